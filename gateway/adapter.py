@@ -1,0 +1,148 @@
+"""The contract between the gateway core and the fieldbus adapters.
+
+The core never imports an adapter: the daemon and the config loader find an
+adapter class through :data:`ADAPTERS` (name -> "module:Class") and import it
+lazily. A bus table may also name a class directly as ``"module:Class"``
+(test adapters, site plugins).
+
+An adapter owns the schema of its bus table and of its drives' extra keys
+(``parse_bus_options`` / ``parse_drive_options``), runs against the hub until
+cancelled (cancellation is the signal to leave the bus cleanly), serves
+parameter reads and writes, and reports its bus diagnostics.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+
+from gateway.errors import AdapterError
+from gateway.model import DesiredCommand, Device, DriveState, SpeedScale
+
+if TYPE_CHECKING:
+    from gateway.config import BusConfig, DriveConfig
+    from gateway.schema import Table
+
+ParamValue = int | float
+
+ADAPTERS: dict[str, str] = {
+    "profibus": "adapters.profibus.adapter:ProfibusAdapter",
+    "devicenet": "adapters.devicenet.adapter:DeviceNetAdapter",
+}
+"""Adapter name (the ``adapter`` key of a bus table) -> "module:Class"."""
+
+
+class EventKind(Enum):
+    COMM = "comm"
+    FAULT = "fault"
+    TRIP = "trip"
+    ALARM = "alarm"
+    COMMAND_REFUSED = "command_refused"
+    SAFETY = "safety"
+    CONTROL = "control"
+    PARAMETER = "parameter"
+    CONFIG = "config"
+    BUS = "bus"
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    drive_id: str
+    kind: EventKind
+    text: str
+    ts: float
+    data: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "drive": self.drive_id,
+            "kind": self.kind.value,
+            "text": self.text,
+            "ts": self.ts,
+            **dict(self.data),
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Capabilities:
+    """What a drive can be commanded to do, as its adapter knows it.
+
+    ``speed_scale`` None: the device has no speed (a soft starter).
+    ``unsupported``: command field -> the reason it is refused for this drive.
+    """
+
+    speed_scale: SpeedScale | None = None
+    unsupported: Mapping[str, str] = field(default_factory=dict)
+
+
+class HubPort(Protocol):
+    """What an adapter may do with the hub."""
+
+    def state(self, drive_id: str) -> DriveState: ...
+
+    def update(self, drive_id: str, **changes: Any) -> DriveState: ...
+
+    def desired(self, drive_id: str) -> DesiredCommand: ...
+
+    def set_capabilities(self, drive_id: str, caps: Capabilities) -> None: ...
+
+    def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None: ...
+
+    def now(self) -> float: ...
+
+
+@runtime_checkable
+class DriveAdapter(Protocol):
+    """One fieldbus line and its drives."""
+
+    name: str
+
+    async def run(self, hub: HubPort) -> None:
+        """Run the bus until cancelled; on cancellation leave the bus cleanly."""
+        ...
+
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue: ...
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: ParamValue
+    ) -> None: ...
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Bus figures: line-level keys, and per drive under ``"drives"``."""
+        ...
+
+
+class AdapterClass(Protocol):
+    """The class-level side of an adapter: its schema and its constructor."""
+
+    devices: ClassVar[frozenset[Device]]
+    address_range: ClassVar[tuple[int, int]]
+
+    @classmethod
+    def parse_bus_options(cls, table: Table) -> Any: ...
+
+    @classmethod
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> Any: ...
+
+    def __call__(self, bus: BusConfig) -> DriveAdapter: ...
+
+
+def load_adapter(name: str) -> AdapterClass:
+    """Import the adapter class for a registry name or a "module:Class" path."""
+    target = ADAPTERS.get(name, name)
+    if ":" not in target:
+        known = ", ".join(sorted(ADAPTERS))
+        raise AdapterError(f"unknown adapter {name!r} (known: {known}, or 'module:Class')")
+    module_name, _, class_name = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise AdapterError(f"adapter {name!r}: {module_name} has no {class_name}")
+    result: AdapterClass = cls
+    return result

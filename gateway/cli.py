@@ -1,0 +1,144 @@
+"""``drive-gateway``: the command line (the only place that prints).
+
+Subcommands come from :data:`COMMANDS` (name -> "module:function" that adds
+the subparser), so tools of later parts (scan, simulators, watch) plug in
+without the core importing them at start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from gateway import __version__
+from gateway.config import DEFAULT_CONFIG, Config, load
+from gateway.errors import ConfigError, ConfigErrors
+
+Handler = Callable[[argparse.Namespace], int]
+
+COMMANDS: dict[str, str] = {
+    "run": "gateway.cli:add_run",
+    "check-config": "gateway.cli:add_check_config",
+    "watch": "gateway.tools:add_watch",
+    "cmd": "gateway.tools:add_cmd",
+    "param": "gateway.tools:add_param",
+    "health": "gateway.tools:add_health",
+    "profibus": "adapters.profibus.cli:add_profibus",
+    "sim": "gateway.simcli:add_sim",
+}
+"""Subcommand -> "module:function(subparsers)"; a module not in this build is skipped."""
+
+
+def setup_logging(level: str) -> None:
+    under_journal = "JOURNAL_STREAM" in os.environ
+    fmt = "%(levelname)s %(name)s: %(message)s"
+    if not under_journal:
+        fmt = "%(asctime)s " + fmt
+    logging.basicConfig(level=getattr(logging, level), format=fmt, stream=sys.stderr, force=True)
+
+
+def _print_config_errors(exc: ConfigErrors | ConfigError) -> None:
+    errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
+    for err in errors:
+        print(f"error: {err}", file=sys.stderr)
+
+
+def _load_or_report(path: str | Path) -> Config | None:
+    try:
+        return load(path)
+    except (ConfigErrors, ConfigError) as exc:
+        _print_config_errors(exc)
+        return None
+
+
+# ---------------------------------------------------------------- run
+
+
+def add_run(sub: Any) -> None:
+    p = sub.add_parser("run", help="run the gateway")
+    p.add_argument("--config", default=str(DEFAULT_CONFIG), help="config file (default: demo)")
+    p.add_argument("--zenoh-endpoint", help="Zenoh endpoint to listen on (overrides config)")
+    p.add_argument("--modbus-bind", help="HOST:PORT of the Modbus server (overrides config)")
+    p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    p.set_defaults(handler=cmd_run)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    config = _load_or_report(args.config)
+    if config is None:
+        return 2
+    try:
+        config = config.with_overrides(args.zenoh_endpoint, args.modbus_bind)
+    except ConfigError as exc:
+        _print_config_errors(exc)
+        return 2
+    setup_logging(args.log_level or config.gateway.log_level)
+    from gateway.daemon import run
+
+    return run(config)
+
+
+# ---------------------------------------------------------------- check-config
+
+
+def add_check_config(sub: Any) -> None:
+    p = sub.add_parser("check-config", help="validate a config file and list its drives")
+    p.add_argument("file")
+    p.set_defaults(handler=cmd_check_config)
+
+
+def cmd_check_config(args: argparse.Namespace) -> int:
+    config = _load_or_report(args.file)
+    if config is None:
+        return 2
+    print(f"{args.file}: ok, {len(config.drives)} drive(s) on {len(config.buses)} bus(es)")
+    for bus in config.buses:
+        print(f"bus {bus.name} ({bus.adapter})")
+        for d in bus.drives:
+            unit = "-" if d.modbus_unit is None else str(d.modbus_unit)
+            print(
+                f"  {d.id:<16} {d.device.value:<8} address {d.address:<4} "
+                f"modbus unit {unit:<4} control {d.control.value}"
+            )
+    return 0
+
+
+# ---------------------------------------------------------------- main
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="drive-gateway",
+        description="Profibus DP and DeviceNet drives on Zenoh and Modbus TCP.",
+    )
+    parser.add_argument("--version", action="version", version=f"drive-gateway {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for target in COMMANDS.values():
+        module_name, _, func_name = target.partition(":")
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name and module_name.startswith(exc.name):
+                continue
+            raise
+        getattr(module, func_name)(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler | None = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return handler(args)
+    except KeyboardInterrupt:
+        return 130

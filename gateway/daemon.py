@@ -1,0 +1,279 @@
+"""The composition root: config -> hub, adapters and front ends, signals, systemd.
+
+Adapters are found through the name -> "module:Class" table of
+:mod:`gateway.adapter` and front ends through :data:`FRONT_ENDS`, both imported
+lazily. An adapter that crashes is logged with its traceback and restarted with
+back-off while its drives are offline; the rest of the gateway keeps running.
+SIGTERM/SIGINT shut down in order (safety rule 4).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib
+import logging
+import signal
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from gateway import __version__
+from gateway.adapter import DriveAdapter, load_adapter
+from gateway.config import BusConfig, Config
+from gateway.hub import DrivePolicy, Hub
+from gateway.model import CommState, DriveState
+from gateway.systemd import Notifier
+
+log = logging.getLogger(__name__)
+
+FRONT_ENDS: dict[str, str] = {
+    "zenoh": "gateway.zenoh.frontend:ZenohFrontEnd",
+    "modbus": "gateway.modbus.frontend:ModbusFrontEnd",
+}
+"""Front-end name (its config section) -> "module:Class"."""
+
+RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
+
+
+class FrontEnd(Protocol):
+    async def run(self) -> None:
+        """Serve until cancelled."""
+        ...
+
+
+@dataclass
+class Runtime:
+    """What front ends may see of the running gateway."""
+
+    config: Config
+    hub: Hub
+    adapters: dict[str, DriveAdapter] = field(default_factory=dict)
+    started: float = field(default_factory=time.monotonic)
+    version: str = __version__
+    restarts: dict[str, int] = field(default_factory=dict)
+
+    def bus_of(self, drive_id: str) -> str:
+        return self.hub.state(drive_id).bus
+
+    def drive_diagnostics(self, drive_id: str) -> dict[str, Any]:
+        adapter = self.adapters.get(self.bus_of(drive_id))
+        if adapter is None:
+            return {}
+        drives = adapter.diagnostics().get("drives", {})
+        result: dict[str, Any] = drives.get(drive_id, {})
+        return result
+
+    def health(self) -> dict[str, Any]:
+        buses = {}
+        for bus in self.config.buses:
+            adapter = self.adapters.get(bus.name)
+            diag = adapter.diagnostics() if adapter is not None else {}
+            live = [d.id for d in bus.drives if self.hub.state(d.id).online]
+            buses[bus.name] = {
+                "adapter": bus.adapter,
+                "live": live,
+                "restarts": self.restarts.get(f"bus {bus.name}", 0),
+                **{k: v for k, v in diag.items() if k != "drives"},
+            }
+        return {
+            "name": self.config.gateway.name,
+            "version": self.version,
+            "uptime_s": round(time.monotonic() - self.started, 3),
+            "drives": len(self.config.drives),
+            "online": sum(1 for s in self.hub.states() if s.online),
+            "buses": buses,
+        }
+
+
+def build_hub(config: Config, hub: Hub | None = None) -> Hub:
+    """A hub holding every configured drive, stopped and offline."""
+    hub = hub or Hub()
+    for bus in config.buses:
+        for d in bus.drives:
+            state = DriveState(id=d.id, device=d.device, bus=bus.name, address=d.address)
+            policy = DrivePolicy(
+                control=d.control,
+                command_timeout=d.command_timeout,
+                on_command_timeout=d.on_command_timeout,
+                on_shutdown=d.on_shutdown,
+                writable_params=d.writable_params,
+                modbus_unit=d.modbus_unit,
+            )
+            hub.add_drive(state, policy)
+    return hub
+
+
+def load_front_end(name: str) -> Callable[[Runtime], FrontEnd] | None:
+    module_name, _, class_name = FRONT_ENDS[name].partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and module_name.startswith(exc.name):
+            log.warning("%s front end is not part of this build; not serving it", name)
+            return None
+        raise
+    factory: Callable[[Runtime], FrontEnd] = getattr(module, class_name)
+    return factory
+
+
+class Daemon:
+    def __init__(self, config: Config, notifier: Notifier | None = None) -> None:
+        self.config = config
+        self.notifier = notifier or Notifier()
+        self.hub = build_hub(config)
+        self.runtime = Runtime(config=config, hub=self.hub)
+        self._stop = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._adapter_tasks: list[asyncio.Task[None]] = []
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    # ------------------------------------------------------------ adapters
+
+    def _make_adapter(self, bus: BusConfig) -> DriveAdapter:
+        adapter = load_adapter(bus.adapter)(bus)
+        self.runtime.adapters[bus.name] = adapter
+        self.hub.attach_params([d.id for d in bus.drives], adapter)
+        return adapter
+
+    def _offline(self, bus: BusConfig) -> None:
+        for d in bus.drives:
+            self.hub.update(d.id, comm=CommState.OFFLINE, running=False)
+
+    async def _supervise(
+        self, what: str, start: Callable[[], Awaitable[None]], on_crash: Callable[[], None]
+    ) -> None:
+        """Run ``start()`` again and again, with back-off, until cancelled."""
+        pause, longest = RESTART_BACKOFF
+        while True:
+            started = time.monotonic()
+            try:
+                await start()
+                log.error("%s returned; restarting it", what)
+            except asyncio.CancelledError:
+                raise
+            except Exception:
+                log.exception("%s crashed; restarting in %.1f s", what, pause)
+            self.runtime.restarts[what] = self.runtime.restarts.get(what, 0) + 1
+            on_crash()
+            if time.monotonic() - started > longest:
+                pause = RESTART_BACKOFF[0]
+            await asyncio.sleep(pause)
+            pause = min(pause * 2, longest)
+
+    def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
+        async def start() -> None:
+            await self._make_adapter(bus).run(self.hub)
+
+        return self._supervise(f"bus {bus.name}", start, lambda: self._offline(bus))
+
+    # ------------------------------------------------------------ loops
+
+    async def _ticker(self) -> None:
+        interval = self.config.gateway.tick
+        while True:
+            self.hub.tick()
+            await asyncio.sleep(interval)
+
+    async def _watchdog(self, interval: float) -> None:
+        while True:
+            self.notifier.watchdog()
+            await asyncio.sleep(interval)
+
+    def _spawn(self, coro: Awaitable[None], name: str) -> asyncio.Task[None]:
+        task = asyncio.ensure_future(coro)
+        task.set_name(name)
+        task.add_done_callback(self._task_done)
+        self._tasks.append(task)
+        return task
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if exc is not None:
+            log.error("task %s failed: %r; shutting down", task.get_name(), exc, exc_info=exc)
+            self._stop.set()
+
+    def _start_front_ends(self) -> None:
+        enabled = {"zenoh": self.config.zenoh.enabled, "modbus": self.config.modbus.enabled}
+        for name, on in enabled.items():
+            if not on:
+                continue
+            factory = load_front_end(name)
+            if factory is None:
+                continue
+
+            def start(factory: Callable[[Runtime], FrontEnd] = factory) -> Awaitable[None]:
+                return factory(self.runtime).run()
+
+            self._spawn(self._supervise(f"{name} front end", start, lambda: None), name)
+
+    # ------------------------------------------------------------ life cycle
+
+    async def run(self) -> int:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, self.request_stop)
+        try:
+            return await self._run()
+        finally:
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                loop.remove_signal_handler(sig)
+            self.notifier.close()
+
+    async def _run(self) -> int:
+        drives = self.config.drives
+        if not drives:
+            log.warning(
+                "no drives are configured in %s; serving the gateway only", self.config.file
+            )
+        for bus in self.config.buses:
+            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
+        self._start_front_ends()
+        self._spawn(self._ticker(), "hub-ticker")
+        if self.notifier.watchdog_interval:
+            self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
+        status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
+        self.notifier.ready(status)
+        log.info("drive-gateway %s running: %s", __version__, status)
+        await self._stop.wait()
+        await self._shutdown()
+        return 0
+
+    async def _shutdown(self) -> None:
+        """Rule 4: on_shutdown, bounded wait for stopped, then leave the buses."""
+        log.info("shutting down: applying on_shutdown to every drive")
+        self.notifier.stopping()
+        self.hub.apply_shutdown()
+        bound = self.config.gateway.shutdown_timeout
+        try:
+            await asyncio.wait_for(self._wait_stopped(), bound)
+            log.info("all drives stopped")
+        except TimeoutError:
+            still = [s.id for s in self.hub.states() if s.online and s.running]
+            log.warning("shutdown bound %.1f s reached; still running: %s", bound, still)
+        # Adapters first (they leave their buses cleanly on cancellation), then the rest.
+        await self._cancel(self._adapter_tasks)
+        await self._cancel([t for t in self._tasks if t not in self._adapter_tasks])
+        log.info("drive-gateway stopped")
+
+    async def _wait_stopped(self) -> None:
+        with self.hub.subscribe_states() as sub:
+            while not self.hub.all_stopped():
+                await sub.get()
+
+    @staticmethod
+    async def _cancel(tasks: list[asyncio.Task[None]]) -> None:
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+
+
+def run(config: Config) -> int:
+    return asyncio.run(Daemon(config).run())

@@ -1,0 +1,81 @@
+"""One root for every error the gateway raises.
+
+Leaves also inherit the matching builtin so callers can catch either way:
+decode errors are ``ValueError``, timeouts are ``TimeoutError``.
+"""
+
+from __future__ import annotations
+
+
+class GatewayError(Exception):
+    """Root of every error raised by drive-gateway."""
+
+
+class ConfigError(GatewayError, ValueError):
+    """A configuration problem, naming the file, the key path and the reason."""
+
+    def __init__(self, file: str, key: str, reason: str) -> None:
+        self.file = file
+        self.key = key
+        self.reason = reason
+        where = f"{file}: {key}: " if key else f"{file}: "
+        super().__init__(f"{where}{reason}")
+
+
+class ConfigErrors(GatewayError, ValueError):
+    """Several configuration problems found in one pass."""
+
+    def __init__(self, errors: list[ConfigError]) -> None:
+        self.errors = list(errors)
+        super().__init__("\n".join(str(e) for e in self.errors))
+
+
+class FrameDecodeError(GatewayError, ValueError):
+    """Bytes on a bus that do not decode; carries the raw bytes."""
+
+    def __init__(self, message: str, raw: bytes = b"") -> None:
+        self.raw = bytes(raw)
+        self.message = message
+        super().__init__(f"{message} (raw: {self.raw.hex(' ') or 'none'})")
+
+
+class FrameEncodeError(GatewayError, ValueError):
+    """A value that cannot be put on the wire (out of range, too long)."""
+
+
+class GatewayTimeout(GatewayError, TimeoutError):
+    """A request that got no answer in time."""
+
+
+class CommandRejected(GatewayError, ValueError):
+    """A command refused before anything of it was applied; ``reason`` says why."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(reason)
+
+
+class ParameterError(GatewayError):
+    """A parameter access refused by the device (its own code and text) or by the gateway."""
+
+    def __init__(self, text: str, code: int | None = None) -> None:
+        self.text = text
+        self.code = code
+        prefix = f"error 0x{code:04X}: " if code is not None else ""
+        super().__init__(f"{prefix}{text}")
+
+
+class ParameterNotWritable(ParameterError):
+    """A write to a parameter that the drive's config does not allow (safety rule 5)."""
+
+
+class AdapterError(GatewayError):
+    """A fieldbus adapter failed (port missing, bus down)."""
+
+
+class DriveOffline(GatewayError):
+    """The drive is not online, so the request cannot be served."""
+
+
+class UnknownDrive(GatewayError, KeyError):
+    """A drive id that the gateway does not have."""

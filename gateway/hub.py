@@ -1,0 +1,443 @@
+"""The hub: latest state per drive, desired command per drive, arbitration, safety timers.
+
+All methods run on the event loop's thread. Time comes from an injected
+monotonic clock (watchdogs) and wall clock (timestamps), so the safety rules are
+tested by stepping :meth:`Hub.tick` with a fake clock.
+
+Safety rules (ARCHITECTURE.md) enforced here:
+
+1. No unintended restart: ``run`` is cleared at start-up, when a drive comes
+   (back) online, when it faults or trips, on a fault reset and when control
+   passes to another source. Only a new command carrying ``run: true`` sets it.
+2. Fault reset is an edge: each request bumps ``fault_reset_seq`` once.
+3. Command watchdog per drive: a client in control that stops refreshing within
+   ``command_timeout`` gets ``on_command_timeout`` applied (ramp stop, coast, hold).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import logging
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+from gateway.adapter import Capabilities, Event, EventKind, ParamValue
+from gateway.errors import (
+    CommandRejected,
+    DriveOffline,
+    ParameterNotWritable,
+    UnknownDrive,
+)
+from gateway.model import (
+    CommState,
+    ControlMode,
+    DesiredCommand,
+    DriveCommand,
+    DriveState,
+    DriveStatus,
+    Source,
+    StopAction,
+)
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+EVENT_QUEUE_LIMIT = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class DrivePolicy:
+    """The per-drive settings the hub enforces (from the drive's config)."""
+
+    control: ControlMode = ControlMode.ANY
+    command_timeout: float | None = None
+    on_command_timeout: StopAction = StopAction.RAMP_STOP
+    on_shutdown: StopAction = StopAction.RAMP_STOP
+    writable_params: frozenset[int] = frozenset()
+    modbus_unit: int | None = None
+
+
+class ParamService(Protocol):
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue: ...
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: ParamValue
+    ) -> None: ...
+
+
+@dataclass
+class _Drive:
+    state: DriveState
+    policy: DrivePolicy
+    desired: DesiredCommand
+    caps: Capabilities
+    last_refresh: float = 0.0
+    watchdog_expired: bool = False
+    params: ParamService | None = None
+
+
+class StateSubscription:
+    """Conflating view of state changes: a slow reader sees the newest state of
+    each drive, never an unbounded queue, and never misses the last one."""
+
+    def __init__(self, hub: Hub) -> None:
+        self._hub = hub
+        self._pending: dict[str, DriveState] = {}
+        self._ready = asyncio.Event()
+
+    def _offer(self, state: DriveState) -> None:
+        self._pending[state.id] = state
+        self._ready.set()
+
+    async def get(self) -> DriveState:
+        while not self._pending:
+            self._ready.clear()
+            await self._ready.wait()
+        drive_id = next(iter(self._pending))
+        return self._pending.pop(drive_id)
+
+    def drain(self) -> list[DriveState]:
+        out = list(self._pending.values())
+        self._pending.clear()
+        return out
+
+    def close(self) -> None:
+        self._hub._state_subs.discard(self)
+
+    def __enter__(self) -> StateSubscription:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class EventSubscription:
+    """Bounded queue of events; the oldest are dropped (and counted) when full."""
+
+    def __init__(self, hub: Hub, limit: int = EVENT_QUEUE_LIMIT) -> None:
+        self._hub = hub
+        self._queue: collections.deque[Event] = collections.deque(maxlen=limit)
+        self._ready = asyncio.Event()
+        self.dropped = 0
+
+    def _offer(self, event: Event) -> None:
+        if len(self._queue) == self._queue.maxlen:
+            self.dropped += 1
+        self._queue.append(event)
+        self._ready.set()
+
+    async def get(self) -> Event:
+        while not self._queue:
+            self._ready.clear()
+            await self._ready.wait()
+        return self._queue.popleft()
+
+    def drain(self) -> list[Event]:
+        out = list(self._queue)
+        self._queue.clear()
+        return out
+
+    def close(self) -> None:
+        self._hub._event_subs.discard(self)
+
+    def __enter__(self) -> EventSubscription:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class Hub:
+    """Latest state and desired command of every drive, with the safety rules."""
+
+    def __init__(self, clock: Clock = time.monotonic, wallclock: Clock = time.time) -> None:
+        self._clock = clock
+        self._wallclock = wallclock
+        self._drives: dict[str, _Drive] = {}
+        self._state_subs: set[StateSubscription] = set()
+        self._event_subs: set[EventSubscription] = set()
+        self._seq = 0
+        self._listeners: list[Callable[[str], None]] = []
+        self.started = clock()
+
+    # ------------------------------------------------------------ drives
+
+    def add_drive(self, state: DriveState, policy: DrivePolicy | None = None) -> None:
+        if state.id in self._drives:
+            raise ValueError(f"drive {state.id!r} added twice")
+        # Rule 1: the gateway starts with every drive stopped.
+        self._drives[state.id] = _Drive(
+            state=state,
+            policy=policy or DrivePolicy(),
+            desired=DesiredCommand(),
+            caps=Capabilities(),
+        )
+
+    def drive_ids(self) -> list[str]:
+        return list(self._drives)
+
+    def _drive(self, drive_id: str) -> _Drive:
+        try:
+            return self._drives[drive_id]
+        except KeyError:
+            raise UnknownDrive(f"no drive {drive_id!r}") from None
+
+    def policy(self, drive_id: str) -> DrivePolicy:
+        return self._drive(drive_id).policy
+
+    def capabilities(self, drive_id: str) -> Capabilities:
+        return self._drive(drive_id).caps
+
+    def set_capabilities(self, drive_id: str, caps: Capabilities) -> None:
+        self._drive(drive_id).caps = caps
+
+    def attach_params(self, drive_ids: Iterable[str], service: ParamService) -> None:
+        for drive_id in drive_ids:
+            self._drive(drive_id).params = service
+
+    def now(self) -> float:
+        return self._clock()
+
+    # ------------------------------------------------------------ state
+
+    def state(self, drive_id: str) -> DriveState:
+        return self._drive(drive_id).state
+
+    def states(self) -> list[DriveState]:
+        return [d.state for d in self._drives.values()]
+
+    def update(self, drive_id: str, **changes: Any) -> DriveState:
+        """An adapter reports readings; returns the (possibly new) state."""
+        drv = self._drive(drive_id)
+        old = drv.state
+        new = replace(old, **changes)
+        if new.same_reading(old):
+            return old
+        self._on_transitions(drive_id, drv, old, new)
+        return self._commit(drv, new)
+
+    def _commit(self, drv: _Drive, new: DriveState) -> DriveState:
+        self._seq += 1
+        new = replace(new, seq=self._seq, ts=self._wallclock(), control_source=drv.desired.source)
+        drv.state = new
+        for sub in tuple(self._state_subs):
+            sub._offer(new)
+        return new
+
+    def _on_transitions(self, drive_id: str, drv: _Drive, old: DriveState, new: DriveState) -> None:
+        if old.comm is not new.comm:
+            self.event(drive_id, EventKind.COMM, f"comm {old.comm.value} -> {new.comm.value}")
+            if new.comm is CommState.ONLINE:
+                self._clear_run(drive_id, drv, "drive came online")
+        if new.faulted and not old.faulted:
+            kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
+            code = "" if new.fault_code is None else f" {new.fault_code}"
+            text = f": {new.fault_text}" if new.fault_text else ""
+            self.event(drive_id, kind, f"{kind.value}{code}{text}", code=new.fault_code)
+            self._clear_run(drive_id, drv, f"drive {kind.value}")
+        if old.faulted and not new.faulted:
+            self.event(drive_id, EventKind.FAULT, "fault cleared")
+        if new.alarm and (not old.alarm or new.alarm_code != old.alarm_code):
+            self.event(drive_id, EventKind.ALARM, f"alarm {new.alarm_code}", code=new.alarm_code)
+
+    def _clear_run(self, drive_id: str, drv: _Drive, why: str) -> None:
+        if drv.desired.run or drv.desired.jog:
+            drv.desired = replace(drv.desired, run=False, jog=False)
+            self.event(drive_id, EventKind.SAFETY, f"run command cleared: {why}")
+            self._notify_command(drive_id)
+
+    def subscribe_states(self) -> StateSubscription:
+        sub = StateSubscription(self)
+        self._state_subs.add(sub)
+        return sub
+
+    async def wait_for(self, drive_id: str, predicate: Callable[[DriveState], bool]) -> DriveState:
+        """Wait until the drive's state satisfies ``predicate`` (tests, shutdown)."""
+        state = self.state(drive_id)
+        if predicate(state):
+            return state
+        with self.subscribe_states() as sub:
+            while True:
+                state = await sub.get()
+                if state.id == drive_id and predicate(state):
+                    return state
+
+    # ------------------------------------------------------------ events
+
+    def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None:
+        ev = Event(drive_id=drive_id, kind=kind, text=text, ts=self._wallclock(), data=data)
+        log.info("%s: %s: %s", drive_id, kind.value, text)
+        for sub in tuple(self._event_subs):
+            sub._offer(ev)
+
+    def subscribe_events(self) -> EventSubscription:
+        sub = EventSubscription(self)
+        self._event_subs.add(sub)
+        return sub
+
+    # ------------------------------------------------------------ commands
+
+    def desired(self, drive_id: str) -> DesiredCommand:
+        return self._drive(drive_id).desired
+
+    def on_command(self, listener: Callable[[str], None]) -> None:
+        """Call ``listener(drive_id)`` whenever a desired command changes."""
+        self._listeners.append(listener)
+
+    def _notify_command(self, drive_id: str) -> None:
+        for listener in self._listeners:
+            listener(drive_id)
+
+    def check(self, drive_id: str, source: Source, cmd: DriveCommand) -> None:
+        """Raise CommandRejected (with the reason) if ``cmd`` may not be applied."""
+        drv = self._drive(drive_id)
+        if not drv.policy.control.admits(source):
+            raise CommandRejected(
+                f"drive {drive_id} takes commands from {drv.policy.control.value} only"
+            )
+        if drv.state.comm is not CommState.ONLINE:
+            raise CommandRejected(f"drive {drive_id} is {drv.state.comm.value}")
+        if cmd.run and cmd.fault_reset:
+            raise CommandRejected("send run after the fault reset, not in the same command")
+        self._check_capabilities(drv, cmd)
+
+    def _check_capabilities(self, drv: _Drive, cmd: DriveCommand) -> None:
+        for name, reason in drv.caps.unsupported.items():
+            value = getattr(cmd, name, None)
+            if value not in (None, False):
+                raise CommandRejected(reason)
+        scale = drv.caps.speed_scale
+        if cmd.has_speed and scale is None:
+            raise CommandRejected(f"{drv.state.device.value} has no speed reference")
+        if scale is None:
+            return
+        if cmd.speed_rpm is not None and abs(cmd.speed_rpm) > scale.max_rpm + 1e-9:
+            raise CommandRejected(
+                f"speed_rpm {cmd.speed_rpm:g} is beyond the drive's scale (±{scale.max_rpm:g} rpm)"
+            )
+        if cmd.speed_pct is not None and abs(cmd.speed_pct) > scale.max_pct + 1e-9:
+            raise CommandRejected(
+                f"speed_pct {cmd.speed_pct:g} is beyond the drive's scale (±{scale.max_pct:g} %)"
+            )
+
+    def submit(self, drive_id: str, source: Source, cmd: DriveCommand) -> DesiredCommand:
+        """Apply a partial command from a northbound source, or raise CommandRejected.
+
+        Nothing of a refused command is applied.
+        """
+        try:
+            self.check(drive_id, source, cmd)
+        except CommandRejected as exc:
+            self.event(
+                drive_id,
+                EventKind.COMMAND_REFUSED,
+                f"command from {source.value} refused: {exc.reason}",
+                source=source.value,
+            )
+            raise
+        drv = self._drive(drive_id)
+        old = drv.desired
+        base = old
+        if old.source not in (source, Source.NONE):
+            # Rule 1: control passes to another source -> run needs a new run command.
+            base = replace(old, run=False, jog=False)
+            self.event(
+                drive_id,
+                EventKind.CONTROL,
+                f"control passed from {old.source.value} to {source.value}",
+            )
+        new = base.merged(cmd, source)
+        if cmd.fault_reset:
+            # Rule 1 and 2: a reset is one edge, and the drive does not restart by itself.
+            new = replace(new, run=False, jog=False)
+        drv.desired = new
+        drv.last_refresh = self._clock()
+        drv.watchdog_expired = False
+        if new != old:
+            self._notify_command(drive_id)
+            if new.source != drv.state.control_source:
+                self._commit(drv, drv.state)
+        return new
+
+    def refresh(self, drive_id: str, source: Source) -> None:
+        """A keep-alive from the source in control (feeds the command watchdog)."""
+        drv = self._drive(drive_id)
+        if drv.desired.source is source:
+            drv.last_refresh = self._clock()
+            drv.watchdog_expired = False
+
+    # ------------------------------------------------------------ timers
+
+    def tick(self) -> None:
+        """Run the safety timers (rule 3); call it periodically."""
+        now = self._clock()
+        for drive_id, drv in self._drives.items():
+            self._check_watchdog(drive_id, drv, now)
+
+    def _check_watchdog(self, drive_id: str, drv: _Drive, now: float) -> None:
+        timeout = drv.policy.command_timeout
+        source = drv.desired.source
+        if timeout is None or drv.watchdog_expired or source not in (Source.ZENOH, Source.MODBUS):
+            return
+        if now - drv.last_refresh < timeout:
+            return
+        drv.watchdog_expired = True
+        action = drv.policy.on_command_timeout
+        self.apply_stop(drive_id, action, f"no command from {source.value} for {timeout:g} s")
+
+    def apply_stop(self, drive_id: str, action: StopAction, why: str) -> None:
+        """A safety action of the gateway: stop (or hold) the drive."""
+        drv = self._drive(drive_id)
+        old = drv.desired
+        new = old.stopped(action, Source.GATEWAY)
+        if action is StopAction.HOLD:
+            new = replace(new, source=Source.GATEWAY)
+        drv.desired = new
+        self.event(
+            drive_id, EventKind.SAFETY, f"{why}: {action.value} applied", action=action.value
+        )
+        if new != old:
+            self._notify_command(drive_id)
+            self._commit(drv, drv.state)
+
+    def apply_shutdown(self) -> None:
+        """Rule 4, first half: every drive gets its ``on_shutdown`` action."""
+        for drive_id, drv in self._drives.items():
+            self.apply_stop(drive_id, drv.policy.on_shutdown, "gateway shutting down")
+
+    def all_stopped(self) -> bool:
+        """True when no online drive that is to be stopped is still turning."""
+        return all(
+            not (d.state.online and d.state.running) or d.desired.run for d in self._drives.values()
+        )
+
+    # ------------------------------------------------------------ parameters
+
+    def _param_service(self, drive_id: str) -> ParamService:
+        drv = self._drive(drive_id)
+        if drv.params is None:
+            raise DriveOffline(f"drive {drive_id} has no parameter service")
+        return drv.params
+
+    async def read_param(self, drive_id: str, number: int, subindex: int = 0) -> ParamValue:
+        return await self._param_service(drive_id).read_param(drive_id, number, subindex)
+
+    async def write_param(
+        self, drive_id: str, number: int, value: ParamValue, subindex: int = 0
+    ) -> None:
+        drv = self._drive(drive_id)
+        if number not in drv.policy.writable_params:
+            # Rule 5: writes only to the parameters the drive's config allows.
+            raise ParameterNotWritable(
+                f"parameter {number} is not in writable_params of drive {drive_id}"
+            )
+        await self._param_service(drive_id).write_param(drive_id, number, subindex, value)
+        self.event(drive_id, EventKind.PARAMETER, f"parameter {number}.{subindex} written: {value}")
+
+    # ------------------------------------------------------------ views
+
+    def snapshot(self) -> Mapping[str, DriveState]:
+        return {k: d.state for k, d in self._drives.items()}

@@ -1,0 +1,210 @@
+"""Typed reading of one TOML table, with errors that name the file, key path and reason.
+
+Every adapter validates its own table with :class:`Table`; the core uses it for
+its own sections. A table remembers which keys were read, and :meth:`Table.finish`
+turns every key nobody read into an error: unknown keys are never ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from enum import Enum
+from typing import Any, TypeVar
+
+from gateway.errors import ConfigError
+
+E = TypeVar("E", bound=Enum)
+
+
+class _Missing:
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+REQUIRED: Any = _Missing()
+
+
+def _type_name(value: Any) -> str:
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "an array",
+        dict: "a table",
+    }.get(type(value), type(value).__name__)
+
+
+class Table:
+    """One TOML table being read; ``path`` is its dotted key path in the file."""
+
+    def __init__(self, data: Mapping[str, Any], file: str, path: str = "") -> None:
+        self.data = data
+        self.file = file
+        self.path = path
+        self._read: set[str] = set()
+
+    def key(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else key
+
+    def error(self, key: str, reason: str) -> ConfigError:
+        return ConfigError(self.file, self.key(key), reason)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def _get(self, key: str, default: Any) -> Any:
+        self._read.add(key)
+        if key in self.data:
+            return self.data[key]
+        if default is REQUIRED:
+            raise self.error(key, "is required")
+        return default
+
+    def raw(self, key: str, default: Any = REQUIRED) -> Any:
+        return self._get(key, default)
+
+    def string(
+        self, key: str, default: Any = REQUIRED, *, choices: Iterable[str] | None = None
+    ) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if not isinstance(value, str):
+            raise self.error(key, f"must be a string, not {_type_name(value)}")
+        if choices is not None:
+            allowed = list(choices)
+            if value not in allowed:
+                raise self.error(key, f"{value!r} is not one of {', '.join(map(repr, allowed))}")
+        return value
+
+    def boolean(self, key: str, default: Any = REQUIRED) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if not isinstance(value, bool):
+            raise self.error(key, f"must be true or false, not {_type_name(value)}")
+        return value
+
+    def integer(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+        allowed: Iterable[int] | None = None,
+        what: str = "",
+    ) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, f"must be an integer, not {_type_name(value)}")
+        if allowed is not None:
+            allowed_list = list(allowed)
+            if value not in allowed_list:
+                shown = ", ".join(str(a) for a in allowed_list)
+                raise self.error(key, f"{value} is not {what or 'an allowed value'} ({shown})")
+        self._check_range(key, value, minimum, maximum)
+        return value
+
+    def number(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: float | None = None,
+        maximum: float | None = None,
+    ) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(key, f"must be a number, not {_type_name(value)}")
+        if not math.isfinite(value):
+            raise self.error(key, "must be a finite number")
+        self._check_range(key, value, minimum, maximum)
+        return float(value)
+
+    def _check_range(
+        self, key: str, value: float, minimum: float | None, maximum: float | None
+    ) -> None:
+        if minimum is not None and value < minimum:
+            raise self.error(key, f"{value} is below the minimum {minimum}")
+        if maximum is not None and value > maximum:
+            raise self.error(key, f"{value} is above the maximum {maximum}")
+
+    def enum(self, key: str, enum: type[E], default: Any = REQUIRED) -> Any:
+        choices = [str(m.value) for m in enum]
+        value = self.string(key, default, choices=choices)
+        if isinstance(value, str):
+            return enum(value)
+        return value
+
+    def int_list(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+    ) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if not isinstance(value, list):
+            raise self.error(key, f"must be an array of integers, not {_type_name(value)}")
+        for i, item in enumerate(value):
+            if isinstance(item, bool) or not isinstance(item, int):
+                raise self.error(f"{key}[{i}]", f"must be an integer, not {_type_name(item)}")
+            self._check_range(f"{key}[{i}]", item, minimum, maximum)
+        return tuple(value)
+
+    def str_list(self, key: str, default: Any = REQUIRED) -> Any:
+        value = self._get(key, default)
+        if value is default and key not in self.data:
+            return value
+        if not isinstance(value, list):
+            raise self.error(key, f"must be an array of strings, not {_type_name(value)}")
+        for i, item in enumerate(value):
+            if not isinstance(item, str):
+                raise self.error(f"{key}[{i}]", f"must be a string, not {_type_name(item)}")
+        return tuple(value)
+
+    def table(self, key: str, required: bool = False) -> Table:
+        value = self._get(key, REQUIRED if required else {})
+        if not isinstance(value, Mapping):
+            raise self.error(key, f"must be a table, not {_type_name(value)}")
+        return Table(value, self.file, self.key(key))
+
+    def table_list(self, key: str) -> list[Table]:
+        value = self._get(key, [])
+        if not isinstance(value, list):
+            raise self.error(key, f"must be an array of tables ([[{self.key(key)}]])")
+        out = []
+        for i, item in enumerate(value):
+            if not isinstance(item, Mapping):
+                raise self.error(f"{key}[{i}]", f"must be a table, not {_type_name(item)}")
+            out.append(Table(item, self.file, f"{self.key(key)}[{i}]"))
+        return out
+
+    def tables(self, key: str) -> dict[str, Table]:
+        """A table of named sub-tables (``[buses.<name>]``)."""
+        outer = self.table(key)
+        out: dict[str, Table] = {}
+        for name, value in outer.data.items():
+            outer._read.add(name)
+            if not isinstance(value, Mapping):
+                raise outer.error(name, f"must be a table, not {_type_name(value)}")
+            out[name] = Table(value, self.file, outer.key(name))
+        return out
+
+    def unread(self) -> list[str]:
+        return sorted(k for k in self.data if k not in self._read)
+
+    def finish(self) -> None:
+        """Raise for the first key that nobody read."""
+        for key in self.unread():
+            raise self.error(key, "unknown key")

@@ -1,0 +1,301 @@
+"""The safety rules 1-3 and arbitration, stepped with an injected clock (no sleeping)."""
+
+from __future__ import annotations
+
+import pytest
+
+from gateway.adapter import Capabilities, EventKind
+from gateway.errors import CommandRejected, ParameterError, ParameterNotWritable
+from gateway.hub import DrivePolicy, Hub
+from gateway.model import (
+    CommState,
+    ControlMode,
+    Device,
+    DriveCommand,
+    DriveState,
+    DriveStatus,
+    Source,
+    SpeedScale,
+    StopAction,
+)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def make_hub(**policy: object) -> tuple[Hub, Clock]:
+    clock = Clock()
+    hub = Hub(clock=clock, wallclock=clock)
+    hub.add_drive(
+        DriveState(id="d", device=Device.CFW11, bus="b", address=3), DrivePolicy(**policy)
+    )  # type: ignore[arg-type]
+    hub.set_capabilities("d", Capabilities(speed_scale=SpeedScale(1800.0)))
+    hub.update("d", comm=CommState.ONLINE, status=DriveStatus.READY)
+    return hub, clock
+
+
+RUN = DriveCommand(run=True, speed_rpm=900)
+
+
+# ------------------------------------------------------------------ rule 1
+
+
+def test_gateway_starts_with_every_drive_stopped() -> None:
+    hub, _ = make_hub()
+    assert hub.desired("d").run is False
+    assert hub.desired("d").source is Source.NONE
+
+
+def test_run_needs_a_run_command() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=900))
+    assert hub.desired("d").run is False
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True))
+    assert hub.desired("d").run is True
+
+
+def test_coming_back_online_clears_run() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, RUN)
+    hub.update("d", comm=CommState.OFFLINE)
+    hub.update("d", comm=CommState.ONLINE)
+    assert hub.desired("d").run is False
+    # the speed reference is kept: only run needs renewing
+    assert hub.desired("d").speed_rpm == 900
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True))
+    assert hub.desired("d").run is True
+
+
+def test_fault_clears_run_and_reset_does_not_restart() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, RUN)
+    hub.update("d", status=DriveStatus.FAULTED, fault_code=70, fault_text="overcurrent")
+    assert hub.desired("d").run is False
+    # the client keeps sending run (a stale level) before the reset: not a restart
+    hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
+    hub.update("d", status=DriveStatus.READY, fault_code=None, fault_text=None)
+    assert hub.desired("d").run is False
+
+
+def test_fault_reset_clears_a_run_given_while_faulted() -> None:
+    hub, _ = make_hub()
+    hub.update("d", status=DriveStatus.FAULTED)
+    hub.submit("d", Source.ZENOH, RUN)  # accepted as a level, but...
+    hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
+    assert hub.desired("d").run is False  # ... the reset needs a new run command after it
+
+
+def test_run_and_reset_together_is_refused() -> None:
+    hub, _ = make_hub()
+    with pytest.raises(CommandRejected, match="send run after the fault reset"):
+        hub.submit("d", Source.ZENOH, DriveCommand(run=True, fault_reset=True))
+    assert hub.desired("d").fault_reset_seq == 0
+
+
+def test_change_of_controlling_source_clears_run() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.MODBUS, RUN)
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=300))
+    desired = hub.desired("d")
+    assert desired.run is False and desired.source is Source.ZENOH
+    assert desired.speed_rpm == 300
+    hub.submit("d", Source.MODBUS, DriveCommand(run=True))
+    assert hub.desired("d").run is True and hub.desired("d").source is Source.MODBUS
+
+
+def test_new_source_may_run_in_its_first_command() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.MODBUS, RUN)
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True, speed_rpm=100))
+    assert hub.desired("d").run is True and hub.desired("d").source is Source.ZENOH
+
+
+# ------------------------------------------------------------------ rule 2
+
+
+def test_fault_reset_is_one_edge_never_repeated() -> None:
+    hub, clock = make_hub(command_timeout=1.0)
+    hub.update("d", status=DriveStatus.FAULTED)
+    hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
+    assert hub.desired("d").fault_reset_seq == 1
+    for _ in range(5):
+        clock.t += 0.5
+        hub.tick()
+        hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=10))  # other commands
+    assert hub.desired("d").fault_reset_seq == 1
+    hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
+    assert hub.desired("d").fault_reset_seq == 2
+
+
+# ------------------------------------------------------------------ rule 3
+
+
+@pytest.mark.parametrize(
+    ("action", "run_after", "coast_after"),
+    [
+        (StopAction.RAMP_STOP, False, False),
+        (StopAction.COAST, False, True),
+        (StopAction.HOLD, True, False),
+    ],
+)
+def test_command_watchdog(action: StopAction, run_after: bool, coast_after: bool) -> None:
+    hub, clock = make_hub(command_timeout=2.0, on_command_timeout=action)
+    hub.submit("d", Source.MODBUS, RUN)
+    clock.t += 1.5
+    hub.tick()
+    assert hub.desired("d").run is True
+    hub.refresh("d", Source.MODBUS)  # a keep-alive restarts the window
+    clock.t += 1.9
+    hub.tick()
+    assert hub.desired("d").run is True
+    clock.t += 0.2
+    hub.tick()
+    desired = hub.desired("d")
+    assert desired.run is run_after
+    assert desired.coast_stop is coast_after
+    assert desired.source is Source.GATEWAY
+    # the client comes back: its old run level does not restart the drive by itself
+    if action is not StopAction.HOLD:
+        hub.submit("d", Source.MODBUS, DriveCommand(speed_rpm=100))
+        assert hub.desired("d").run is False
+
+
+def test_watchdog_only_watches_the_controlling_client() -> None:
+    hub, clock = make_hub(command_timeout=1.0)
+    clock.t += 10
+    hub.tick()
+    assert hub.desired("d").source is Source.NONE  # nobody in control: nothing to do
+    hub.submit("d", Source.ZENOH, RUN)
+    hub.refresh("d", Source.MODBUS)  # not in control: does not feed the watchdog
+    clock.t += 1.0
+    hub.tick()
+    assert hub.desired("d").run is False
+
+
+def test_watchdog_acts_once_and_reports() -> None:
+    hub, clock = make_hub(command_timeout=1.0)
+    with hub.subscribe_events() as sub:
+        hub.submit("d", Source.ZENOH, RUN)
+        clock.t += 1.0
+        hub.tick()
+        clock.t += 5.0
+        hub.tick()
+        safety = [e.text for e in sub.drain() if e.kind is EventKind.SAFETY]
+    assert safety == ["no command from zenoh for 1 s: ramp_stop applied"]
+
+
+# ------------------------------------------------------------------ arbitration
+
+
+@pytest.mark.parametrize(
+    ("control", "zenoh_ok", "modbus_ok"),
+    [
+        (ControlMode.ANY, True, True),
+        (ControlMode.ZENOH, True, False),
+        (ControlMode.MODBUS, False, True),
+    ],
+)
+def test_control_setting(control: ControlMode, zenoh_ok: bool, modbus_ok: bool) -> None:
+    for source, ok in ((Source.ZENOH, zenoh_ok), (Source.MODBUS, modbus_ok)):
+        hub, _ = make_hub(control=control)
+        if ok:
+            hub.submit("d", source, RUN)
+            assert hub.desired("d").run is True
+            assert hub.state("d").control_source is source
+        else:
+            with pytest.raises(CommandRejected, match=f"takes commands from {control.value} only"):
+                hub.submit("d", source, RUN)
+            assert hub.desired("d").run is False
+
+
+def test_refused_commands_change_nothing() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, RUN)
+    before = hub.desired("d")
+    for cmd in (DriveCommand(run=False, speed_rpm=99999), DriveCommand(speed_pct=-101)):
+        with pytest.raises(CommandRejected, match="beyond the drive's scale"):
+            hub.submit("d", Source.ZENOH, cmd)
+    assert hub.desired("d") == before
+
+
+def test_capabilities_refuse_with_reason() -> None:
+    hub, _ = make_hub()
+    hub.set_capabilities(
+        "d", Capabilities(speed_scale=None, unsupported={"quick_stop": "no quick stop here"})
+    )
+    with pytest.raises(CommandRejected, match="no quick stop here"):
+        hub.submit("d", Source.ZENOH, DriveCommand(quick_stop=True))
+    with pytest.raises(CommandRejected, match="has no speed reference"):
+        hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=1))
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True))
+
+
+def test_offline_drive_refuses_commands() -> None:
+    hub, _ = make_hub()
+    hub.update("d", comm=CommState.OFFLINE)
+    with pytest.raises(CommandRejected, match="is offline"):
+        hub.submit("d", Source.ZENOH, RUN)
+
+
+# ------------------------------------------------------------------ state and shutdown
+
+
+async def test_state_subscription_conflates_to_the_newest() -> None:
+    hub, _ = make_hub()
+    with hub.subscribe_states() as sub:
+        for rpm in range(100):
+            hub.update("d", speed_rpm=float(rpm))
+        state = await sub.get()
+        assert state.speed_rpm == 99
+        assert sub.drain() == []
+
+
+def test_seq_grows_only_on_change() -> None:
+    hub, _ = make_hub()
+    s1 = hub.update("d", speed_rpm=1.0)
+    s2 = hub.update("d", speed_rpm=1.0)
+    s3 = hub.update("d", speed_rpm=2.0)
+    assert s1.seq == s2.seq < s3.seq
+
+
+def test_shutdown_applies_on_shutdown() -> None:
+    hub, _ = make_hub(on_shutdown=StopAction.COAST)
+    hub.submit("d", Source.ZENOH, RUN)
+    hub.update("d", running=True)
+    hub.apply_shutdown()
+    assert hub.desired("d").run is False and hub.desired("d").coast_stop
+    assert not hub.all_stopped()
+    hub.update("d", running=False)
+    assert hub.all_stopped()
+
+
+class Params:
+    def __init__(self) -> None:
+        self.values = {100: 50}
+
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> int:
+        if number not in self.values:
+            raise ParameterError("impermissible parameter number", code=0)
+        return self.values[number]
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: int | float
+    ) -> None:
+        self.values[number] = int(value)
+
+
+async def test_parameter_writes_only_where_allowed() -> None:
+    hub, _ = make_hub(writable_params=frozenset({100}))
+    params = Params()
+    hub.attach_params(["d"], params)
+    assert await hub.read_param("d", 100) == 50
+    await hub.write_param("d", 100, 85)
+    assert params.values[100] == 85
+    with pytest.raises(ParameterNotWritable, match="not in writable_params"):
+        await hub.write_param("d", 101, 1)
+    assert 101 not in params.values

@@ -1,0 +1,182 @@
+"""The layering rules of ARCHITECTURE.md, checked on the import graph.
+
+Imports under ``if TYPE_CHECKING:`` are annotations only and do not count.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FIELDBUS_LIBS = ("serial", "can", "canopen")
+# Codec modules: sans-IO, may import only their own codec siblings and gateway.errors.
+CODEC_NAMES = {
+    "adapters.profibus": ("fdl", "dp", "dpv1", "profidrive", "wegrecord", "weg48", "diag", "cfg"),
+    "adapters.devicenet": ("ids", "explicit", "fragment", "dupmac", "cip", "connection"),
+}
+# Parts of an adapter package that are not codecs: a codec may not import them.
+NON_CODEC_NAMES = ("master", "link", "scanner", "adapter", "sim", "cli", "engine", "weg", "cfw08")
+ENGINE_NAMES = ("adapters.profibus.master", "adapters.devicenet.scanner")
+ADAPTER_MAY_IMPORT = (
+    "gateway.model",
+    "gateway.errors",
+    "gateway.adapter",
+    "gateway.schema",
+    "gateway.config",
+    "gateway.sim",
+)
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def imports_of(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), str(path))
+    package = module_name(path)
+    if path.name != "__init__.py":
+        package = package.rpartition(".")[0]
+    found: set[str] = set()
+
+    def visit(nodes: list[ast.stmt]) -> None:
+        for node in nodes:
+            if isinstance(node, ast.If) and _is_type_checking(node):
+                visit(node.orelse)
+                continue
+            for child in ast.walk(node):
+                if isinstance(child, ast.Import):
+                    found.update(alias.name for alias in child.names)
+                elif isinstance(child, ast.ImportFrom):
+                    base = child.module or ""
+                    if child.level:
+                        anchor = package.split(".")
+                        anchor = anchor[: len(anchor) - (child.level - 1)]
+                        base = ".".join([*anchor, base] if base else anchor)
+                    found.add(base)
+                    found.update(f"{base}.{alias.name}" for alias in child.names)
+
+    visit(tree.body)
+    return found
+
+
+def project_modules() -> dict[str, set[str]]:
+    out = {}
+    for top in ("gateway", "adapters"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            out[module_name(path)] = imports_of(path)
+    return out
+
+
+MODULES = project_modules()
+
+
+def under(name: str, *prefixes: str) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def violations(rule) -> list[str]:
+    bad = []
+    for mod, imports in MODULES.items():
+        for imp in sorted(imports):
+            why = rule(mod, imp)
+            if why:
+                bad.append(f"{mod} imports {imp}: {why}")
+    return bad
+
+
+def test_core_imports_no_adapter_and_no_fieldbus_library() -> None:
+    composition = ("gateway.daemon", "gateway.cli", "gateway.__main__", "gateway.simcli")
+
+    def rule(mod: str, imp: str) -> str | None:
+        if not under(mod, "gateway") or under(mod, *composition):
+            return None
+        if under(imp, "adapters"):
+            return "the core never imports an adapter (use the name table)"
+        if under(imp, *FIELDBUS_LIBS):
+            return "no fieldbus library in the core"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_codecs_import_only_codecs_and_errors() -> None:
+    def rule(mod: str, imp: str) -> str | None:
+        for pkg, names in CODEC_NAMES.items():
+            codecs = [f"{pkg}.{n}" for n in names]
+            if under(mod, *codecs):
+                if under(imp, "gateway") and not under(imp, "gateway.errors"):
+                    return "a codec imports nothing of the project but errors"
+                upper = [f"{pkg}.{n}" for n in NON_CODEC_NAMES]
+                if under(imp, "adapters") and (not under(imp, pkg) or under(imp, *upper)):
+                    return "a codec imports only other codecs"
+                if under(imp, *FIELDBUS_LIBS, "asyncio", "zenoh", "pymodbus"):
+                    return "a codec is sans-IO"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_adapters_import_only_their_package_and_the_adapter_contract() -> None:
+    def rule(mod: str, imp: str) -> str | None:
+        if not under(mod, "adapters"):
+            return None
+        if under(imp, "gateway") and not under(imp, *ADAPTER_MAY_IMPORT):
+            return f"adapters may import only {', '.join(ADAPTER_MAY_IMPORT)} of the core"
+        own = mod.split(".")[1] if mod.count(".") >= 1 else ""
+        if under(imp, "adapters") and imp != "adapters":
+            other = imp.split(".")[1]
+            # the MCD 600 profile runs on the Profibus master and uses its codecs
+            if other != own and not (own == "mcd600" and other == "profibus"):
+                return "adapters do not import each other"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_simulators_never_import_engines() -> None:
+    def rule(mod: str, imp: str) -> str | None:
+        if ".sim" in mod and under(imp, *ENGINE_NAMES):
+            return "a simulator is built from codecs and profiles, never the engine"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_front_ends_do_not_import_each_other() -> None:
+    def rule(mod: str, imp: str) -> str | None:
+        if under(mod, "gateway.zenoh") and under(imp, "gateway.modbus"):
+            return "front ends are independent"
+        if under(mod, "gateway.modbus") and under(imp, "gateway.zenoh"):
+            return "front ends are independent"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_the_checker_sees_imports_but_not_type_checking_ones(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    probe = tmp_path / "gateway" / "probe.py"
+    probe.parent.mkdir()
+    probe.write_text(
+        "import serial\nfrom . import hub\nfrom typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n    import can\n"
+    )
+    found = imports_of(probe)
+    assert {"serial", "gateway", "gateway.hub"} <= found
+    assert "can" not in found
