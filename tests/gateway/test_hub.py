@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from gateway.adapter import Capabilities, EventKind
@@ -28,12 +30,12 @@ class Clock:
         return self.t
 
 
-def make_hub(**policy: object) -> tuple[Hub, Clock]:
+def make_hub(**policy: Any) -> tuple[Hub, Clock]:
     clock = Clock()
     hub = Hub(clock=clock, wallclock=clock)
     hub.add_drive(
         DriveState(id="d", device=Device.CFW11, bus="b", address=3), DrivePolicy(**policy)
-    )  # type: ignore[arg-type]
+    )
     hub.set_capabilities("d", Capabilities(speed_scale=SpeedScale(1800.0)))
     hub.update("d", comm=CommState.ONLINE, status=DriveStatus.READY)
     return hub, clock
