@@ -1,0 +1,198 @@
+"""The contract between the Profibus DP master and the device profiles and device simulators.
+
+Gateway side, one :class:`DpProfile` instance per configured slave: it says how
+to set the slave up (ident number, Chk_Cfg bytes, user parameter data), turns
+the hub's desired command into the output telegram and the input telegram into
+drive-state changes, and does parameter access over DP-V1 through a
+:class:`RecordChannel` the master provides.
+
+Simulator side, one :class:`SimDevice` per simulated slave, plugged into the
+generic DP slave simulator: it checks the configuration it is given, answers
+data exchange, reacts to lost communication (watchdog expiry, Global_Control
+Clear) and answers DP-V1 record reads and writes with its manual's errors.
+
+Profiles are found through :data:`PROFILES` (device -> "module:Class"), so the
+master never imports a profile module eagerly, and the MCD 600 profile lives in
+its own package (adapters/mcd600) while running on this master.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+from gateway.adapter import Capabilities, ParamValue
+from gateway.errors import GatewayError
+from gateway.model import DesiredCommand, Device
+
+if TYPE_CHECKING:
+    from gateway.config import DriveConfig
+    from gateway.schema import Table
+
+PROFILES: dict[Device, str] = {
+    Device.CFW11: "adapters.profibus.weg.cfw11:Cfw11Profile",
+    Device.CFW700: "adapters.profibus.weg.cfw700:Cfw700Profile",
+    Device.CFW320: "adapters.profibus.weg.cfw320:Cfw320Profile",
+    Device.MCD600: "adapters.mcd600.profile:Mcd600Profile",
+}
+"""Device -> "module:Class" of its :class:`DpProfile`."""
+
+
+class RecordAccessError(GatewayError):
+    """A DP-V1 read/write answered negatively (the slave's Error_Code_1/2 and its text)."""
+
+    def __init__(self, text: str, code_1: int, code_2: int = 0, error_decode: int = 0x80) -> None:
+        self.text = text
+        self.code_1 = code_1
+        self.code_2 = code_2
+        self.error_decode = error_decode
+        super().__init__(f"DP-V1 error 0x{code_1:02X}/0x{code_2:02X}: {text}")
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveSetup:
+    """What the master sends a slave at start-up (Set_Prm and Chk_Cfg)."""
+
+    ident_number: int
+    cfg: bytes  # Chk_Cfg identifier bytes, exactly as on the wire
+    user_prm: bytes = b""  # user parameter data after the standard (and DP-V1) bytes
+    input_len: int = 0  # bytes of the input telegram (slave -> master)
+    output_len: int = 0  # bytes of the output telegram (master -> slave)
+    dpv1: bool = True  # DP-V1 enabled in the Set_Prm DP-V1 status bytes
+    group: int = 0  # Global_Control group bits
+
+
+@dataclass(frozen=True, slots=True)
+class DiagEvent:
+    """Something a profile read from the slave's extended diagnosis, worth an event."""
+
+    text: str
+    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info"
+    data: Mapping[str, Any] = field(default_factory=dict)
+
+
+class RecordChannel(Protocol):
+    """DP-V1 MSAC_C1 access to one slave, provided by the master.
+
+    Raises :class:`RecordAccessError` for a negative answer and
+    ``gateway.errors.GatewayTimeout`` when the slave does not answer in time.
+    """
+
+    async def read_record(self, slot: int, index: int, length: int) -> bytes: ...
+
+    async def write_record(self, slot: int, index: int, data: bytes) -> None: ...
+
+
+class EventSink(Protocol):
+    def __call__(self, text: str, kind: str = "info", **data: Any) -> None: ...
+
+
+class DpProfile(Protocol):
+    """One configured slave's device profile (stateful: one instance per drive)."""
+
+    device: ClassVar[Device]
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> Any:
+        """Validate the profile's own keys of the drive's config table."""
+        ...
+
+    def setup(self) -> SlaveSetup: ...
+
+    def capabilities(self) -> Capabilities:
+        """Speed scale (None for a soft starter) and the commands it refuses, with reasons."""
+        ...
+
+    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Mapping[str, Any]:
+        """After the slave reached data exchange: read scales, write ``startup_params``.
+
+        Returns drive-state changes (for example ``speed_base``). Raise
+        :class:`gateway.errors.GatewayError` to leave the drive "not configured".
+        """
+        ...
+
+    def outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The output telegram for this cycle (fault reset as one edge, state machines)."""
+        ...
+
+    def inputs(self, data: bytes, now: float) -> Mapping[str, Any]:
+        """Drive-state changes (DriveState field names) from an input telegram."""
+        ...
+
+    def on_ext_diag(self, data: bytes) -> list[DiagEvent]:
+        """Events from the device-related extended diagnosis bytes."""
+        ...
+
+    def on_comm_lost(self) -> None:
+        """Communication was lost: forget edges and state-machine progress."""
+        ...
+
+    async def read_param(self, channel: RecordChannel, number: int, subindex: int) -> ParamValue:
+        """Raise ``gateway.errors.ParameterError`` with the device's own text on refusal."""
+        ...
+
+    async def write_param(
+        self, channel: RecordChannel, number: int, subindex: int, value: ParamValue
+    ) -> None: ...
+
+
+class ProfileFactory(Protocol):
+    device: ClassVar[Device]
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> Any: ...
+
+    def __call__(self, drive: DriveConfig) -> DpProfile: ...
+
+
+def load_profile(device: Device) -> ProfileFactory:
+    """Import the profile class of a device (lazily)."""
+    try:
+        target = PROFILES[device]
+    except KeyError:
+        raise GatewayError(f"no Profibus profile for {device.value}") from None
+    module_name, _, class_name = target.partition(":")
+    factory: ProfileFactory = getattr(importlib.import_module(module_name), class_name)
+    return factory
+
+
+class SimDevice(Protocol):
+    """A simulated device behind the generic DP slave simulator (sans-IO, clock injected)."""
+
+    ident_number: int
+
+    def expected_cfg(self) -> bytes:
+        """The Chk_Cfg bytes it accepts (Get_Cfg answers them); others are a Cfg_Fault."""
+        ...
+
+    def set_prm(self, user_prm: bytes) -> bool:
+        """Take the user parameter data; False is a Prm_Fault."""
+        ...
+
+    def exchange(self, outputs: bytes, now: float) -> bytes:
+        """One data exchange: take the outputs, return the inputs."""
+        ...
+
+    def comm_lost(self, now: float) -> None:
+        """The DP watchdog expired or the master sent Global_Control Clear."""
+        ...
+
+    def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
+        """DP-V1 read; raise :class:`RecordAccessError` for the manual's negative answers."""
+        ...
+
+    def write_record(self, slot: int, index: int, data: bytes, now: float) -> None: ...
+
+    def ext_diag(self) -> bytes:
+        """Device-related extended diagnosis bytes (empty when none)."""
+        ...
+
+    def tick(self, now: float) -> None:
+        """Advance the device's physics to ``now``."""
+        ...
+
+    def power_cycle(self, now: float) -> None:
+        """Lose power and come back: parameters kept, running state and comm lost."""
+        ...
