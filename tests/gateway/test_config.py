@@ -161,3 +161,9 @@ def test_check_config_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert "2 drive(s) on 1 bus(es)" in out and "d1" in out and "MCD 600" in out
     assert main(["check-config", str(write(tmp_path, "[gateway]\nx=1\n", "bad.toml"))]) == 2
     assert "gateway.x: unknown key" in capsys.readouterr().err
+
+
+def test_site_template_is_valid() -> None:
+    config = load(DEFAULT_CONFIG.parent / "site.example.toml")
+    assert (config.modbus.host, config.modbus.port) == ("0.0.0.0", 502)
+    assert config.zenoh.multicast_scouting is False
