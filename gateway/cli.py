@@ -25,10 +25,10 @@ Handler = Callable[[argparse.Namespace], int]
 COMMANDS: dict[str, str] = {
     "run": "gateway.cli:add_run",
     "check-config": "gateway.cli:add_check_config",
-    "watch": "gateway.tools:add_watch",
-    "cmd": "gateway.tools:add_cmd",
-    "param": "gateway.tools:add_param",
-    "health": "gateway.tools:add_health",
+    "watch": "gateway.cli_tools:add_watch",
+    "cmd": "gateway.cli_tools:add_cmd",
+    "param": "gateway.cli_tools:add_param",
+    "health": "gateway.cli_tools:add_health",
     "profibus": "adapters.profibus.cli:add_profibus",
     "sim": "gateway.simcli:add_sim",
 }
