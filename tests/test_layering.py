@@ -15,8 +15,29 @@ ROOT = Path(__file__).resolve().parents[1]
 FIELDBUS_LIBS = ("serial", "can", "canopen")
 # Codec modules: sans-IO, may import only their own codec siblings and gateway.errors.
 CODEC_NAMES = {
-    "adapters.profibus": ("fdl", "dp", "dpv1", "profidrive", "wegrecord", "weg48", "diag", "cfg"),
-    "adapters.devicenet": ("ids", "explicit", "fragment", "dupmac", "cip", "connection"),
+    "adapters.profibus": (
+        "fdl",
+        "dp",
+        "dpv1",
+        "profidrive",
+        "wegrecord",
+        "diag",
+        "cfg",
+        "errors",
+        "_pdu",
+    ),
+    "adapters.devicenet": (
+        "ids",
+        "explicit",
+        "fragment",
+        "dupmac",
+        "cip",
+        "objects",
+        "datatypes",
+        "frame",
+        "errors",
+        "_validate",
+    ),
 }
 # Parts of an adapter package that are not codecs: a codec may not import them.
 NON_CODEC_NAMES = ("master", "link", "scanner", "adapter", "sim", "cli", "engine", "weg", "cfw08")
