@@ -1,0 +1,444 @@
+"""A simulated MCD 600 with its PROFIBUS card, for the generic DP slave simulator.
+
+:class:`Mcd600Sim` implements :class:`adapters.profibus.profile.SimDevice` (sans-IO, clock
+injected) on the soft starter physics of :mod:`adapters.mcd600.starter`, following the
+card's installation guide:
+
+* network commands are obeyed only when parameter 1-1 Command Source is Network and the
+  reset input is closed (3.3); a start needs control word byte 0 bit 4 = 0 (4.2);
+* the communication timeout from Set_Prm (3.3, 0-100 s, 0 = keep the state) forces the
+  reaction of parameter 6-13 once the master has been gone that long;
+* Global_Control (6): Clear makes the starter quick stop; Sync holds the outputs until the
+  next Sync; Freeze holds the inputs until the next Freeze (:meth:`Mcd600Sim.global_control`);
+* data requests (4.3) with their scales, parameter reads and writes (4.4) with the invalid
+  number / invalid value answers, and the diagnosis telegram (5.1).
+
+Fault injection: :meth:`trip` (any code, until reset), :meth:`keypad_change`,
+``reset_input_closed``, ``input_a``/``input_b``, ``warning``, :attr:`faults` (the shared
+:class:`gateway.sim.FaultInjector`, whose line-level knobs the host applies).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import ClassVar, Final, Protocol
+
+from adapters.profibus.profile import RecordAccessError
+from gateway.sim import FaultInjector, MotorParams
+
+from .diag import ExtDiag
+from .layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
+from .monitoring import (
+    FOURTEEN_BITS,
+    PRODUCT_TYPE_MCD600,
+    DataRequest,
+    MonitorReply,
+    ScaledPower,
+    StarterState,
+    StarterStateWord,
+)
+from .options import DEFAULT_IDENT_NUMBER, parse_user_prm
+from .programming import ParamReply, ParamRequest
+from .simparams import (
+    COMMAND_SOURCE,
+    CURRENT_LIMIT,
+    EXCESS_START_TIME,
+    INITIAL_CURRENT,
+    LOCKED_ROTOR_TIME,
+    MOTOR_FLC,
+    NETWORK_COMMS,
+    START_RAMP_TIME,
+    STOP_MODE,
+    STOP_TIME,
+    CommandSource,
+    NetworkCommsAction,
+    ParamStore,
+    StopMode,
+)
+from .starter import SoftStarter, StarterSettings
+from .trips import NETWORK_FORCED_TRIP
+from .words import ControlWord, MotorSet, StatusWord, current_to_raw
+
+log = logging.getLogger(__name__)
+
+DEFAULT_COMM_TIMEOUT: Final = 10  # s, guide 3.3
+WARNING_THERMAL_PCT: Final = 90.0  # our choice: warn before the overload trip
+NO_DPV1: Final = 0xA9  # DP-V1 error class 0xA (application), code 9: not supported
+
+
+class GlobalControlLike(Protocol):
+    """What :meth:`Mcd600Sim.global_control` reads (``adapters.profibus.dp.GlobalControl``)."""
+
+    @property
+    def clear_data(self) -> bool: ...
+
+    @property
+    def unfreeze(self) -> bool: ...
+
+    @property
+    def freeze(self) -> bool: ...
+
+    @property
+    def unsync(self) -> bool: ...
+
+    @property
+    def sync(self) -> bool: ...
+
+
+class Mcd600Sim:
+    """One simulated MCD 600 with a PROFIBUS card (a ``SimDevice``)."""
+
+    dpv1: ClassVar[bool] = False  # Set_Prm has no DP-V1 status bytes: user data from byte 7
+
+    def __init__(
+        self,
+        mode: Mode = Mode.BASIC,
+        *,
+        flc_a: int = 100,
+        params: dict[int, int] | None = None,
+        ident_number: int = DEFAULT_IDENT_NUMBER,
+        current_x10: bool = False,
+        line_voltage: float = 400.0,
+        load: float = 0.6,
+        required_start_pct: float = 250.0,
+        version: tuple[int, int] = (1, 4),
+        seed: int = 0,
+    ) -> None:
+        self.mode = mode
+        self.layout = LAYOUTS[mode]
+        self.ident_number = ident_number
+        self.current_x10 = current_x10
+        self.version = version
+        self.params = ParamStore({MOTOR_FLC: flc_a, **(params or {})})
+        motor = MotorParams(
+            rated_rpm=1480.0,
+            rated_current=float(flc_a),
+            magnetising_current=0.3 * flc_a,
+            load=load,
+        )
+        self.starter = SoftStarter(
+            motor, line_voltage=line_voltage, required_start_pct=required_start_pct
+        )
+        self.faults = FaultInjector(seed=seed)
+        # digital inputs (request 16); the reset input must be closed to run (3.3)
+        self.reset_input_closed = True
+        self.start_input = False
+        self.input_a = False
+        self.input_b = False
+        self.warning = False  # injected warning (status word byte 1 bit 3)
+        # bus side
+        self.comm_timeout = DEFAULT_COMM_TIMEOUT
+        self.prm_ok = False
+        self.exchanging = False
+        self._lost_at: float | None = None
+        self._comm_acted = False
+        self._comm_warning = False
+        self._last_tick: float | None = None
+        self._control = ControlWord()
+        self._applied = OutputTelegram()
+        self._param_reply = ParamReply()
+        self._changed_param = 0
+        self._sync = False
+        self._held: OutputTelegram | None = None
+        self._frozen: bytes | None = None
+        # what tests look at
+        self.reset_edges = 0
+        self.starts = 0
+        self.motor_set_used: MotorSet | None = None
+
+    # ------------------------------------------------------------------ SimDevice
+
+    def expected_cfg(self) -> bytes:
+        return self.layout.cfg
+
+    def set_prm(self, user_prm: bytes) -> bool:
+        timeout = parse_user_prm(user_prm)  # guide 3.3: 0-100 s
+        if timeout is None:
+            return False
+        self.comm_timeout = timeout
+        self.prm_ok = True
+        return True
+
+    def exchange(self, outputs: bytes, now: float) -> bytes:
+        self.tick(now)
+        telegram = OutputTelegram.decode(self.layout, outputs)
+        self.exchanging = True
+        self._lost_at = None
+        self._comm_acted = False
+        self._comm_warning = False
+        if self._sync:
+            self._held = telegram  # 6.2: not processed until the next Sync
+        else:
+            self._apply(telegram)
+        if self._frozen is not None:
+            return self._frozen  # 6.1: inputs only change on the next Freeze
+        return self._inputs()
+
+    def comm_lost(self, now: float) -> None:
+        """The DP watchdog expired: keep the state, start the comm timeout (3.3)."""
+        self.tick(now)
+        if self.exchanging:
+            self.exchanging = False
+            self._lost_at = now
+            self._comm_acted = False
+
+    def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
+        raise RecordAccessError("the MCD 600 PROFIBUS card has no DP-V1", NO_DPV1)
+
+    def write_record(self, slot: int, index: int, data: bytes, now: float) -> None:
+        raise RecordAccessError("the MCD 600 PROFIBUS card has no DP-V1", NO_DPV1)
+
+    def ext_diag(self) -> bytes:
+        """The diagnosis telegram of 5.1 (3 bytes, length byte included), empty when clear."""
+        diag = ExtDiag(self.trip_code, self._changed_param)
+        return b"" if diag.empty else diag.encode()
+
+    @property
+    def diag_alert(self) -> bool:
+        """A trip raises the diagnosis alarm (5.1.1); a changed parameter does not (5.1.2)."""
+        return self.trip_code != 0
+
+    def tick(self, now: float) -> None:
+        last = now if self._last_tick is None else self._last_tick
+        self._last_tick = max(now, last)
+        dt = max(0.0, now - last)
+        deadline = self._comm_deadline()
+        if deadline is not None and deadline <= now:
+            self._advance(max(0.0, deadline - last))
+            self._comm_timeout_expired()
+            self._advance(now - max(deadline, last))
+        else:
+            self._advance(dt)
+
+    def power_cycle(self, now: float) -> None:
+        """Control power off and on: parameters and thermal model kept, the rest lost."""
+        self.tick(now)
+        self.starter.power_off()
+        self.faults.clear()
+        self.comm_timeout = DEFAULT_COMM_TIMEOUT
+        self.prm_ok = False
+        self.exchanging = False
+        self._lost_at = None
+        self._comm_warning = False
+        self._control = ControlWord()
+        self._applied = OutputTelegram()
+        self._param_reply = ParamReply()
+        self._changed_param = 0
+        self._sync = False
+        self._held = None
+        self._frozen = None
+
+    # ------------------------------------------------------------------ Global_Control (6)
+
+    def global_control(self, control: GlobalControlLike, now: float) -> None:
+        self.tick(now)
+        if control.clear_data and self.starter.active:
+            self.starter.coast()  # 6.3: Clear -> quick stop
+        if control.unsync:
+            self._sync = False
+            self._release_held()
+        elif control.sync:
+            self._release_held()  # 6.2: the outputs received so far take effect
+            self._sync = True
+        if control.unfreeze:
+            self._frozen = None
+        elif control.freeze:
+            self._frozen = self._inputs()  # 6.1: inputs sampled now
+
+    def _release_held(self) -> None:
+        held, self._held = self._held, None
+        if held is not None:
+            self._apply(held)
+
+    # ------------------------------------------------------------------ fault injection
+
+    def trip(self, code: int) -> None:
+        """Trip on ``code`` (any 1-255); the starter stops and reports it until reset."""
+        if not 1 <= code <= 255:
+            raise ValueError(f"trip code {code} is not 1..255")
+        self.faults.trip(code)
+        self.starter.trip(code)
+
+    def keypad_change(self, number: int, value: int) -> None:
+        """Someone changes a parameter on the starter's keypad (5.1.2)."""
+        self.params.set(number, value)  # ValueError for an unknown number or bad value
+        self._changed_param = number
+
+    # ------------------------------------------------------------------ internals
+
+    @property
+    def trip_code(self) -> int:
+        return self.starter.trip_code if self.starter.tripped else 0
+
+    @property
+    def network_control(self) -> bool:
+        return self.params[COMMAND_SOURCE] == CommandSource.NETWORK
+
+    def settings(self) -> StarterSettings:
+        p = self.params
+        return StarterSettings(
+            flc_a=float(p[MOTOR_FLC]),
+            start_ramp_time=float(p[START_RAMP_TIME]),
+            initial_current_pct=float(p[INITIAL_CURRENT]),
+            current_limit_pct=float(p[CURRENT_LIMIT]),
+            excess_start_time=float(p[EXCESS_START_TIME]),
+            soft_stop=p[STOP_MODE] == StopMode.SOFT_STOP,
+            stop_time=float(p[STOP_TIME]),
+            locked_rotor_time=float(p[LOCKED_ROTOR_TIME]),
+        )
+
+    def _advance(self, dt: float) -> None:
+        code = self.faults.fault_code
+        if code is not None and not self.starter.tripped:
+            self.starter.trip(code)  # an injected condition trips again until reset
+        self.starter.available = self.reset_input_closed
+        self.starter.advance(dt, self.settings())
+
+    def _comm_deadline(self) -> float | None:
+        if self._lost_at is None or self._comm_acted or self.comm_timeout == 0:
+            return None  # 3.3: timeout 0 leaves the starter as it is
+        return self._lost_at + self.comm_timeout
+
+    def _comm_timeout_expired(self) -> None:
+        self._comm_acted = True
+        action = NetworkCommsAction(self.params[NETWORK_COMMS])
+        log.info("MCD 600 sim: communication timeout, %s", action.name)
+        if action is NetworkCommsAction.TRIP_STARTER:
+            self.starter.trip(NETWORK_FORCED_TRIP)
+        elif action is NetworkCommsAction.SOFT_TRIP_AND_LOG:
+            self.starter.soft_trip(NETWORK_FORCED_TRIP, self.settings())
+        elif action is NetworkCommsAction.WARN_AND_LOG:
+            self._comm_warning = True
+
+    def _apply(self, telegram: OutputTelegram) -> None:
+        self._applied = telegram
+        self._apply_control(telegram.control)
+        if self.layout.programming:
+            self._param_reply = self._program(telegram.param)
+
+    def _apply_control(self, cw: ControlWord) -> None:
+        previous, self._control = self._control, cw
+        if not self.network_control:
+            return  # 3.3: commands from the card only with 1-1 = Network
+        if cw.reset and not previous.reset:
+            self.reset_edges += 1
+            self._reset()
+        if cw.quick_stop:
+            self.starter.coast()  # 4.2 byte 0 bit 4: stop action is a quick stop
+        elif not cw.start:
+            self.starter.stop(self.settings())
+        elif self.starter.state is StarterState.READY and cw.motor_set is not MotorSet.RESERVED:
+            self._start(cw.motor_set)
+
+    def _start(self, motor_set: MotorSet) -> None:
+        """Start with the motor set of control word bits 2-3 (the sim's remote input for
+        the motor set is input A: closed = secondary)."""
+        if motor_set is MotorSet.REMOTE_INPUT:
+            motor_set = MotorSet.SECONDARY if self.input_a else MotorSet.PRIMARY
+        if self.starter.start(self.settings()):
+            self.starts += 1
+            self.motor_set_used = motor_set
+
+    def _reset(self) -> None:
+        if self.starter.tripped and self.starter.reset():
+            self.faults.clear()  # the injected condition is gone (5.1.1)
+
+    def _program(self, request: ParamRequest) -> ParamReply:
+        """4.4: answer a read or write; a write wins when both bits are set."""
+        number = request.number
+        if request.idle:
+            return ParamReply(echo=number)
+        if not self.params.known(number):
+            return ParamReply(echo=number, invalid_number=True)
+        if request.write:
+            if not self.params.valid_value(number, request.value):
+                return ParamReply(echo=number, invalid_value=True, value=self.params[number])
+            self.params.set(number, request.value)
+        if number == self._changed_param:
+            self._changed_param = 0  # 5.1.2: the master read or wrote it
+        return ParamReply(echo=number, value=self.params[number])
+
+    # ------------------------------------------------------------------ inputs
+
+    def _inputs(self) -> bytes:
+        monitor = self._monitor(self._applied.request) if self.layout.monitoring else None
+        param = self._param_reply if self.layout.programming else None
+        return InputTelegram(self._status_word(), monitor, param).encode(self.layout)
+
+    def _status_word(self) -> StatusWord:
+        s = self.starter
+        return StatusWord(
+            current_raw=current_to_raw(s.current_pct(self.settings())),
+            network_control=self.network_control,
+            ramping=s.state in _RAMPING,
+            ready=s.state is _READY,
+            active=s.active,
+            tripped=s.tripped,
+            warning=self._warning(),
+        )
+
+    def _warning(self) -> bool:
+        return (
+            self.warning or self._comm_warning or (self.starter.thermal_pct >= WARNING_THERMAL_PCT)
+        )
+
+    def _monitor(self, number: int) -> MonitorReply:
+        try:
+            request = DataRequest(number)
+        except ValueError:
+            return MonitorReply(echo=number, invalid=True)  # 4.3 table 5 byte 3 bit 0
+        value = _VALUES[request](self)
+        return MonitorReply(echo=number, value=value & 0xFFFF)
+
+    # data values (4.3 table 6)
+
+    def _amps(self, amps: float, mask: int) -> int:
+        return min(mask, round(amps * (10 if self.current_x10 else 1)))
+
+    def _starter_state(self) -> int:
+        s = self.starter
+        return StarterStateWord(
+            state=int(s.state),
+            positive_phase_sequence=True,
+            current_above_flc=s.current_pct(self.settings()) > 100.0,
+            initialised=True,
+            trip_code=self.trip_code,
+        ).encode()
+
+    def _digital_inputs(self) -> int:
+        bits = (
+            (self.start_input, 0),
+            (self.reset_input_closed, 2),
+            (self.input_a, 3),
+            (self.input_b, 4),
+        )
+        return sum(1 << bit for closed, bit in bits if closed)
+
+    def _volts(self) -> int:
+        return min(FOURTEEN_BITS, round(self.starter.line_voltage))
+
+
+_RAMPING: Final = frozenset({StarterState.STARTING, StarterState.STOPPING})
+_READY: Final = StarterState.READY
+
+_VALUES: Final[dict[DataRequest, Callable[[Mcd600Sim], int]]] = {
+    DataRequest.PRODUCT: lambda sim: PRODUCT_TYPE_MCD600 << 8,
+    DataRequest.STARTER_STATE: Mcd600Sim._starter_state,
+    DataRequest.MOTOR_CURRENT: lambda sim: sim._amps(sim.starter.current_a, 0xFFFF),
+    DataRequest.MOTOR_TEMPERATURE: lambda sim: min(255, round(sim.starter.thermal_pct)),
+    DataRequest.POWER_FACTOR: lambda sim: round(100 * sim.starter.power_factor),
+    DataRequest.POWER_KW: lambda sim: ScaledPower.from_units(sim.starter.power_w).encode(),
+    DataRequest.POWER_KVA: lambda sim: ScaledPower.from_units(
+        sim.starter.apparent_power_va
+    ).encode(),
+    DataRequest.VOLTAGE: Mcd600Sim._volts,
+    DataRequest.CURRENT_L1: lambda sim: sim._amps(sim.starter.current_a, FOURTEEN_BITS),
+    DataRequest.CURRENT_L2: lambda sim: sim._amps(sim.starter.current_a, FOURTEEN_BITS),
+    DataRequest.CURRENT_L3: lambda sim: sim._amps(sim.starter.current_a, FOURTEEN_BITS),
+    DataRequest.VOLTAGE_L1: Mcd600Sim._volts,
+    DataRequest.VOLTAGE_L2: Mcd600Sim._volts,
+    DataRequest.VOLTAGE_L3: Mcd600Sim._volts,
+    DataRequest.VERSION: lambda sim: sim.version[0] << 8 | sim.version[1],
+    DataRequest.DIGITAL_INPUTS: Mcd600Sim._digital_inputs,
+}

@@ -1,0 +1,157 @@
+"""The simulated MCD 600 on its own: the rules of its guide, driven by raw telegrams."""
+
+from __future__ import annotations
+
+import pytest
+
+from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
+from adapters.mcd600.monitoring import DataRequest, StarterState
+from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.simparams import (
+    COMMAND_SOURCE,
+    CURRENT_LIMIT,
+    EXCESS_START_TIME,
+    START_RAMP_TIME,
+    CommandSource,
+)
+from adapters.mcd600.trips import EXCESS_START_TIME as EXCESS_START_TRIP
+from adapters.mcd600.words import ControlWord, MotorSet, StatusWord
+from adapters.profibus.profile import RecordAccessError
+from gateway.errors import FrameDecodeError
+
+START = ControlWord(start=True).encode()
+STOP = ControlWord().encode()
+
+
+def status(sim: Mcd600Sim, outputs: bytes, now: float) -> StatusWord:
+    return InputTelegram.decode(sim.layout, sim.exchange(outputs, now)).status
+
+
+def test_setup_answers() -> None:
+    sim = Mcd600Sim(Mode.PARAMETER)
+    assert sim.expected_cfg() == LAYOUTS[Mode.PARAMETER].cfg
+    assert sim.set_prm(b"\x0a") and sim.comm_timeout == 10
+    assert not sim.set_prm(b"\x65")  # 101 s is out of 0-100 (guide 3.3): Prm_Fault
+    assert not sim.set_prm(b"")
+    with pytest.raises(RecordAccessError) as info:
+        sim.read_record(0, 47, 240, 0.0)
+    assert info.value.code_1 == 0xA9
+    with pytest.raises(RecordAccessError):
+        sim.write_record(0, 47, b"\x00", 0.0)
+    with pytest.raises(FrameDecodeError):
+        sim.exchange(b"\x00\x01", 0.0)  # parameter mode outputs are 7 bytes
+
+
+def test_start_needs_network_as_command_source() -> None:
+    sim = Mcd600Sim(params={COMMAND_SOURCE: CommandSource.DIGITAL_INPUT})
+    word = status(sim, START, 0.1)
+    assert not word.network_control and word.ready and not word.active
+    assert sim.starts == 0
+    sim.params.set(COMMAND_SOURCE, CommandSource.NETWORK)
+    status(sim, STOP, 0.2)
+    word = status(sim, START, 0.3)
+    assert word.network_control and word.active and word.ramping
+
+
+def test_start_needs_the_reset_input_closed() -> None:
+    sim = Mcd600Sim()
+    sim.reset_input_closed = False
+    word = status(sim, START, 0.1)
+    word = status(sim, START, 0.2)
+    assert not word.ready and not word.active and not word.tripped  # not ready
+    assert sim.starter.state is StarterState.NOT_READY
+    sim.reset_input_closed = True
+    assert status(sim, STOP, 0.3).ready
+    assert status(sim, START, 0.4).active
+
+
+def test_start_needs_bit_4_of_byte_0_clear() -> None:
+    sim = Mcd600Sim()
+    word = status(sim, ControlWord(start=True, quick_stop=True).encode(), 0.1)
+    assert not word.active and sim.starts == 0  # guide 4.2 note
+
+
+def test_motor_set_selection() -> None:
+    sim = Mcd600Sim()
+    status(sim, ControlWord(start=True, motor_set=MotorSet.SECONDARY).encode(), 0.1)
+    assert sim.motor_set_used is MotorSet.SECONDARY
+    sim = Mcd600Sim()
+    sim.input_a = True
+    status(sim, START, 0.1)
+    assert sim.motor_set_used is MotorSet.SECONDARY  # from the remote input
+    sim = Mcd600Sim()
+    status(sim, ControlWord(start=True, motor_set=MotorSet.RESERVED).encode(), 0.1)
+    assert sim.starts == 0
+
+
+def test_current_limit_too_low_trips_on_excess_start_time() -> None:
+    sim = Mcd600Sim(params={CURRENT_LIMIT: 150, START_RAMP_TIME: 2, EXCESS_START_TIME: 5})
+    t = 0.0
+    while t < 4.9:
+        t += 0.1
+        word = status(sim, START, t)
+        assert word.active and word.ramping  # stalled below line speed
+    assert word.current_pct_flc == pytest.approx(150.0, abs=3.2)  # held at the limit
+    t += 0.3
+    word = status(sim, START, t)
+    assert word.tripped and sim.trip_code == EXCESS_START_TRIP
+    assert sim.ext_diag() == bytes.fromhex("03 01 00")
+
+
+def test_thermal_model_trips_on_overload() -> None:
+    sim = Mcd600Sim(params={CURRENT_LIMIT: 600}, required_start_pct=1000.0)  # never reaches speed
+    sim.params.set(EXCESS_START_TIME, 0)  # no excess start time check
+    t = 0.0
+    while not sim.starter.tripped and t < 60.0:
+        t += 0.5
+        status(sim, START, t)
+    assert sim.trip_code == 2  # motor overload
+    assert 9.0 < t < 20.0  # locked rotor time 10 s at 600 %
+    assert not sim.starter.reset()  # still too hot to reset
+
+
+def test_data_requests_out_of_range_are_flagged_invalid() -> None:
+    sim = Mcd600Sim(Mode.EXTENDED)
+    for number in (0, 17, 255):
+        out = OutputTelegram(ControlWord(), number).encode(sim.layout)
+        reply = InputTelegram.decode(sim.layout, sim.exchange(out, 0.1)).monitor
+        assert reply is not None and reply.echo == number and reply.invalid
+
+
+def test_small_models_report_currents_times_ten() -> None:
+    sim = Mcd600Sim(Mode.EXTENDED, current_x10=True)
+    status(sim, START + b"\x00", 0.1)
+    out = OutputTelegram(ControlWord(start=True), DataRequest.MOTOR_CURRENT).encode(sim.layout)
+    reply = InputTelegram.decode(sim.layout, sim.exchange(out, 0.2)).monitor
+    assert reply is not None
+    assert reply.value == round(sim.starter.current_a * 10)
+
+
+def test_power_cycle_keeps_parameters_and_loses_the_rest() -> None:
+    sim = Mcd600Sim()
+    sim.set_prm(b"\x05")
+    sim.params.set(START_RAMP_TIME, 3)
+    status(sim, START, 0.1)
+    sim.trip(40)
+    sim.power_cycle(1.0)
+    assert not sim.prm_ok and not sim.exchanging
+    assert sim.comm_timeout == 10
+    assert sim.params[START_RAMP_TIME] == 3
+    assert not sim.starter.active and sim.trip_code == 0
+    assert sim.ext_diag() == b""
+    sim.tick(100.0)  # no comm timeout after a power cycle
+    assert sim.trip_code == 0
+
+
+def test_injected_trip_needs_a_reset_edge() -> None:
+    sim = Mcd600Sim()
+    sim.trip(7)
+    assert status(sim, START, 0.1).tripped
+    reset = ControlWord(reset=True).encode()
+    assert not status(sim, reset, 0.2).tripped
+    assert status(sim, reset, 0.3).ready  # held reset: one edge, one reset
+    assert sim.reset_edges == 1
+    with pytest.raises(ValueError):
+        sim.trip(0)
+    with pytest.raises(ValueError):
+        sim.keypad_change(250, 1)
