@@ -79,8 +79,8 @@ class Motor:
             rate = self._rate(towards_zero)
             distance = abs(goal - self.speed)
             needed = distance / rate if rate != math.inf else 0.0
-            if needed <= dt:
-                self.speed = goal
+            if needed <= dt or distance < 1e-6:
+                self.speed = goal  # snap: no float residue left at the end of a ramp
                 dt -= needed
             else:
                 step = rate * dt

@@ -1,0 +1,707 @@
+"""The DP profile shared by the WEG CFW-11, CFW700 and CFW320 (raw words <-> drive model).
+
+One instance per configured drive. The model's differences come from its
+:class:`~adapters.profibus.weg.spec.ModelSpec`; :mod:`.cfw11`, :mod:`.cfw700` and
+:mod:`.cfw320` only name the spec.
+
+Cyclic words (telegram of ``words`` 16-bit words, big-endian, both directions):
+
+* word 1 out: control word (P0684 manufacturer / P0967 PROFIdrive); in: status word
+  (P0680 / P0968);
+* word 2 out: speed reference (P0685 13 bits / 4000h = P0134); in: motor speed (P0681 / same);
+* words 3..N: the parameters the drive is programmed with (P0742.. in, P0750.. / P746.. out).
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, ClassVar, Final
+
+from adapters.profibus.cfg import CompactId, IoDirection
+from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
+from adapters.profibus.profile import DiagEvent, EventSink, RecordChannel, SlaveSetup
+from gateway.adapter import Capabilities, ParamValue
+from gateway.errors import GatewayError, ParameterError
+from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedScale
+
+from . import words as w
+from .options import WegOptions, parse_options
+from .records import RecordParams
+from .spec import SIGNED, DataProfile, ModelSpec, scaled
+
+if TYPE_CHECKING:
+    from gateway.config import DriveConfig
+    from gateway.schema import Table
+
+log = logging.getLogger(__name__)
+
+MAX_13BIT_PCT: Final = 100.0 * w.WORD_MAX / w.SPEED_13BIT_BASE  # 4 x base, saturating (P681)
+MAX_PROFIDRIVE_PCT: Final = 100.0  # the drive limits the speed to P0134 = 4000h
+
+
+class DriveProgrammingMismatch(GatewayError):
+    """The drive's programming (P0741, P0922/P751, P0742..) differs from the drive's config."""
+
+
+@dataclass(frozen=True)
+class SpeedBase:
+    """What the speed word's full scale means: ``rpm`` at ``full_scale`` (8192 or 4000h)."""
+
+    rpm: float
+    full_scale: int
+    max_pct: float
+    label: str
+
+    def to_raw(self, rpm: float | None, pct: float | None) -> int:
+        if rpm is not None:
+            return w.speed_to_raw(rpm, self.rpm, self.full_scale)
+        if pct is not None:
+            return w.speed_to_raw(pct, 100.0, self.full_scale)
+        return 0
+
+    def rpm_of(self, raw: int) -> float:
+        return w.raw_to_speed(raw, self.rpm, self.full_scale)
+
+    def pct_of(self, raw: int) -> float:
+        return w.raw_to_speed(raw, 100.0, self.full_scale)
+
+    def scale(self) -> SpeedScale:
+        return SpeedScale(base_rpm=self.rpm, max_pct=self.max_pct, label=self.label)
+
+
+@dataclass(frozen=True)
+class Ratings:
+    """Scale parameters read at connect (or fixed by the config)."""
+
+    rated_hz: float | None = None  # P0403
+    rated_rpm: float | None = None  # P0402
+    sync_rpm: float | None = None  # from the two above (13-bit base)
+    max_rpm: float | None = None  # P0134 (PROFIdrive base)
+    rated_current_a: float | None = None  # P0401 (frame 20 P0760)
+    rated_power_kw: float | None = None  # P0404 (frame 20 P0761)
+
+
+@dataclass
+class _Sent:
+    """What the last output telegram asked for (inputs are judged against it)."""
+
+    run: bool = False
+    forward: bool = True
+    reference: int = 0  # signed raw word as sent
+    remote: bool = True
+
+
+class WegProfile:
+    """DpProfile of a WEG drive on Profibus DP (see the module docstring)."""
+
+    device: ClassVar[Device]
+    spec: ClassVar[ModelSpec]
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
+        return parse_options(table, cls.spec)
+
+    def __init__(self, drive: DriveConfig) -> None:
+        opts = drive.options if isinstance(drive.options, WegOptions) else WegOptions()
+        self.drive = drive
+        self.options = opts
+        self.params = RecordParams(
+            opts.param_record, opts.param_slot, opts.record_retries, opts.record_retry_delay
+        )
+        self.in_map = opts.mapped_in()
+        self.out_map = opts.mapped_out()
+        self.out_values = [w.to_word(opts.out_value_of(i)) for i in range(len(self.out_map))]
+        self.ratings = Ratings(
+            rated_hz=opts.rated_hz,
+            rated_rpm=opts.rated_rpm,
+            sync_rpm=opts.sync_rpm,
+            max_rpm=opts.max_rpm,
+            rated_current_a=opts.rated_current_a,
+            rated_power_kw=opts.rated_power_kw,
+        )
+        self.base: SpeedBase | None = self._speed_base(self.ratings)
+        self._reset_seen: int | None = None
+        self._pulse_until: float | None = None
+        self._pulse_sent = False
+        self._sent = _Sent()
+        self._zsw: w.ProfidriveStatus | None = None
+        self._faulted = False
+        self._alarm = False
+        self._polled_fault: int | None = None
+        self._polled_alarm: int | None = None
+
+    # ------------------------------------------------------------------ setup
+
+    @property
+    def profidrive(self) -> bool:
+        return self.options.data_profile is DataProfile.PROFIDRIVE
+
+    def setup(self) -> SlaveSetup:
+        """Ident number, one consistent word identifier for the I/O words, no user data.
+
+        The manuals give the telegram sizes (P0922 / P751) but not the GSD modules: we
+        send one compact identifier ``F0h + words - 1`` (words in and out, consistent),
+        the form of the fact sheet's 0xF1 for telegram 1 (1.7).
+        """
+        n = self.options.words
+        cfg = CompactId(IoDirection.INPUT_OUTPUT, n, words=True, consistent=True).encode()
+        ident = self.options.ident_number
+        return SlaveSetup(
+            ident_number=self.spec.default_ident if ident is None else ident,
+            cfg=cfg,
+            user_prm=b"",
+            input_len=2 * n,
+            output_len=2 * n,
+            dpv1=True,
+        )
+
+    def capabilities(self) -> Capabilities:
+        unsupported: dict[str, str] = {}
+        if not self.spec.quick_stop:
+            unsupported["quick_stop"] = (
+                f"the {self.spec.device.value} has no quick stop "
+                f"({self.spec.pname(684)} bit 6 is reserved, Table 4.3)"
+            )
+        scale = None if self.base is None else self.base.scale()
+        return Capabilities(speed_scale=scale, unsupported=unsupported)
+
+    # ------------------------------------------------------------------ connect
+
+    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Mapping[str, Any]:
+        """Write ``startup_params``, check the drive's programming, read the scales."""
+        for number, value in self.options.startup_params:
+            await self._startup_param(channel, event, number, value)
+        if self.options.verify_mapping:
+            await self._verify_programming(channel)
+        await self._read_ratings(channel)
+        return {"speed_base": None if self.base is None else self.base.label}
+
+    async def _startup_param(
+        self, channel: RecordChannel, event: EventSink, number: int, value: int
+    ) -> None:
+        name = self.spec.pname(number)
+        raw = w.to_word(value)
+        try:
+            if await self.params.read(channel, number) != raw:
+                await self.params.write(channel, number, raw)
+                event(f"startup {name} = {value} written", "parameter", number=number, value=value)
+            back = await self.params.read(channel, number)
+        except ParameterError as exc:
+            raise ParameterError(f"startup {name} = {value}: {exc.text}", exc.code) from exc
+        if back != raw:
+            raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
+
+    def _expected_programming(self) -> list[tuple[int, int]]:
+        """(parameter, expected raw value) that the config implies about the drive."""
+        spec, opts = self.spec, self.options
+        out = [(spec.telegram_param, spec.telegram_code(opts.words))]
+        if len(spec.profiles) > 1:
+            out.append((741, opts.data_profile.p0741))
+        for i, param in enumerate(self.in_map):
+            out.append((spec.read_map_param(i + 3), param))
+        for i, param in enumerate(self.out_map):
+            out.append((spec.write_map_param(i + 3), param))
+        return out
+
+    async def _verify_programming(self, channel: RecordChannel) -> None:
+        expected = self._expected_programming()
+        values = await self.params.read_many(channel, [(n, 0) for n, _ in expected])
+        wrong = [
+            f"{self.spec.pname(n)} = {got} (config: {want})"
+            for (n, want), got in zip(expected, values, strict=True)
+            if got != want
+        ]
+        if wrong:
+            raise DriveProgrammingMismatch(
+                "the drive is programmed differently from its config: " + ", ".join(wrong)
+            )
+
+    def _rating_params(self) -> dict[str, int]:
+        """Ratings field -> parameter, for what the config leaves to the drive.
+
+        P0134 is read in both profiles: the PROFIdrive base, and the limit of the 13-bit
+        references (the drive limits the speed to P0134 whatever the word says).
+        """
+        r, need = self.ratings, {}
+        if r.max_rpm is None:
+            need["max_rpm"] = 134
+        if not self.profidrive and (
+            r.sync_rpm is None or (self.spec.device is Device.CFW320 and r.rated_hz is None)
+        ):
+            if r.rated_hz is None:
+                need["rated_hz"] = 403
+            if r.rated_rpm is None and r.sync_rpm is None:
+                need["rated_rpm"] = 402
+        if self.options.frame == 20:
+            if r.rated_current_a is None:
+                need["rated_current_a"] = 401
+            if r.rated_power_kw is None:
+                need["rated_power_kw"] = 404
+        return need
+
+    async def _read_ratings(self, channel: RecordChannel) -> None:
+        need = self._rating_params()
+        if need:
+            raws = await self.params.read_many(channel, [(n, 0) for n in need.values()])
+            read = {
+                key: float(scaled(n, raw)) for (key, n), raw in zip(need.items(), raws, strict=True)
+            }
+            for key, value in read.items():
+                if value <= 0:
+                    raise DriveProgrammingMismatch(
+                        f"{self.spec.pname(need[key])} = {value:g}: no scale can be derived"
+                    )
+            self.ratings = replace(self.ratings, **read)
+        self.base = self._speed_base(self.ratings)
+
+    def _base_configured(self) -> bool:
+        o = self.options
+        if self.profidrive:
+            return o.max_rpm is not None
+        return o.sync_rpm is not None or (o.rated_hz is not None and o.rated_rpm is not None)
+
+    def _speed_base(self, r: Ratings) -> SpeedBase | None:
+        """The speed word's base from the ratings known so far (None: not yet)."""
+        suffix = " (configured)" if self._base_configured() else ""
+        if self.profidrive:
+            if r.max_rpm is None:
+                return None
+            label = f"4000h = {self.spec.pname(134)} {r.max_rpm:g} rpm{suffix}"
+            return SpeedBase(r.max_rpm, w.PROFIDRIVE_SPEED_BASE, MAX_PROFIDRIVE_PCT, label)
+        sync = r.sync_rpm
+        if sync is None and r.rated_hz is not None and r.rated_rpm is not None:
+            sync = w.synchronous_rpm(r.rated_hz, r.rated_rpm)
+        if sync is None:
+            return None
+        if self.spec.device is Device.CFW320:
+            hz = "" if r.rated_hz is None else f" {r.rated_hz:g} Hz"
+            label = f"8192 = {self.spec.pname(403)}{hz} = {sync:g} rpm{suffix}"
+        else:
+            label = f"8192 = {sync:g} rpm synchronous{suffix}"
+        limit = MAX_13BIT_PCT if r.max_rpm is None else min(MAX_13BIT_PCT, 100 * r.max_rpm / sync)
+        return SpeedBase(sync, w.SPEED_13BIT_BASE, limit, label)
+
+    # ------------------------------------------------------------------ outputs
+
+    def outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        reset = self._reset_pulse(desired.fault_reset_seq, now)
+        if self.profidrive:
+            control, reference = self._profidrive_out(desired, reset)
+        else:
+            control, reference = self._manufacturer_out(desired, reset)
+        words = [control, w.to_word(reference), *self.out_values]
+        return struct.pack(f">{len(words)}H", *words)
+
+    def _reset_pulse(self, seq: int, now: float) -> bool:
+        """One reset pulse each time ``fault_reset_seq`` grows; never repeated on its own.
+
+        The bit is held for ``reset_pulse`` seconds and at least one telegram, then dropped.
+        The first telegram after start or a communication loss adopts the counter as seen.
+        """
+        if self._reset_seen is None:
+            self._reset_seen = seq
+        elif seq > self._reset_seen:
+            self._reset_seen = seq
+            self._pulse_until = now + self.options.reset_pulse
+            self._pulse_sent = False
+        if self._pulse_until is None:
+            return False
+        if not self._pulse_sent or now < self._pulse_until:
+            self._pulse_sent = True
+            return True
+        self._pulse_until = None
+        return False
+
+    def _reference(self, desired: DesiredCommand) -> int:
+        """Speed magnitude (and sign) asked for, as a raw word of the speed scale."""
+        if self.base is None:
+            return 0
+        return self.base.to_raw(desired.speed_rpm, desired.speed_pct)
+
+    def _manufacturer_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
+        """P0684 and P0685 (Table 3.3 / 4.3; P0685 bit 2 cases).
+
+        Run = run/stop + general enable + remote; coast stop drops general enable; quick
+        stop is bit 6 where the model has it. Bit 2 = 1 for forward and 0 for reverse, so
+        the sign of the speed (normally positive) keeps the manual's meaning.
+        """
+        forward = d.direction is Direction.FORWARD
+        reference = self._reference(d)
+        control = w.ManufacturerControl(
+            run=d.run,
+            general_enable=not d.coast_stop,
+            forward=forward,
+            jog=d.jog,
+            remote=d.remote,
+            quick_stop=d.quick_stop and self.spec.quick_stop,
+            fault_reset=reset,
+        )
+        self._sent = _Sent(d.run or d.jog, forward, reference, d.remote)
+        return control.encode(self.spec.control_bits), reference
+
+    def _profidrive_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
+        """STW1 (P0967, Table 3.8 / 4.7) walking the switching-on states, and NSOLL.
+
+        Switching on inhibited: ON = 0 (the drive goes to ready to switch on); then ON = 1
+        with enable operation, ramp and setpoint (switched on, then operation). A fault is
+        acknowledged with one bit-7 pulse and ON = 0. Reverse is a negative reference
+        (P0967 note). Reserved bits 5 and 9 are sent as 0.
+        """
+        state = w.ProfidriveState.SWITCHING_ON_INHIBITED if self._zsw is None else self._zsw.state
+        want = (d.run or d.jog) and not d.coast_stop and not d.quick_stop
+        walkable = state in (
+            w.ProfidriveState.READY_TO_SWITCH_ON,
+            w.ProfidriveState.SWITCHED_ON,
+            w.ProfidriveState.OPERATION,
+        )
+        on = want and walkable
+        magnitude = self._reference(d)
+        forward = d.direction is Direction.FORWARD
+        reference = w.saturate(magnitude if forward else -magnitude)
+        control = w.ProfidriveControl(
+            on=on,
+            no_coast_stop=not d.coast_stop,
+            no_quick_stop=not d.quick_stop,
+            enable_operation=True,
+            enable_ramp=True,
+            enable_setpoint=True,
+            fault_ack=reset,
+            jog=d.jog and on,
+            control_by_plc=d.remote,
+        )
+        self._sent = _Sent(on, True, reference, d.remote)
+        return control.encode(w.STW1_BITS), reference
+
+    # ------------------------------------------------------------------ inputs
+
+    def inputs(self, data: bytes, now: float) -> Mapping[str, Any]:
+        n = self.options.words
+        if len(data) != 2 * n:
+            raise ProfibusDecodeError(
+                DecodeFailure.BAD_LENGTH, f"input telegram of {len(data)} bytes, not {2 * n}", data
+            )
+        raw = struct.unpack(f">{n}H", data)
+        changes: dict[str, Any] = {}
+        speed = w.signed(raw[1])
+        if self.profidrive:
+            self._profidrive_in(raw[0], speed, changes)
+        else:
+            self._manufacturer_in(raw[0], speed, changes)
+        mapped = _Mapped()
+        for param, word in zip(self.in_map, raw[2:], strict=True):
+            if param:
+                self._mapped_word(param, word, changes, mapped)
+        self._resolve_codes(changes, mapped)
+        if mapped.values:
+            changes["values"] = dict(mapped.values)
+        return changes
+
+    def _speed_fields(self, speed: int, changes: dict[str, Any]) -> None:
+        if self.base is None:
+            return
+        changes["speed_rpm"] = round(self.base.rpm_of(speed), 3)
+        changes["speed_pct"] = round(self.base.pct_of(speed), 3)
+        if self._sent.remote:
+            effective = w.effective_reference(self._sent.forward, self._sent.reference)
+            changes["speed_ref_rpm"] = round(self.base.rpm_of(effective), 3)
+            changes["speed_ref_pct"] = round(self.base.pct_of(effective), 3)
+        else:
+            changes["speed_ref_rpm"] = changes["speed_ref_pct"] = None
+
+    def _near_reference(self, speed: int) -> bool:
+        if self.base is None:
+            return False
+        effective = w.effective_reference(self._sent.forward, self._sent.reference)
+        band = self.options.at_reference_band
+        return abs(self.base.pct_of(speed) - self.base.pct_of(effective)) <= band
+
+    def _manufacturer_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
+        """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403)."""
+        st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
+        self._speed_fields(speed, changes)
+        if self.spec.device is Device.CFW320:
+            commanded = st.run_command  # CFW320 bit 1 "Run command"
+        else:
+            commanded = self._sent.run if st.remote else True
+        at_ref = st.running and commanded and st.remote and self._near_reference(speed)
+        if st.fault:
+            status = DriveStatus.FAULTED
+        elif st.config_mode or st.undervoltage:
+            status = DriveStatus.NOT_READY
+        elif not st.running:
+            status = DriveStatus.READY
+        elif st.quick_stop_active or not commanded:
+            status = DriveStatus.STOPPING
+        elif at_ref or not st.remote:
+            status = DriveStatus.RUNNING
+        else:
+            status = DriveStatus.STARTING
+        self._faulted, self._alarm = st.fault, st.alarm
+        changes.update(
+            status=status,
+            running=st.running,
+            direction=Direction.FORWARD if st.forward else Direction.REVERSE,
+            at_reference=at_ref,
+            remote=st.remote,
+            alarm=st.alarm,
+        )
+
+    def _profidrive_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
+        """P0968 ZSW1 (Table 3.9 / 4.8) and NIST (4000h = P0134)."""
+        zsw = w.ProfidriveStatus.decode(word, self.spec.zsw1_bits)
+        self._zsw = zsw
+        state = zsw.state
+        self._speed_fields(speed, changes)
+        operation = state is w.ProfidriveState.OPERATION
+        running = operation and (self._sent.run or speed != 0)
+        if any(name == "frequency_reached" for name, _ in self.spec.zsw1_bits):
+            at_ref = operation and self._sent.run and zsw.frequency_reached  # CFW-11 bit 10
+        else:
+            at_ref = operation and self._sent.run and self._near_reference(speed)
+        status = _PROFIDRIVE_STATUS[state]
+        if operation:
+            if not self._sent.run or not zsw.quick_stop_not_active:
+                status = DriveStatus.STOPPING if speed else DriveStatus.READY
+            else:
+                status = DriveStatus.RUNNING if at_ref else DriveStatus.STARTING
+        elif state is w.ProfidriveState.SWITCHED_ON and self._sent.run:
+            status = DriveStatus.STARTING
+        if speed > 0:
+            direction = Direction.FORWARD
+        elif speed < 0:
+            direction = Direction.REVERSE
+        else:
+            direction = Direction.FORWARD if self._sent.reference >= 0 else Direction.REVERSE
+        self._faulted, self._alarm = zsw.fault, zsw.warning
+        changes.update(
+            status=status,
+            running=running,
+            direction=direction,
+            at_reference=at_ref,
+            remote=zsw.control_requested,
+            alarm=zsw.warning,
+        )
+
+    # ------------------------------------------------------------------ mapped words
+
+    def _mapped_word(self, param: int, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        handler = _KNOWN.get(param)
+        if handler is None:
+            m.values[self.spec.pname(param)] = scaled(param, word)
+        else:
+            handler(self, word, changes, m)
+
+    def _current(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0003 motor current, one decimal (P0742 description: 4.7 A is sent as 47)."""
+        amps = word / 10.0
+        changes["current_a"] = amps
+        if self.ratings.rated_current_a:
+            changes["current_pct_flc"] = round(100.0 * amps / self.ratings.rated_current_a, 2)
+
+    def _alarm_word(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0048 present alarm (Table 3.2 bit 7 note)."""
+        m.alarm = word
+
+    def _fault_word(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0049 present fault (Table 3.2 bit 15 note) / P0947 fault number."""
+        if word:
+            m.fault = word
+
+    def _power(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0010 output power, kW with one decimal (P0761 description)."""
+        changes["power_kw"] = word / 10.0
+
+    def _pd_current(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0760: 4000h = 100 % of the motor rated current P0401."""
+        pct = 100.0 * word / w.PROFIDRIVE_PERCENT_BASE
+        changes["current_pct_flc"] = round(pct, 2)
+        if self.ratings.rated_current_a:
+            changes["current_a"] = round(pct * self.ratings.rated_current_a / 100.0, 2)
+
+    def _pd_power(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0761 = (P0010 / P0404) x 4000h."""
+        if self.ratings.rated_power_kw:
+            frac = word / w.PROFIDRIVE_PERCENT_BASE
+            changes["power_kw"] = round(frac * self.ratings.rated_power_kw, 3)
+        else:
+            m.values["power_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
+
+    def _pd_torque(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0762: 4000h = 100 % of the output torque."""
+        m.values["torque_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
+
+    def _namur(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+        """P0763 VIK-NAMUR status (Table 3.7): fault categories."""
+        m.namur = word
+        m.values[self.spec.pname(763)] = word
+
+    def _resolve_codes(self, changes: dict[str, Any], m: _Mapped) -> None:
+        """Fault and alarm codes with their texts from the drive's own tables."""
+        if self._faulted:
+            code = m.fault if m.fault is not None else self._polled_fault
+            text = None
+            categories = w.namur_categories(m.namur)
+            if code is None and len(categories) == 1 and len(categories[0][1]) == 1:
+                code = categories[0][1][0]  # a NAMUR bit naming exactly one fault
+            if code is not None:
+                text = self.spec.fault_text(code)
+            elif categories:
+                text = "; ".join(c for c, _ in categories)
+            changes.update(fault_code=code, fault_text=text)
+        else:
+            self._polled_fault = None
+            changes.update(fault_code=None, fault_text=None)
+        alarm = m.alarm if m.alarm is not None else self._polled_alarm
+        if not self._alarm and not alarm:
+            self._polled_alarm = None
+            changes["alarm_code"] = None
+        else:
+            changes["alarm_code"] = alarm or None
+            if alarm:
+                changes["alarm"] = True
+
+    # ------------------------------------------------------------------ codes by DP-V1
+
+    @property
+    def wants_codes(self) -> bool:
+        """True when the status shows a fault or alarm that no telegram word numbers.
+
+        The master may then call :meth:`read_codes` (an addition to the DpProfile contract).
+        """
+        fault_mapped = any(p in (49, 947) for p in self.in_map)
+        alarm_mapped = 48 in self.in_map
+        return (self._faulted and not fault_mapped and self._polled_fault is None) or (
+            self._alarm and not alarm_mapped and self._polled_alarm is None
+        )
+
+    async def read_codes(self, channel: RecordChannel) -> Mapping[str, Any]:
+        """Read P0049 (present fault) and P0048 (present alarm) through DP-V1."""
+        fault, alarm = await self.params.read_many(channel, [(49, 0), (48, 0)])
+        changes: dict[str, Any] = {}
+        if self._faulted and fault:
+            self._polled_fault = fault
+            changes.update(fault_code=fault, fault_text=self.spec.fault_text(fault))
+        if self._alarm and alarm:
+            self._polled_alarm = alarm
+            changes.update(alarm_code=alarm)
+        return changes
+
+    def alarm_text(self, code: int) -> str:
+        """The manual's text of an alarm code (A138...), or the code as shown."""
+        return self.spec.alarm_text(code)
+
+    # ------------------------------------------------------------------ diag, loss
+
+    def on_ext_diag(self, data: bytes) -> list[DiagEvent]:
+        """The WEG manuals define no device-related diagnosis (faults are parameters)."""
+        if not data:
+            return []
+        return [
+            DiagEvent(
+                f"unexpected device diagnosis {data.hex(' ')}",
+                kind="info",
+                data={"raw": data.hex()},
+            )
+        ]
+
+    def on_comm_lost(self) -> None:
+        self._reset_seen = None
+        self._pulse_until = None
+        self._pulse_sent = False
+        self._zsw = None
+        self._sent = _Sent()
+        self._polled_fault = self._polled_alarm = None
+
+    # ------------------------------------------------------------------ parameters
+
+    async def read_param(self, channel: RecordChannel, number: int, subindex: int) -> ParamValue:
+        """The raw word (signed for the signed parameters), as the manuals list values."""
+        raw = await self.params.read(channel, number, subindex)
+        return w.signed(raw) if number in SIGNED else raw
+
+    async def write_param(
+        self, channel: RecordChannel, number: int, subindex: int, value: ParamValue
+    ) -> None:
+        raw = _raw(value)
+        await self.params.write(channel, number, raw, subindex)
+        if subindex == 0:
+            self._after_write(number, raw)
+
+    def _after_write(self, number: int, raw: int) -> None:
+        """Keep cyclic output words and the speed scale in step with a parameter written."""
+        for i, param in enumerate(self.out_map):
+            if param == number:
+                self.out_values[i] = raw
+        name = _SCALE_FIELDS.get(number)
+        configured = {
+            "max_rpm": self.options.max_rpm,
+            "rated_hz": self.options.rated_hz,
+            "rated_rpm": self.options.rated_rpm,
+            "rated_current_a": self.options.rated_current_a,
+            "rated_power_kw": self.options.rated_power_kw,
+        }
+        if name is None or configured[name] is not None or self.base is None:
+            return
+        value = float(scaled(number, raw))
+        if value > 0:
+            self.ratings = replace(self.ratings, **{name: value})
+            self.base = self._speed_base(self.ratings)
+
+
+_SCALE_FIELDS: Final[Mapping[int, str]] = {
+    134: "max_rpm",
+    403: "rated_hz",
+    402: "rated_rpm",
+    401: "rated_current_a",
+    404: "rated_power_kw",
+}
+
+_PROFIDRIVE_STATUS: Final[Mapping[w.ProfidriveState, DriveStatus]] = {
+    w.ProfidriveState.NOT_READY: DriveStatus.NOT_READY,
+    w.ProfidriveState.SWITCHING_ON_INHIBITED: DriveStatus.NOT_READY,
+    w.ProfidriveState.READY_TO_SWITCH_ON: DriveStatus.READY,
+    w.ProfidriveState.SWITCHED_ON: DriveStatus.READY,
+    w.ProfidriveState.OPERATION: DriveStatus.RUNNING,
+    w.ProfidriveState.FAULT: DriveStatus.FAULTED,
+}
+
+
+@dataclass
+class _Mapped:
+    """What the mapped words of one input telegram said."""
+
+    fault: int | None = None
+    alarm: int | None = None
+    namur: int = 0
+    values: dict[str, float | int] = field(default_factory=dict)
+
+
+_Handler = Callable[[WegProfile, int, dict[str, Any], _Mapped], None]
+
+_KNOWN: Final[Mapping[int, _Handler]] = {
+    3: WegProfile._current,
+    10: WegProfile._power,
+    48: WegProfile._alarm_word,
+    49: WegProfile._fault_word,
+    947: WegProfile._fault_word,
+    760: WegProfile._pd_current,
+    761: WegProfile._pd_power,
+    762: WegProfile._pd_torque,
+    763: WegProfile._namur,
+}
+
+
+def _raw(value: ParamValue) -> int:
+    """A parameter value as the raw word: an integer (no decimal point on the wire)."""
+    if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+        raise ParameterError(
+            f"{value!r} is not a raw parameter value (integers, without decimal point: "
+            "P0100 = 8.5 s is written as 85)"
+        )
+    number = int(value)
+    if not w.WORD_MIN <= number <= 0xFFFF:
+        raise ParameterError(f"{number} does not fit a 16-bit parameter")
+    return number & 0xFFFF
