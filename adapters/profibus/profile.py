@@ -159,7 +159,16 @@ def load_profile(device: Device) -> ProfileFactory:
 
 
 class SimDevice(Protocol):
-    """A simulated device behind the generic DP slave simulator (sans-IO, clock injected)."""
+    """A simulated device behind the generic DP slave simulator (sans-IO, clock injected).
+
+    Optional hooks the slave simulator calls when a device has them (``getattr``):
+    ``check_cfg(cfg: bytes) -> bool`` on Chk_Cfg (a WEG drive shows P0740 = 3 on a bad one);
+    ``clear_mode(now, active: bool)`` on Global_Control Clear/Operate, and
+    ``global_control(gc: dp.GlobalControl, now)`` for Clear/Sync/Freeze (the MCD 600
+    quick-stops on Clear). When a device has either, Clear goes there and ``comm_lost``
+    is called only on watchdog expiry. ``address`` is re-read after ``set_prm`` and
+    ``power_cycle``; ``diag_alert`` (bool) sets Ext_Diag with high priority.
+    """
 
     ident_number: int
 
