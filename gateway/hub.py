@@ -162,6 +162,7 @@ class Hub:
         self._seq = 0
         self._listeners: list[Callable[[str], None]] = []
         self.started = clock()
+        self.shutting_down = False
 
     # ------------------------------------------------------------ drives
 
@@ -294,6 +295,8 @@ class Hub:
     def check(self, drive_id: str, source: Source, cmd: DriveCommand) -> None:
         """Raise CommandRejected (with the reason) if ``cmd`` may not be applied."""
         drv = self._drive(drive_id)
+        if self.shutting_down:
+            raise CommandRejected("the gateway is shutting down")
         if not drv.policy.control.admits(source):
             raise CommandRejected(
                 f"drive {drive_id} takes commands from {drv.policy.control.value} only"
@@ -404,7 +407,12 @@ class Hub:
             self._commit(drv, drv.state)
 
     def apply_shutdown(self) -> None:
-        """Rule 4, first half: every drive gets its ``on_shutdown`` action."""
+        """Rule 4, first half: every drive gets its ``on_shutdown`` action.
+
+        From here on every command is refused, so nothing restarts a drive while
+        the gateway waits for the drives to stop.
+        """
+        self.shutting_down = True
         for drive_id, drv in self._drives.items():
             self.apply_stop(drive_id, drv.policy.on_shutdown, "gateway shutting down")
 

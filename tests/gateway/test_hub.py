@@ -274,6 +274,9 @@ def test_shutdown_applies_on_shutdown() -> None:
     assert not hub.all_stopped()
     hub.update("d", running=False)
     assert hub.all_stopped()
+    with pytest.raises(CommandRejected, match="shutting down"):
+        hub.submit("d", Source.MODBUS, RUN)
+    assert hub.desired("d").run is False
 
 
 class Params:
