@@ -60,6 +60,15 @@ class DrivePolicy:
     modbus_unit: int | None = None
 
 
+def _transition_fields_differ(old: DriveState, new: DriveState) -> bool:
+    return (
+        old.comm is not new.comm
+        or old.status is not new.status
+        or old.alarm != new.alarm
+        or old.alarm_code != new.alarm_code
+    )
+
+
 class ParamService(Protocol):
     async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue: ...
 
@@ -211,18 +220,36 @@ class Hub:
         return [d.state for d in self._drives.values()]
 
     def update(self, drive_id: str, **changes: Any) -> DriveState:
-        """An adapter reports readings; returns the (possibly new) state."""
+        """An adapter reports readings; returns the (possibly new) state.
+
+        Hot path: the changes are compared field by field and the new state is
+        built once; seq grows only when a reading changed.
+        """
         drv = self._drive(drive_id)
         old = drv.state
-        new = replace(old, **changes)
-        if new.same_reading(old):
+        if not old.differs(changes):
             return old
-        self._on_transitions(drive_id, drv, old, new)
-        return self._commit(drv, new)
+        changes.pop("seq", None)
+        changes.pop("ts", None)
+        changes.pop("control_source", None)
+        if not old.differs(changes):
+            return old
+        self._seq += 1
+        changes["seq"] = self._seq
+        changes["ts"] = self._wallclock()
+        changes["control_source"] = drv.desired.source
+        new = drv.state = old.evolve(changes)
+        if _transition_fields_differ(old, new):
+            self._on_transitions(drive_id, drv, old, new)
+        for sub in tuple(self._state_subs):
+            sub._offer(drv.state)
+        return drv.state
 
     def _commit(self, drv: _Drive, new: DriveState) -> DriveState:
         self._seq += 1
-        new = replace(new, seq=self._seq, ts=self._wallclock(), control_source=drv.desired.source)
+        new = new.evolve(
+            {"seq": self._seq, "ts": self._wallclock(), "control_source": drv.desired.source}
+        )
         drv.state = new
         for sub in tuple(self._state_subs):
             sub._offer(new)

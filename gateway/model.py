@@ -186,9 +186,30 @@ class DriveState:
     def changed(self, **changes: Any) -> DriveState:
         return replace(self, **changes)
 
+    def differs(self, changes: Mapping[str, Any]) -> bool:
+        """True when applying ``changes`` would change a reading (fast path of the hub)."""
+        return any(getattr(self, name) != value for name, value in changes.items())
+
+    def evolve(self, changes: Mapping[str, Any]) -> DriveState:
+        """``dataclasses.replace`` without its per-call overhead (hot path of the hub).
+
+        Field names are checked; values are taken as given, like ``replace``.
+        """
+        unknown = changes.keys() - _STATE_FIELDS
+        if unknown:
+            raise TypeError(f"DriveState has no field(s) {sorted(unknown)}")
+        new = object.__new__(DriveState)
+        for name in _STATE_FIELD_ORDER:
+            object.__setattr__(new, name, changes[name] if name in changes else getattr(self, name))
+        return new
+
     def same_reading(self, other: DriveState) -> bool:
         """True when nothing but seq and ts differ."""
         return replace(self, seq=0, ts=0.0) == replace(other, seq=0, ts=0.0)
+
+
+_STATE_FIELD_ORDER: tuple[str, ...] = tuple(f.name for f in fields(DriveState))
+_STATE_FIELDS: frozenset[str] = frozenset(_STATE_FIELD_ORDER)
 
 
 def _json_value(value: Any) -> Any:

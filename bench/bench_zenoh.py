@@ -1,0 +1,419 @@
+"""Zenoh front end: state fan-out to a subscriber in another process, and command latency.
+
+- State fan-out: the bench drives a hub flat out (``hub.update`` on 10 drives); the
+  front end publishes; a subscriber in another process counts the states it gets
+  per second. Reference, in the same run and to the same subscriber: raw
+  zenoh-python puts of the same JSON payload (pre-encoded, one publisher per drive,
+  CongestionControl.BLOCK). Two more references: a naive bridge (the same hub
+  updates, each state taken off a hub subscription, ``json.dumps(state.to_json())``
+  and put at once on the loop: the least any front end must do), and the hub
+  alone (``hub.update`` with a conflating subscription drained, no Zenoh): the
+  ceiling the core sets before any front end.
+- Command latency: another process puts 1000 commands (one every 2 ms) on
+  ``<prefix>/drives/d0/command``; the latency is from just before the put to the
+  moment the hub's desired command changes (CLOCK_MONOTONIC is one clock for both
+  processes). Also the round trip of a command query, seen by the client.
+
+Run: ``.venv/bin/python -m bench zenoh``. Everything stays on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from bench.common import Figure
+from gateway.adapter import Capabilities
+from gateway.config import Config, ZenohSection
+from gateway.daemon import Runtime
+from gateway.hub import Hub
+from gateway.model import CommState, Device, DriveState, SpeedScale
+from gateway.zenoh.frontend import ZenohFrontEnd
+from gateway.zenoh.requests import encode_state
+from gateway.zenoh.session import zenoh_config
+
+ROOT = Path(__file__).resolve().parents[1]
+PREFIX = "bench"
+DRIVES = 10
+FANOUT_SECONDS = 2.0
+COMMANDS = 1000
+COMMAND_PERIOD = 0.002
+QUERIES = 200
+SENTINEL = -1.0  # speed_rpm of the last state of a run
+
+
+def _free_endpoint() -> str:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def _session(listen: tuple[str, ...] = (), connect: tuple[str, ...] = ()) -> zenoh.Session:
+    return zenoh.open(zenoh_config(ZenohSection(listen=listen, connect=connect)))
+
+
+def _hub() -> Hub:
+    hub = Hub()
+    for i in range(DRIVES):
+        drive_id = f"d{i}"
+        hub.add_drive(DriveState(id=drive_id, device=Device.CFW11, bus="line1", address=i + 1))
+        hub.set_capabilities(drive_id, Capabilities(speed_scale=SpeedScale(1800.0)))
+        hub.update(drive_id, comm=CommState.ONLINE, current_a=3.2, voltage_v=380.0, power_kw=1.5)
+    return hub
+
+
+def _percentile(values: list[float], pct: float) -> float:
+    ordered = sorted(values)
+    index = min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1)))
+    return ordered[index]
+
+
+class Peer:
+    """The other process: a line protocol on its stdin and stdout."""
+
+    def __init__(self, *args: str) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "bench.bench_zenoh", *args],
+            cwd=ROOT,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+
+    def read(self) -> str:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError("the bench peer exited")
+        return line.strip()
+
+    def write(self, line: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+
+
+# ---------------------------------------------------------------- the bench process
+
+
+async def _serve(hub: Hub, endpoint: str) -> tuple[ZenohFrontEnd, asyncio.Task[None]]:
+    section = ZenohSection(prefix=PREFIX, listen=(endpoint,), heartbeat=60.0)
+    fe = ZenohFrontEnd(Runtime(config=Config(file="bench", zenoh=section), hub=hub))
+    task = asyncio.create_task(fe.run())
+    await asyncio.wait_for(fe.ready.wait(), 10)
+    return fe, task
+
+
+async def _stop(task: asyncio.Task[None]) -> None:
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+
+
+def _ask_ready(peer: Peer) -> None:
+    if peer.read() != "ready":
+        raise RuntimeError("the bench peer did not get ready")
+
+
+def _raw_phase(session: zenoh.Session, peer: Peer) -> None:
+    """Raw puts of the same payload, one publisher per drive, for FANOUT_SECONDS."""
+    state = _hub().state("d0")
+    payload = encode_state(state)
+    pubs = [
+        session.declare_publisher(
+            f"{PREFIX}/raw/drives/d{i}/state",
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+        )
+        for i in range(DRIVES)
+    ]
+    end = time.monotonic() + FANOUT_SECONDS
+    i = 0
+    while time.monotonic() < end:
+        for _ in range(100):
+            pubs[i % DRIVES].put(payload)
+            i += 1
+    pubs[0].put(encode_state(state.changed(speed_rpm=SENTINEL)))
+    for pub in pubs:
+        pub.undeclare()
+
+
+async def _naive_phase(session: zenoh.Session) -> int:
+    """The least a front end must do: hub -> subscription -> to_json -> put, on the loop."""
+    hub = _hub()
+    pubs = {
+        f"d{i}": session.declare_publisher(
+            f"{PREFIX}/naive/drives/d{i}/state",
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+            congestion_control=zenoh.CongestionControl.DROP,
+        )
+        for i in range(DRIVES)
+    }
+    with hub.subscribe_states() as sub:
+
+        async def bridge() -> None:
+            while True:
+                for state in (await sub.get(), *sub.drain()):
+                    pubs[state.id].put(json.dumps(state.to_json()).encode())
+
+        task = asyncio.create_task(bridge())
+        n = await _gateway_phase(hub)
+        await asyncio.sleep(0.1)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    for pub in pubs.values():
+        pub.undeclare()
+    return n
+
+
+async def _gateway_phase(hub: Hub) -> int:
+    """hub.update flat out on every drive for FANOUT_SECONDS; returns the updates made."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + FANOUT_SECONDS
+    n = 0
+    while loop.time() < end:
+        hub.update(f"d{n % DRIVES}", speed_rpm=float(n % 1800))
+        n += 1
+        await asyncio.sleep(0)  # the front end takes each state off the hub
+    hub.update("d0", speed_rpm=SENTINEL)
+    return n
+
+
+async def _hub_alone() -> float:
+    """The ceiling: hub.update with a conflating subscription drained, no front end."""
+    hub = _hub()
+    loop = asyncio.get_running_loop()
+    with hub.subscribe_states() as sub:
+
+        async def drain() -> None:
+            while True:
+                await sub.get()
+                sub.drain()
+
+        drainer = asyncio.create_task(drain())
+        start = loop.time()
+        end = start + FANOUT_SECONDS
+        n = 0
+        while loop.time() < end:
+            hub.update(f"d{n % DRIVES}", speed_rpm=float(n % 1800))
+            n += 1
+            await asyncio.sleep(0)
+        rate = n / (loop.time() - start)
+        drainer.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await drainer
+    return rate
+
+
+async def _fanout() -> list[Figure]:
+    hub = _hub()
+    gw_endpoint, raw_endpoint = _free_endpoint(), _free_endpoint()
+    fe, task = await _serve(hub, gw_endpoint)
+    raw = _session(listen=(raw_endpoint,))
+    raw_ping = raw.declare_queryable(
+        f"{PREFIX}/raw/ping", lambda q: (q.reply(f"{PREFIX}/raw/ping", b"{}"), q.drop())
+    )
+    peer = Peer("count", gw_endpoint, raw_endpoint)
+    try:
+        await asyncio.to_thread(_ask_ready, peer)
+        _raw_phase(raw, peer)
+        await _naive_phase(raw)
+        updates = await _gateway_phase(hub)
+        await asyncio.to_thread(peer.write, "report")
+        report = json.loads(await asyncio.to_thread(peer.read))
+    finally:
+        peer.close()
+        raw_ping.undeclare()
+        raw.close()
+        await _stop(task)
+    ceiling = await _hub_alone()
+    gw, rw, nv = report["gateway"], report["raw"], report["naive"]
+    gw_rate = gw["n"] / gw["seconds"]
+    raw_rate = rw["n"] / rw["seconds"]
+    naive_rate = nv["n"] / nv["seconds"]
+    note = (
+        f"{DRIVES} drives; {updates} hub updates in {FANOUT_SECONDS:g} s, {gw['n']} states "
+        f"delivered ({fe.worker.replaced} replaced in the I/O slot); raw: {rw['n']} puts of "
+        f"the same {len(encode_state(hub.state('d0')))}-byte payload"
+    )
+    return [
+        Figure(
+            "zenoh state fan-out (vs raw puts)",
+            round(gw_rate),
+            "states/s",
+            reference=round(raw_rate),
+            target="ratio >= 0.5",
+            note=note,
+        ),
+        Figure(
+            "zenoh state fan-out (vs naive bridge)",
+            round(gw_rate),
+            "states/s",
+            reference=round(naive_rate),
+            note="reference: hub subscription -> json.dumps(to_json()) -> DROP put on the loop, "
+            "no liveliness, heartbeat, last-word or command handling",
+        ),
+        Figure(
+            "zenoh state fan-out (vs hub alone)",
+            round(gw_rate),
+            "states/s",
+            reference=round(ceiling),
+            note="reference: hub.update rate with a drained subscription and no front end",
+        ),
+    ]
+
+
+async def _commands() -> list[Figure]:
+    hub = _hub()
+    endpoint = _free_endpoint()
+    _, task = await _serve(hub, endpoint)
+    arrived: dict[float, float] = {}
+
+    def on_command(drive_id: str) -> None:
+        rpm = hub.desired(drive_id).speed_rpm
+        if rpm is not None and rpm not in arrived:
+            arrived[rpm] = time.monotonic()
+
+    hub.on_command(on_command)
+    peer = Peer("command", endpoint)
+    try:
+        await asyncio.to_thread(_ask_ready, peer)
+        await asyncio.to_thread(peer.write, "go")
+        report = json.loads(await asyncio.to_thread(peer.read))
+    finally:
+        peer.close()
+        await _stop(task)
+    sent: dict[str, float] = report["sent"]
+    latencies = [
+        (arrived[float(rpm)] - t) * 1000 for rpm, t in sent.items() if float(rpm) in arrived
+    ]
+    lost = len(sent) - len(latencies)
+    rtt: list[float] = report["query_ms"]
+    note = f"{len(latencies)} of {len(sent)} commands arrived ({lost} missing)"
+    return [
+        Figure(
+            "zenoh command latency p50", round(statistics.median(latencies), 3), "ms", note=note
+        ),
+        Figure(
+            "zenoh command latency p99",
+            round(_percentile(latencies, 99), 3),
+            "ms",
+            target="p99 < 5 ms",
+            note=note,
+        ),
+        Figure(
+            "zenoh command query round trip p50",
+            round(statistics.median(rtt), 3),
+            "ms",
+            note=f"{len(rtt)} queries, reply {{'accepted': true}} seen by the client",
+        ),
+        Figure("zenoh command query round trip p99", round(_percentile(rtt, 99), 3), "ms"),
+    ]
+
+
+def run() -> list[Figure]:
+    async def main() -> list[Figure]:
+        return [*(await _fanout()), *(await _commands())]
+
+    return asyncio.run(main())
+
+
+# ---------------------------------------------------------------- the other process
+
+
+def _settle(session: zenoh.Session, selector: str) -> None:
+    """A round trip: the declarations made before it have reached that peer."""
+    for _ in range(100):
+        if any(r.ok is not None for r in session.get(selector, timeout=1.0)):
+            return
+    raise RuntimeError(f"no answer from {selector}")
+
+
+def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
+    session = _session(connect=(gw_endpoint, raw_endpoint))
+    stats: dict[str, dict[str, Any]] = {
+        name: {"n": 0, "first": 0.0, "last": 0.0} for name in ("gateway", "raw", "naive")
+    }
+    ended = {name: threading.Event() for name in stats}
+    sentinel = f'"speed_rpm":{SENTINEL}'.encode()
+    sentinel_spaced = f'"speed_rpm": {SENTINEL}'.encode()  # json.dumps' default separators
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        now = time.monotonic()
+        part = str(sample.key_expr).split("/")[1]
+        name = part if part in ("raw", "naive") else "gateway"
+        entry = stats[name]
+        if entry["n"] == 0:
+            entry["first"] = now
+        entry["n"] += 1
+        entry["last"] = now
+        payload = sample.payload.to_bytes()
+        if sentinel in payload or sentinel_spaced in payload:
+            ended[name].set()
+
+    sub = session.declare_subscriber(f"{PREFIX}/**/state", on_sample)
+    _settle(session, f"{PREFIX}/gateway/health")
+    _settle(session, f"{PREFIX}/raw/ping")
+    print("ready", flush=True)
+    sys.stdin.readline()  # "report": both runs are over
+    for event in ended.values():
+        event.wait(30)  # the sentinel state is the last word of each run
+    report = {
+        name: {"n": e["n"], "seconds": max(e["last"] - e["first"], 1e-9)}
+        for name, e in stats.items()
+    }
+    print(json.dumps(report), flush=True)
+    sub.undeclare()
+    session.close()
+
+
+def _peer_command(endpoint: str) -> None:
+    session = _session(connect=(endpoint,))
+    key = f"{PREFIX}/drives/d0/command"
+    _settle(session, f"{PREFIX}/gateway/health")
+    print("ready", flush=True)
+    sys.stdin.readline()
+    sent: dict[str, float] = {}
+    for i in range(1, COMMANDS + 1):
+        payload = json.dumps({"run": True, "speed_rpm": float(i)}).encode()
+        sent[str(float(i))] = time.monotonic()
+        session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        time.sleep(COMMAND_PERIOD)
+    query_ms = []
+    for i in range(QUERIES):
+        payload = json.dumps({"speed_rpm": float(1000 + i)}).encode()
+        start = time.monotonic()
+        replies = list(session.get(key, payload=payload, timeout=5.0))
+        query_ms.append((time.monotonic() - start) * 1000)
+        if not replies or replies[0].ok is None:
+            raise RuntimeError("a command query got no reply")
+    print(json.dumps({"sent": sent, "query_ms": query_ms}), flush=True)
+    session.close()
+
+
+if __name__ == "__main__":
+    mode, *rest = sys.argv[1:]
+    if mode == "count":
+        _peer_count(*rest)
+    else:
+        _peer_command(*rest)

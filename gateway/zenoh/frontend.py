@@ -1,0 +1,447 @@
+"""The Zenoh front end: the common drive model on Eclipse Zenoh (key space in
+:mod:`gateway.zenoh.keys`, document in docs/zenoh-keys.md).
+
+Threading model and delivery:
+
+- The event loop owns the hub; every hub call of this module runs there.
+- A state change is put at once, from the loop, with CongestionControl.DROP:
+  such a put never waits on the network (beyond Zenoh's ``wait_before_drop``,
+  1 ms by default, when a link's queue is full); on a slow link Zenoh drops it,
+  so older states are overtaken by newer ones and nothing queues up.
+- The last word is never lost: once a drive's state has not changed for
+  :data:`SETTLE` seconds, and at least once per ``zenoh.heartbeat``, its newest
+  state is put again with CongestionControl.BLOCK (a repeat has the same
+  ``seq``). These puts, like every Zenoh call that may block (opening the session,
+  declarations, events, diagnostics, replies, liveliness tokens, closing), are
+  made by one I/O thread (:class:`gateway.zenoh.worker.Worker`): the loop hands
+  over without waiting, through a latest-per-drive slot for states and
+  diagnostics and an ordered queue for the rest. Handing each change to a thread
+  instead would starve it of the GIL whenever the loop is busy.
+- Zenoh runs the callbacks (command puts, queries) on its own threads; they copy
+  key and payload and hand over with ``loop.call_soon_threadsafe``. A query is
+  answered exactly once, from the I/O thread, and then dropped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+
+from gateway.adapter import EventKind
+from gateway.errors import CommandRejected, GatewayError, UnknownDrive
+from gateway.hub import EventSubscription, StateSubscription
+from gateway.model import DriveState, Source
+from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
+from gateway.zenoh.link import Incoming, ZenohLink
+from gateway.zenoh.requests import (
+    Answer,
+    BadRequest,
+    ParamRequest,
+    command_accepted,
+    command_refused,
+    encode_json,
+    encode_state,
+    error_body,
+    param_result,
+    parse_command,
+    parse_param_request,
+)
+from gateway.zenoh.session import zenoh_config
+from gateway.zenoh.worker import Worker, WorkerStopped
+
+if TYPE_CHECKING:
+    from gateway.daemon import Runtime
+
+log = logging.getLogger(__name__)
+
+PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a client gets an answer
+CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
+HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
+SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
+
+
+@dataclass(eq=False)
+class _Pending:
+    """A query waiting for its answer."""
+
+    incoming: Incoming
+    answered: bool = False
+
+
+class ZenohFrontEnd:
+    """Serves the hub on Zenoh until cancelled; cancellation closes the session cleanly."""
+
+    def __init__(self, runtime: Runtime) -> None:
+        self.runtime = runtime
+        self.hub = runtime.hub
+        self.section = runtime.config.zenoh
+        self.keys = KeySpace(self.section.prefix)
+        self._drive_ids = tuple(self.hub.drive_ids())
+        self._worker = Worker(f"zenoh-io {self.section.prefix}")
+        self._link: ZenohLink | None = None  # touched on the I/O thread only
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._serving = False
+        self.ready = asyncio.Event()  # set once serving (the gateway token is declared)
+        self._live: set[str] = set()
+        self._changes: dict[str, Any] = {}  # drive id -> DROP publisher, used on the loop
+        self._changed_at: dict[str, float] = {}  # drives with a change not yet put with BLOCK
+        self._confirmed_at: dict[str, float] = {}  # when each drive's state was put with BLOCK
+        self._wake = asyncio.Event()
+        self._pending: set[_Pending] = set()
+        self._requests: set[asyncio.Task[None]] = set()
+        self._handlers: dict[KeyKind, Callable[[_Pending], None]] = {
+            KeyKind.STATE: self._query_state,
+            KeyKind.COMMAND: self._query_command,
+            KeyKind.PARAM: self._query_param,
+            KeyKind.HEALTH: self._query_health,
+        }
+
+    @property
+    def worker(self) -> Worker:
+        return self._worker
+
+    # ------------------------------------------------------------ life cycle
+
+    async def run(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        config = zenoh_config(self.section)
+        if self.section.config_file is not None:
+            log.info("zenoh session config from %s (used as it is)", self.section.config_file)
+        self._worker.start()
+        tasks: list[asyncio.Task[None]] = []
+        try:
+            with self.hub.subscribe_states() as states, self.hub.subscribe_events() as events:
+                self._changes = await asyncio.wrap_future(
+                    self._worker.call(partial(self._io_open, config))
+                )
+                self._serving = True
+                for state in self.hub.states():
+                    self._send_state(state)
+                await asyncio.wrap_future(self._worker.call(self._io_gateway_token))
+                self.ready.set()
+                log.info(
+                    "zenoh front end serving %s/** (mode %s, listen %s, connect %s)",
+                    self.keys.prefix,
+                    self.section.mode,
+                    ", ".join(self.section.listen) or "none",
+                    ", ".join(self.section.connect) or "none",
+                )
+                tasks = [
+                    asyncio.create_task(self._forward_states(states), name="zenoh-states"),
+                    asyncio.create_task(self._forward_events(events), name="zenoh-events"),
+                    asyncio.create_task(self._heartbeat(), name="zenoh-heartbeat"),
+                ]
+                done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+                for task in done:
+                    task.result()
+        finally:
+            await self._shutdown(tasks)
+
+    async def _shutdown(self, tasks: list[asyncio.Task[None]]) -> None:
+        self._serving = False
+        self.ready.clear()
+        self._changes = {}
+        pending_tasks = [*tasks, *self._requests]
+        for task in pending_tasks:
+            task.cancel()
+        await asyncio.gather(*pending_tasks, return_exceptions=True)
+        for drive_id in list(self._changed_at):
+            self._confirm(drive_id, 0.0)  # the last word goes out before the session closes
+        for pending in list(self._pending):
+            self._answer(pending, [Answer.refusal("the gateway is shutting down")])
+        done = self._worker.stop(final=self._io_close)
+        try:
+            await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(done)), CLOSE_TIMEOUT)
+        except TimeoutError:
+            log.warning("zenoh I/O thread did not close the session in %g s", CLOSE_TIMEOUT)
+            raise
+        finally:
+            self._worker.join(CLOSE_TIMEOUT)  # returns at once unless cancelled meanwhile
+        log.info("zenoh front end stopped")
+
+    # ------------------------------------------------------------ I/O thread jobs
+
+    def _io_open(self, config: Any) -> dict[str, Any]:
+        self._link = ZenohLink.open(
+            config, self.keys, self._drive_ids, self._command_from_zenoh, self._query_from_zenoh
+        )
+        return dict(self._link.change_publishers)
+
+    def _io_close(self) -> None:
+        link, self._link = self._link, None
+        if link is not None:
+            link.close()
+
+    def _io_gateway_token(self) -> None:
+        if self._link is not None:
+            self._link.declare_gateway_token()
+
+    def _io_set_live(self, drive_id: str, live: bool) -> None:
+        if self._link is not None:
+            self._link.set_live(drive_id, live)
+
+    def _io_publish_state(self, drive_id: str, payload: bytes) -> None:
+        if self._link is not None:
+            self._link.publish_state(drive_id, payload)
+
+    def _io_publish_diag(self, drive_id: str, payload: bytes) -> None:
+        if self._link is not None:
+            self._link.publish_diag(drive_id, payload)
+
+    def _io_publish_events(self, events: Sequence[tuple[str, bytes]]) -> None:
+        if self._link is not None:
+            self._link.publish_events(events)
+
+    # ------------------------------------------------------------ Zenoh threads
+
+    def _to_loop(self, callback: Callable[..., None], *args: Any) -> bool:
+        loop = self._loop
+        if loop is None:
+            return False
+        try:
+            loop.call_soon_threadsafe(callback, *args)
+        except RuntimeError:  # the loop is closed: the gateway is gone
+            return False
+        return True
+
+    def _command_from_zenoh(self, key: str, payload: bytes) -> None:
+        self._to_loop(self._on_command_put, key, payload)
+
+    def _query_from_zenoh(self, incoming: Incoming) -> None:
+        if not self._to_loop(self._on_query, incoming):
+            incoming.query.drop()
+
+    # ------------------------------------------------------------ publishing (loop)
+
+    def _send_state(self, state: DriveState) -> None:
+        """A change: put it now with DROP; the newest state follows with BLOCK (settle)."""
+        live = state.online
+        if live != (state.id in self._live):
+            if live:
+                self._live.add(state.id)
+            else:
+                self._live.discard(state.id)
+            self._worker.post(partial(self._io_set_live, state.id, live))
+        publisher = self._changes.get(state.id)
+        if publisher is not None:
+            try:
+                publisher.put(encode_state(state))
+            except zenoh.ZError as exc:
+                log.debug("state put of %s failed: %s", state.id, exc)
+        if state.id not in self._changed_at:
+            self._wake.set()
+        self._changed_at[state.id] = self._now()
+
+    def _confirm(self, drive_id: str, now: float) -> None:
+        """Hand the drive's newest state to the I/O thread, to be put with BLOCK."""
+        payload = encode_state(self.hub.state(drive_id))
+        job = partial(self._io_publish_state, drive_id, payload)
+        self._worker.offer((KeyKind.STATE, drive_id), job)
+        self._confirmed_at[drive_id] = now
+        self._changed_at.pop(drive_id, None)
+
+    def _due(self, drive_id: str, now: float, period: float) -> bool:
+        """Settled since its last change, or a heartbeat since its last BLOCK put."""
+        changed = self._changed_at.get(drive_id)
+        if changed is not None and now - changed >= SETTLE - HEARTBEAT_SLACK:
+            return True
+        confirmed = self._confirmed_at.get(drive_id, -math.inf)
+        return now - confirmed >= period - HEARTBEAT_SLACK
+
+    def _now(self) -> float:
+        loop = self._loop
+        return loop.time() if loop is not None else time.monotonic()
+
+    async def _forward_states(self, states: StateSubscription) -> None:
+        while True:
+            first = await states.get()
+            self._send_state(first)
+            for state in states.drain():
+                self._send_state(state)
+
+    async def _forward_events(self, events: EventSubscription) -> None:
+        while True:
+            first = await events.get()
+            batch = [(ev.drive_id, encode_json(ev.to_json())) for ev in (first, *events.drain())]
+            await asyncio.wrap_future(self._worker.call(partial(self._io_publish_events, batch)))
+
+    def _send_diag(self, drive_id: str, ts: float) -> None:
+        try:
+            figures = self.runtime.drive_diagnostics(drive_id)
+        except Exception:
+            log.exception("diagnostics of drive %s failed", drive_id)
+            return
+        body = {"id": drive_id, "bus": self.runtime.bus_of(drive_id), "ts": ts, **figures}
+        payload = encode_json(body)
+        self._worker.offer(
+            (KeyKind.DIAG, drive_id), partial(self._io_publish_diag, drive_id, payload)
+        )
+
+    async def _heartbeat(self) -> None:
+        """Settle and heartbeat puts (BLOCK) of every drive, diagnostics every heartbeat."""
+        period = self.section.heartbeat
+        next_diag = self._now()
+        while True:
+            self._wake.clear()
+            now = self._now()
+            for drive_id in self._drive_ids:
+                if self._due(drive_id, now, period):
+                    self._confirm(drive_id, now)
+            if now >= next_diag - HEARTBEAT_SLACK:
+                wall = time.time()
+                for drive_id in self._drive_ids:
+                    self._send_diag(drive_id, wall)
+                next_diag = now + period
+            due = min(
+                [
+                    next_diag,
+                    *(t + SETTLE for t in self._changed_at.values()),
+                    *(t + period for t in self._confirmed_at.values()),
+                ]
+            )
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), max(0.0, due - self._now()))
+
+    # ------------------------------------------------------------ commands (loop)
+
+    def _on_command_put(self, key: str, payload: bytes) -> None:
+        if not self._serving:
+            return
+        parsed = self.keys.parse(key)
+        if parsed is None or parsed.kind != KeyKind.COMMAND.value or parsed.rest:
+            log.warning("zenoh command put on %s ignored: not a drive's command key", key)
+            return
+        body = self._apply_command(parsed.drive_id, payload)
+        if not body["accepted"]:
+            log.info("zenoh command put on %s refused: %s", key, body["error"])
+
+    def _apply_command(self, drive_id: str, payload: bytes | None) -> dict[str, Any]:
+        """Parse and submit a command; refusals are reported on the drive's events key."""
+        if drive_id not in self._drive_ids:
+            return command_refused(f"no drive {drive_id!r}")
+        try:
+            cmd = parse_command(payload)
+        except CommandRejected as exc:
+            self.hub.event(
+                drive_id,
+                EventKind.COMMAND_REFUSED,
+                f"command from {Source.ZENOH.value} refused: {exc.reason}",
+                source=Source.ZENOH.value,
+            )
+            return command_refused(exc.reason)
+        try:
+            self.hub.submit(drive_id, Source.ZENOH, cmd)  # reports its own refusals
+        except CommandRejected as exc:
+            return command_refused(exc.reason)
+        except UnknownDrive:
+            return command_refused(f"no drive {drive_id!r}")
+        return command_accepted()
+
+    # ------------------------------------------------------------ queries (loop)
+
+    def _on_query(self, incoming: Incoming) -> None:
+        pending = _Pending(incoming)
+        if not self._serving:
+            with contextlib.suppress(Exception):
+                incoming.query.drop()
+            return
+        self._pending.add(pending)
+        try:
+            self._handlers[incoming.kind](pending)
+        except Exception as exc:
+            log.exception("zenoh query on %s failed", incoming.key)
+            self._answer(pending, [Answer.error(error_body(exc))])
+
+    def _answer(self, pending: _Pending, answers: list[Answer]) -> None:
+        """Answer a query exactly once (later calls are ignored), from the I/O thread."""
+        if pending.answered:
+            return
+        pending.answered = True
+        self._pending.discard(pending)
+        query = pending.incoming.query
+        try:
+            self._worker.post(partial(ZenohLink.reply, query, answers))
+        except WorkerStopped:
+            with contextlib.suppress(Exception):
+                query.drop()
+
+    def _refuse(self, pending: _Pending, text: str) -> None:
+        self._answer(pending, [Answer.refusal(text)])
+
+    def _query_state(self, pending: _Pending) -> None:
+        incoming = pending.incoming
+        if not incoming.targets and is_concrete(incoming.key):
+            self._refuse(pending, f"no drive state at {incoming.key}")
+            return
+        answers = [
+            Answer(True, encode_state(self.hub.state(d)), self.keys.key(KeyKind.STATE, d))
+            for d in incoming.targets
+        ]
+        self._answer(pending, answers)
+
+    def _query_command(self, pending: _Pending) -> None:
+        incoming = pending.incoming
+        parsed = self.keys.parse(incoming.key)
+        if not is_concrete(incoming.key) or parsed is None:
+            self._refuse(pending, "a command names one drive: <prefix>/drives/<id>/command")
+            return
+        body = self._apply_command(parsed.drive_id, incoming.payload)
+        self._answer(pending, [Answer.reply(incoming.key, body)])
+
+    def _query_param(self, pending: _Pending) -> None:
+        incoming = pending.incoming
+        parsed = self.keys.parse(incoming.key)
+        if not is_concrete(incoming.key) or parsed is None:
+            self._refuse(pending, "a parameter query names one drive and one parameter")
+            return
+        try:
+            req = parse_param_request(parsed.rest, incoming.payload)
+        except BadRequest as exc:
+            self._refuse(pending, exc.text)
+            return
+        if parsed.drive_id not in self._drive_ids:
+            self._refuse(pending, f"no drive {parsed.drive_id!r}")
+            return
+        task = asyncio.create_task(self._serve_param(pending, parsed.drive_id, req))
+        self._requests.add(task)
+        task.add_done_callback(self._requests.discard)
+
+    async def _serve_param(self, pending: _Pending, drive_id: str, req: ParamRequest) -> None:
+        key = pending.incoming.key
+        try:
+            if req.value is not None:
+                await asyncio.wait_for(
+                    self.hub.write_param(drive_id, req.number, req.value, req.subindex),
+                    PARAM_TIMEOUT,
+                )
+                body = param_result(req, req.value)
+            else:
+                value = await asyncio.wait_for(
+                    self.hub.read_param(drive_id, req.number, req.subindex), PARAM_TIMEOUT
+                )
+                body = param_result(req, value)
+        except asyncio.CancelledError:
+            self._refuse(pending, "the gateway is shutting down")
+            raise
+        except GatewayError as exc:
+            self._answer(pending, [Answer.error(error_body(exc))])
+        except TimeoutError:
+            self._refuse(pending, f"no answer from drive {drive_id} in {PARAM_TIMEOUT:g} s")
+        except Exception as exc:
+            log.exception("parameter request %s failed", key)
+            self._answer(pending, [Answer.error(error_body(exc))])
+        else:
+            self._answer(pending, [Answer.reply(key, body)])
+
+    def _query_health(self, pending: _Pending) -> None:
+        body = self.runtime.health()
+        self._answer(pending, [Answer.reply(self.keys.key(KeyKind.HEALTH), body)])

@@ -1,0 +1,329 @@
+"""The Zenoh key space of drive-gateway: one table, used by the front end and the document.
+
+The front end builds every key expression it declares from :data:`KEYS`, and
+``docs/zenoh-keys.md`` is generated from the same table (``python -m
+gateway.zenoh.keys > docs/zenoh-keys.md``); a test fails when the two disagree.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import Enum
+
+from gateway.adapter import EventKind
+from gateway.model import COMMAND_FIELDS, EXTRA_JSON_FIELDS, JSON_FIELDS
+
+
+class KeyKind(Enum):
+    """Every kind of key the gateway uses."""
+
+    STATE = "state"
+    COMMAND = "command"
+    PARAM = "params"
+    EVENTS = "events"
+    DIAG = "diag"
+    DRIVE_TOKEN = "drive token"
+    GATEWAY_TOKEN = "gateway token"
+    HEALTH = "health"
+
+
+class Role(Enum):
+    """What the gateway does on a key."""
+
+    PUBLISHES = "publishes"
+    SUBSCRIBES = "subscribes (put)"
+    QUERYABLE = "queryable"
+    TOKEN = "liveliness token"
+
+
+@dataclass(frozen=True, slots=True)
+class KeySpec:
+    kind: KeyKind
+    template: str  # "{prefix}", "{id}", "{number}", "{subindex}" are filled in
+    roles: tuple[Role, ...]
+    payload: str
+    qos: str
+    summary: str
+
+
+KEYS: tuple[KeySpec, ...] = (
+    KeySpec(
+        KeyKind.STATE,
+        "{prefix}/drives/{id}/state",
+        (Role.PUBLISHES, Role.QUERYABLE),
+        "DriveState JSON (see below), encoding application/json",
+        "a change: DROP, at once; the newest state: BLOCK, 50 ms after the last change "
+        "and at least once per heartbeat",
+        "Published on every change, and again (same `seq`) once the drive has not changed "
+        "for 50 ms and at least once per `zenoh.heartbeat`: on a slow link Zenoh may drop "
+        "a change, never the newest state. A query (wildcards allowed, e.g. "
+        "`{prefix}/drives/*/state`) answers the latest state of every matching drive.",
+    ),
+    KeySpec(
+        KeyKind.COMMAND,
+        "{prefix}/drives/{id}/command",
+        (Role.SUBSCRIBES, Role.QUERYABLE),
+        "command JSON object (fields below)",
+        'reply: `{"accepted": true}` or `{"accepted": false, "error": "..."}`',
+        "A put is fire and forget; a refused put is reported on the drive's `events` key. "
+        "A query carries the command as its payload and gets exactly one reply. "
+        "A command names one drive: a key with wildcards is answered with an error reply. "
+        "Any accepted command (even `{}`) refreshes the drive's command watchdog.",
+    ),
+    KeySpec(
+        KeyKind.PARAM,
+        "{prefix}/drives/{id}/params/{number}[/{subindex}]",
+        (Role.QUERYABLE,),
+        'query payload: none (read) or `{"value": V}` (write)',
+        'reply: `{"number": N, "subindex": S, "value": V}`; '
+        'error reply: `{"error": "device text", "code": C}`',
+        'A query without payload reads the parameter; with `{"value": V}` it writes it '
+        "(only the drive's `writable_params`). Device and gateway refusals come back as an "
+        "error reply (`Reply.err`) carrying the device's own text and code, never as a "
+        "timeout. Subindex defaults to 0. The key must name one drive and one parameter.",
+    ),
+    KeySpec(
+        KeyKind.EVENTS,
+        "{prefix}/drives/{id}/events",
+        (Role.PUBLISHES,),
+        "event JSON: `drive`, `kind`, `text`, `ts` and kind-specific fields",
+        "CongestionControl.BLOCK, in order",
+        "Comm changes, faults and trips with the device's text, refused commands, "
+        "safety actions, control changes, parameter writes.",
+    ),
+    KeySpec(
+        KeyKind.DIAG,
+        "{prefix}/drives/{id}/diag",
+        (Role.PUBLISHES,),
+        "JSON: `id`, `bus`, `ts` and the adapter's bus figures for the drive",
+        "CongestionControl.BLOCK, conflated per drive",
+        "Published once per `zenoh.heartbeat`.",
+    ),
+    KeySpec(
+        KeyKind.DRIVE_TOKEN,
+        "{prefix}/drives/{id}",
+        (Role.TOKEN,),
+        "none",
+        "liveliness",
+        "Present while the drive is online (comm `online`); gone when it goes offline, "
+        "when the gateway stops, or when the gateway's process dies.",
+    ),
+    KeySpec(
+        KeyKind.GATEWAY_TOKEN,
+        "{prefix}/gateway",
+        (Role.TOKEN,),
+        "none",
+        "liveliness",
+        "Present while the gateway's Zenoh front end is serving; declared after every "
+        "subscriber and queryable, so a client that sees it can command at once.",
+    ),
+    KeySpec(
+        KeyKind.HEALTH,
+        "{prefix}/gateway/health",
+        (Role.QUERYABLE,),
+        "JSON: name, version, uptime_s, drives, online, per bus live list and cycle figures",
+        "reply",
+        "The gateway's health (`Runtime.health()`).",
+    ),
+)
+
+SPECS: dict[KeyKind, KeySpec] = {spec.kind: spec for spec in KEYS}
+
+COMMAND_FIELD_DOC: dict[str, str] = {
+    "run": "bool: run (true) or stop (false); after a fault reset, a restart or a change of "
+    "control source a drive runs only on a new `run: true`",
+    "direction": '"forward" or "reverse"',
+    "speed_rpm": "number: speed reference in rpm (not with speed_pct)",
+    "speed_pct": "number: speed reference in % of the drive's scale base (not with speed_rpm)",
+    "fault_reset": "true: one fault reset edge (never repeated; not with run)",
+    "quick_stop": "bool: quick stop",
+    "coast_stop": "bool: coast stop (disable the output)",
+    "jog": "bool: jog",
+    "remote": "bool: take (true) or leave (false) network control",
+}
+"""One line per command field; a test checks it names exactly COMMAND_FIELDS."""
+
+STATE_FIELD_DOC: dict[str, str] = {
+    "id": "drive id (the `<id>` of the keys)",
+    "device": 'device model: "CFW-11", "CFW700", "CFW320", "CFW-08", "MCD 600"',
+    "bus": "bus name from the config",
+    "address": "station address (Profibus) or MAC id (DeviceNet)",
+    "comm": '"offline", "connecting", "online", "clear"',
+    "status": '"not_ready", "ready", "starting", "running", "stopping", "faulted", "tripped"',
+    "running": "bool",
+    "direction": '"forward" or "reverse"',
+    "at_reference": "bool",
+    "remote": "bool: the network is in control",
+    "alarm": "bool",
+    "speed_rpm": "actual speed in rpm (null for a soft starter)",
+    "speed_pct": "actual speed in % of the scale base (null for a soft starter)",
+    "speed_ref_rpm": "speed reference in rpm",
+    "speed_ref_pct": "speed reference in %",
+    "current_a": "motor current in A",
+    "current_pct_flc": "motor current in % of full-load current (soft starters)",
+    "motor_temp_pct": "motor temperature in %",
+    "power_kw": "output power in kW",
+    "voltage_v": "output or line voltage in V",
+    "fault_code": "the device's fault code, or null",
+    "fault_text": "the device's text for the fault code, or null",
+    "alarm_code": "the device's alarm code, or null",
+    "seq": "monotonic sequence number (a heartbeat repeat keeps it)",
+    "ts": "wall-clock time of the reading, seconds since the epoch",
+    "control_source": '"none", "zenoh", "modbus", "gateway"',
+    "speed_base": "what 100 % speed is, or null",
+    "values": "named raw values the profile does not model",
+}
+"""One line per DriveState JSON field; a test checks it names exactly the model's fields."""
+
+EVENT_KIND_DOC: dict[EventKind, str] = {
+    EventKind.COMM: "communication state changed",
+    EventKind.FAULT: "fault (with code and the device's text), fault cleared, reset sent",
+    EventKind.TRIP: "soft starter trip (with code and text)",
+    EventKind.ALARM: "alarm raised",
+    EventKind.COMMAND_REFUSED: "a command was refused (field `source` says from where)",
+    EventKind.SAFETY: "a safety action of the gateway (watchdog, shutdown, run cleared)",
+    EventKind.CONTROL: "control passed from one source to another",
+    EventKind.PARAMETER: "a parameter was written",
+    EventKind.CONFIG: "configuration",
+    EventKind.BUS: "bus-level event",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ParsedKey:
+    """A concrete key under ``<prefix>/drives/``: the drive id and what follows it."""
+
+    drive_id: str
+    kind: str
+    rest: tuple[str, ...] = ()
+
+
+class KeySpace:
+    """The keys of one gateway (one prefix)."""
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix = prefix
+        self._drives = f"{prefix}/drives/"
+
+    def key(self, kind: KeyKind, drive_id: str = "") -> str:
+        template = SPECS[kind].template
+        base = template.split("[", 1)[0] if kind is KeyKind.PARAM else template
+        return base.format(prefix=self.prefix, id=drive_id, number="", subindex="").rstrip("/")
+
+    def param(self, drive_id: str, number: int, subindex: int | None = None) -> str:
+        key = f"{self._drives}{drive_id}/params/{number}"
+        return key if subindex is None else f"{key}/{subindex}"
+
+    def all_drives(self, kind: KeyKind) -> str:
+        """The key expression covering ``kind`` for every drive (for declarations)."""
+        if kind is KeyKind.PARAM:
+            return f"{self._drives}*/params/**"
+        return self.key(kind, "*")
+
+    def parse(self, key: str) -> ParsedKey | None:
+        """Split a key under ``<prefix>/drives/``; None if it is not one."""
+        if not key.startswith(self._drives):
+            return None
+        parts = key[len(self._drives) :].split("/")
+        if len(parts) < 2 or not parts[0]:
+            return None
+        return ParsedKey(parts[0], parts[1], tuple(parts[2:]))
+
+
+def is_concrete(key: str) -> bool:
+    """True when a key expression names one key (no ``*``, ``**`` or ``$*``)."""
+    return "*" not in key
+
+
+# ---------------------------------------------------------------- the document
+
+
+def _display(template: str) -> str:
+    """A key template as the document writes it: ``<prefix>/drives/<id>/...``."""
+    for name in ("prefix", "id", "number", "subindex"):
+        template = template.replace("{" + name + "}", f"<{name}>")
+    return template
+
+
+def _table(header: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in rows]
+    return lines
+
+
+def render_markdown() -> str:
+    """docs/zenoh-keys.md, generated from the tables of this module."""
+    out = [
+        "# drive-gateway: Zenoh key space",
+        "",
+        "<!-- Generated by `python -m gateway.zenoh.keys > docs/zenoh-keys.md`; do not edit. -->",
+        "",
+        "`<prefix>` is `zenoh.prefix` from the config (the demo uses `demo`), `<id>` a drive id.",
+        "Every payload is JSON (encoding `application/json`).",
+        "",
+        "## Keys",
+        "",
+    ]
+    rows = [
+        (
+            f"`{_display(spec.template)}`",
+            ", ".join(r.value for r in spec.roles),
+            spec.payload,
+            spec.qos,
+        )
+        for spec in KEYS
+    ]
+    out += _table(("key", "gateway", "payload", "delivery"), rows)
+    out.append("")
+    for spec in KEYS:
+        out += [f"### `{_display(spec.template)}`", "", _display(spec.summary), ""]
+    out += ["## Command fields", ""]
+    out += _table(("field", "meaning"), [(f"`{n}`", COMMAND_FIELD_DOC[n]) for n in COMMAND_FIELDS])
+    out += [
+        "",
+        "Unknown fields, wrong types, out-of-range speeds, speed_rpm together with speed_pct, "
+        "and fields the device cannot follow (a speed or direction for a soft starter) are "
+        "refused with the reason; nothing of a refused command is applied. Invalid JSON is "
+        "refused the same way.",
+        "",
+        "## State fields",
+        "",
+    ]
+    fields = JSON_FIELDS + EXTRA_JSON_FIELDS
+    out += _table(("field", "meaning"), [(f"`{n}`", STATE_FIELD_DOC[n]) for n in fields])
+    out += ["", "## Event kinds", ""]
+    out += _table(("kind", "meaning"), [(f"`{k.value}`", EVENT_KIND_DOC[k]) for k in EventKind])
+    out += [
+        "",
+        "## Session and delivery",
+        "",
+        "- Peer mode by default. The session listens and connects only on the endpoints of the "
+        "config (`zenoh.listen`, `zenoh.connect`, or `--zenoh-endpoint`); multicast and gossip "
+        "scouting are off unless `zenoh.multicast_scouting` is true. `zenoh.config_file` "
+        "(JSON5) replaces all of this and is passed to Zenoh as it is (routers, TLS, access "
+        "control).",
+        "- The gateway's event loop never waits on the network. It puts each state change "
+        "at once with CongestionControl.DROP (on a congested link Zenoh drops it: older "
+        "states are overtaken by newer ones, nothing queues up). The newest state of a "
+        "drive is put again with CongestionControl.BLOCK once the drive has been quiet for "
+        "50 ms and at least once per heartbeat, so the last word always arrives.",
+        "- One I/O thread makes every Zenoh call that can block: opening and closing the "
+        "session, declarations, BLOCK puts of states (through a latest-per-drive slot: a "
+        "newer state replaces one not yet sent), events and diagnostics, query replies and "
+        "liveliness tokens. Events are put in order with CongestionControl.BLOCK.",
+        "- Zenoh callbacks only copy the key and payload and hand them to the event loop; "
+        "every query gets exactly one reply (an error reply if the gateway stops first).",
+        "",
+    ]
+    return "\n".join(out)
+
+
+def main() -> int:
+    sys.stdout.write(render_markdown())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,234 @@
+"""Sans-IO handling of what arrives on the Zenoh keys: payload bytes in, typed requests out,
+and the JSON bodies of the replies.
+
+Nothing here touches Zenoh or the hub; every problem with a request is a typed
+error carrying the text the client gets back.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from operator import attrgetter
+from typing import Any
+
+from gateway.adapter import ParamValue
+from gateway.errors import CommandRejected, GatewayError, ParameterError
+from gateway.model import (
+    EXTRA_JSON_FIELDS,
+    JSON_FIELDS,
+    CommState,
+    Device,
+    Direction,
+    DriveCommand,
+    DriveState,
+    DriveStatus,
+    Source,
+)
+
+PARAM_NUMBER_MAX = 65535
+PARAM_SUBINDEX_MAX = 65535
+
+
+class BadRequest(GatewayError, ValueError):
+    """A query the gateway cannot serve as asked; ``text`` goes back in the error reply."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+        super().__init__(text)
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """One reply to a query: ``ok`` is a normal reply on ``key``, else an error reply."""
+
+    ok: bool
+    payload: bytes
+    key: str = ""
+
+    @classmethod
+    def reply(cls, key: str, body: Any) -> Answer:
+        return cls(True, encode_json(body), key)
+
+    @classmethod
+    def error(cls, body: Mapping[str, Any]) -> Answer:
+        return cls(False, encode_json(body))
+
+    @classmethod
+    def refusal(cls, text: str) -> Answer:
+        return cls.error({"error": text})
+
+
+def encode_json(obj: Any) -> bytes:
+    """Compact JSON; anything JSON cannot hold becomes its text (never an exception)."""
+    return json.dumps(obj, separators=(",", ":"), default=str).encode()
+
+
+def _finite(value: Any) -> Any:
+    return value if value is None or math.isfinite(value) else None
+
+
+def _mapping(value: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: _finite(v) if isinstance(v, float) else v for k, v in value.items()}
+
+
+_STATE_FIELDS = JSON_FIELDS + EXTRA_JSON_FIELDS
+_STATE_VALUES = attrgetter(*_STATE_FIELDS)
+_STRICT = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+_encode_str: Callable[[str], str] = json.encoder.encode_basestring_ascii
+
+
+def _sanitise(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return _finite(obj)
+    if isinstance(obj, dict):
+        return {k: _sanitise(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_sanitise(v) for v in obj]
+    return obj
+
+
+def encode_state(state: DriveState) -> bytes:
+    """The published form of a state: ``DriveState.to_json()`` as compact JSON.
+
+    Hot path of the fan-out: each value is turned into its JSON text by a table
+    keyed on its type (the same text ``json.dumps`` writes for it); a value the
+    table does not know falls back to ``to_json`` with every non-finite number
+    made null.
+    """
+    try:
+        parts = [
+            key + _TEXT[type(value)](value)
+            for key, value in zip(_STATE_KEYS, _STATE_VALUES(state), strict=True)
+        ]
+    except (KeyError, TypeError, ValueError):
+        return encode_json(_sanitise(state.to_json()))
+    return ("{" + ",".join(parts) + "}").encode()
+
+
+def _float_text(value: float) -> str:
+    return float.__repr__(value) if math.isfinite(value) else "null"
+
+
+def _mapping_text(value: Mapping[str, Any]) -> str:
+    return _STRICT(_mapping(value)) if value else "{}"
+
+
+_STATE_KEYS = tuple(_encode_str(name) + ":" for name in _STATE_FIELDS)
+_TEXT: dict[type, Callable[[Any], str]] = {
+    bool: lambda v: "true" if v else "false",
+    int: int.__repr__,
+    float: _float_text,
+    str: _encode_str,
+    type(None): lambda v: "null",
+    dict: _mapping_text,
+}
+for _enum_type in (Device, CommState, Direction, Source):
+    _TEXT[_enum_type] = {m: _encode_str(m.value) for m in _enum_type}.__getitem__
+_TEXT[DriveStatus] = {m: _encode_str(m.label) for m in DriveStatus}.__getitem__
+
+
+def decode_json(payload: bytes) -> Any:
+    """Parse a JSON payload; raises ValueError with a short reason."""
+    try:
+        return json.loads(payload.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError("payload is not UTF-8") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"invalid JSON: {exc.msg} at position {exc.pos}") from None
+
+
+# ---------------------------------------------------------------- commands
+
+
+def parse_command(payload: bytes | None) -> DriveCommand:
+    """A command payload -> DriveCommand; every problem is a CommandRejected with the reason."""
+    if not payload:
+        raise CommandRejected("a command is a JSON object, and the payload is empty")
+    try:
+        data = decode_json(payload)
+    except ValueError as exc:
+        raise CommandRejected(str(exc)) from None
+    return DriveCommand.from_json(data)
+
+
+def command_accepted() -> dict[str, Any]:
+    return {"accepted": True}
+
+
+def command_refused(reason: str) -> dict[str, Any]:
+    return {"accepted": False, "error": reason}
+
+
+# ---------------------------------------------------------------- parameters
+
+
+@dataclass(frozen=True, slots=True)
+class ParamRequest:
+    """A read (``value`` None) or a write of one parameter."""
+
+    number: int
+    subindex: int = 0
+    value: ParamValue | None = None
+
+    @property
+    def is_write(self) -> bool:
+        return self.value is not None
+
+
+def _index(text: str, what: str, maximum: int) -> int:
+    if not text.isascii() or not text.isdigit():
+        raise BadRequest(f"{what} must be a decimal number, not {text!r}")
+    value = int(text)
+    if value > maximum:
+        raise BadRequest(f"{what} {value} is beyond {maximum}")
+    return value
+
+
+def parse_param_request(rest: tuple[str, ...], payload: bytes | None) -> ParamRequest:
+    """``rest``: the key chunks after ``params/`` (number and optional subindex)."""
+    if not rest or len(rest) > 2:
+        raise BadRequest("a parameter key is params/<number> or params/<number>/<subindex>")
+    number = _index(rest[0], "parameter number", PARAM_NUMBER_MAX)
+    subindex = _index(rest[1], "subindex", PARAM_SUBINDEX_MAX) if len(rest) == 2 else 0
+    return ParamRequest(number, subindex, _write_value(payload))
+
+
+def _write_value(payload: bytes | None) -> ParamValue | None:
+    if not payload:
+        return None
+    try:
+        data = decode_json(payload)
+    except ValueError as exc:
+        raise BadRequest(str(exc)) from None
+    if not isinstance(data, dict) or "value" not in data:
+        raise BadRequest('a parameter write is {"value": V}')
+    unknown = sorted(set(data) - {"value"})
+    if unknown:
+        raise BadRequest(f"unknown field(s): {', '.join(unknown)}")
+    value = data["value"]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BadRequest(f"value must be a number, not {value!r}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise BadRequest("value must be a finite number")
+    return value
+
+
+def param_result(req: ParamRequest, value: ParamValue) -> dict[str, Any]:
+    return {"number": req.number, "subindex": req.subindex, "value": value}
+
+
+def error_body(exc: BaseException) -> dict[str, Any]:
+    """The error reply for a failed request: the device's own text and code where it has one."""
+    if isinstance(exc, ParameterError):
+        body: dict[str, Any] = {"error": exc.text}
+        if exc.code is not None:
+            body["code"] = exc.code
+        return body
+    if isinstance(exc, BadRequest):
+        return {"error": exc.text}
+    if isinstance(exc, KeyError) and exc.args:
+        return {"error": str(exc.args[0])}
+    return {"error": str(exc) or type(exc).__name__}
