@@ -98,14 +98,31 @@ def encode_state(state: DriveState) -> bytes:
     table does not know falls back to ``to_json`` with every non-finite number
     made null.
     """
+    values = _STATE_VALUES(state)
+    cached = _LAST_TEXT.get(state.id)
     try:
-        parts = [
-            key + _TEXT[type(value)](value)
-            for key, value in zip(_STATE_KEYS, _STATE_VALUES(state), strict=True)
-        ]
+        if cached is None:
+            parts = [key + _TEXT[type(v)](v) for key, v in zip(_STATE_KEYS, values, strict=True)]
+        else:
+            old_values, old_parts = cached
+            parts = [
+                old_part if v is old_v else key + _TEXT[type(v)](v)
+                for key, v, old_v, old_part in zip(
+                    _STATE_KEYS, values, old_values, old_parts, strict=True
+                )
+            ]
     except (KeyError, TypeError, ValueError):
         return encode_json(_sanitise(state.to_json()))
+    if len(_LAST_TEXT) > _LAST_TEXT_LIMIT:
+        _LAST_TEXT.clear()
+    _LAST_TEXT[state.id] = (values, parts)
     return ("{" + ",".join(parts) + "}").encode()
+
+
+_LAST_TEXT: dict[str, tuple[tuple[Any, ...], list[str]]] = {}
+"""Per drive id, the values last encoded and their JSON texts: a field whose value is
+the very same object as last time (states share their unchanged fields) is reused."""
+_LAST_TEXT_LIMIT = 4096
 
 
 def _float_text(value: float) -> str:
