@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -97,3 +98,66 @@ def test_unit_file_verifies(tmp_path: Path) -> None:
         line for line in (proc.stdout + proc.stderr).splitlines() if "drive-gateway.service" in line
     ]
     assert problems == [], problems
+
+
+def unit_lines() -> list[tuple[str, str]]:
+    """Every setting of the unit file, in order (a key may repeat)."""
+    out = []
+    for line in UNIT.read_text().splitlines():
+        if "=" in line and not line.startswith("#"):
+            name, value = line.split("=", 1)
+            out.append((name, value))
+    return out
+
+
+def test_unit_sandbox_keeps_what_the_product_needs() -> None:
+    lines = unit_lines()
+    settings = dict(lines)
+    families = set(settings["RestrictAddressFamilies"].split())
+    # journal and notify socket, Zenoh and Modbus, SocketCAN and its interface lookup
+    assert families == {"AF_UNIX", "AF_INET", "AF_INET6", "AF_CAN", "AF_NETLINK"}
+    assert settings["DevicePolicy"] == "closed"
+    devices = {value for name, value in lines if name == "DeviceAllow"}
+    assert {"char-ttyS rw", "char-ttyUSB rw", "char-ttyACM rw"} <= devices
+    assert all(d.startswith("char-tty") for d in devices)  # serial ports only
+    assert "PrivateDevices" not in settings  # it would hide /dev/ttyS* and /dev/ttyUSB*
+    assert "PrivateNetwork" not in settings and "IPAddressDeny" not in settings
+    assert "PrivateUsers" not in settings  # it would void CAP_NET_BIND_SERVICE for port 502
+    assert settings["NotifyAccess"] == "main"
+    for name, value in {
+        "ProtectSystem": "strict",
+        "PrivateMounts": "yes",
+        "RemoveIPC": "yes",
+        "ProtectProc": "invisible",
+        "ProcSubset": "pid",
+        "MemoryDenyWriteExecute": "yes",
+        "RestrictNamespaces": "yes",
+        "SystemCallArchitectures": "native",
+        "ReadOnlyPaths": "/etc/drive-gateway",
+    }.items():
+        assert settings[name] == value, name
+
+
+def _offline_security(unit: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["systemd-analyze", "security", "--offline=yes", "--no-pager", str(unit)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
+def test_unit_exposure_stays_low(tmp_path: Path) -> None:
+    """The score recorded in docs/operations.md ("Security"); systemd >= 250 (--offline)."""
+    exe = Path(sys.executable).parent / "drive-gateway"
+    unit = tmp_path / "drive-gateway.service"
+    unit.write_text(
+        UNIT.read_text().replace("/opt/drive-gateway/.venv/bin/drive-gateway", str(exe))
+    )
+    proc = _offline_security(unit)
+    if "--offline" in proc.stderr and proc.returncode != 0:
+        pytest.skip(f"systemd-analyze has no --offline: {proc.stderr.strip()}")
+    found = re.search(r"Overall exposure level for drive-gateway\.service: ([0-9.]+)", proc.stdout)
+    assert found, proc.stdout + proc.stderr
+    assert float(found.group(1)) <= 1.7, proc.stdout
