@@ -7,10 +7,10 @@ blocks; DP-V1 alarm and status inside a device-related block (when the slave run
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Final, Self
+from typing import Any, Final, Self
 
 from gateway.errors import FrameEncodeError
 
@@ -227,6 +227,58 @@ def decode_specifier(value: int) -> tuple[AlarmSpecifier, bool, int]:
 
 
 DiagBlock = DeviceDiag | IdentifierDiag | ChannelDiag | AlarmDiag | StatusDiag
+
+
+def _device_text(block: DeviceDiag) -> str:
+    return f"device diagnosis {block.data.hex(' ').upper() or '(empty)'}"
+
+
+def _identifier_text(block: IdentifierDiag) -> str:
+    modules = block.faulty_modules
+    if not modules:
+        return "no module reports a fault"
+    return f"module(s) {', '.join(map(str, modules))} report a fault"
+
+
+def _channel_text(block: ChannelDiag) -> str:
+    direction = ChannelDirection(block.direction).name.lower().replace("_", "/")
+    kind = ChannelType(block.channel_type).name.lower()
+    return (
+        f"module {block.module} channel {block.channel} ({direction}, {kind}): "
+        f"{block.error_text} (error {block.error})"
+    )
+
+
+def _kind_name(value: int, kind: type[IntEnum]) -> str:
+    try:
+        return kind(value).name.lower().replace("_", " ")
+    except ValueError:
+        return f"type {value}"
+
+
+def _alarm_text(block: AlarmDiag) -> str:
+    what = AlarmSpecifier(block.specifier).name.lower().replace("_", " ")
+    data = f" {block.data.hex(' ').upper()}" if block.data else ""
+    return f"{_kind_name(block.alarm_type, AlarmType)} alarm, slot {block.slot}, {what}{data}"
+
+
+def _status_text(block: StatusDiag) -> str:
+    data = f" {block.data.hex(' ').upper()}" if block.data else ""
+    return f"{_kind_name(block.status_type, StatusType)} message, slot {block.slot}{data}"
+
+
+_BLOCK_TEXTS: Final[dict[type, Callable[[Any], str]]] = {
+    DeviceDiag: _device_text,
+    IdentifierDiag: _identifier_text,
+    ChannelDiag: _channel_text,
+    AlarmDiag: _alarm_text,
+    StatusDiag: _status_text,
+}
+
+
+def describe_blocks(blocks: Iterable[DiagBlock]) -> str:
+    """The extended diagnosis in words, block by block (fact sheet 1.8 field names)."""
+    return "; ".join(_BLOCK_TEXTS[type(b)](b) for b in blocks)
 
 
 def _decode_device_block(block: bytes, dpv1: bool) -> DiagBlock:

@@ -426,6 +426,7 @@ class DecoderStats:
 
 DecoderEvent = DataTelegram | TokenTelegram | ShortAck | Discarded | NeedMore
 
+DECODE_MEMO: Final = 256  # decoded telegrams a TelegramDecoder keeps by their bytes
 _FIXED_SIZE: Final = {SD1: 6, SD3: 6 + SD3_LENGTH, SD4: 3, SC: 1}
 _START_BYTES: Final = frozenset(_DECODERS)
 
@@ -457,6 +458,9 @@ class TelegramDecoder:
         self._telegram_bytes = 0
         self._discarded_bytes = 0
         self._decode_errors = 0
+        # Telegrams are immutable: the same bytes (a slave's unchanged inputs, cycle after
+        # cycle) decode once. Only whole, valid telegrams are kept, at most DECODE_MEMO.
+        self._memo: dict[bytes, Telegram] = {}
 
     @property
     def stats(self) -> DecoderStats:
@@ -527,10 +531,17 @@ class TelegramDecoder:
         if len(buf) < size:
             return NEED_MORE
         raw = bytes(buf[:size])
+        known = self._memo.get(raw)
+        if known is not None:
+            return known, size
         try:
-            return decode_telegram(raw), size
+            telegram = decode_telegram(raw)
         except FdlDecodeError as exc:
             return exc
+        if len(self._memo) >= DECODE_MEMO:
+            self._memo.clear()
+        self._memo[raw] = telegram
+        return telegram, size
 
     def _sd2_size(self) -> int | FdlDecodeError | NeedMore:
         head = self._buf[:4]

@@ -372,6 +372,28 @@ def test_channel_error_texts() -> None:
     assert diag.channel_error_text(12) == "reserved"
 
 
+def test_extended_diagnosis_in_words() -> None:
+    # what a fault text quotes of the slave (1.8 field names and channel error table)
+    blocks = (
+        DeviceDiag(h("1A 00")),
+        IdentifierDiag.for_modules([0, 9]),
+        ChannelDiag(1, 3, ChannelDirection.OUTPUT, ChannelType.WORD, 20),
+        AlarmDiag(AlarmType.PULL, 2, AlarmSpecifier.DISAPPEARS, data=h("0102")),
+        StatusDiag(StatusType.MODULE_STATUS, 4),
+        AlarmDiag(99, 1),
+    )
+    assert diag.describe_blocks(blocks).split("; ") == [
+        "device diagnosis 1A 00",
+        "module(s) 0, 9 report a fault",
+        "module 1 channel 3 (output, word): vendor specific (error 20)",
+        "pull alarm, slot 2, disappears 01 02",
+        "module status message, slot 4",
+        "type 99 alarm, slot 1, appears",
+    ]
+    assert diag.describe_blocks(()) == ""
+    assert diag.describe_blocks([IdentifierDiag(h("00"))]) == "no module reports a fault"
+
+
 @pytest.mark.parametrize(
     ("wire", "reason"),
     [

@@ -1,0 +1,680 @@
+"""The Profibus DP line as a :class:`gateway.adapter.DriveAdapter` ("profibus").
+
+One master engine (:mod:`.master`) on one serial link (:mod:`.link`, :mod:`.driver`), one
+device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive:
+
+* start-up states -> comm "connecting"; absent -> "offline" (one event);
+* data exchange reached -> outputs at a safe value (the profile's outputs for a stopped
+  command), then ``profile.on_connect`` (scales, start-up parameters) through a DP-V1
+  :class:`RecordChannel`; a failure leaves the drive "not configured" (comm connecting, an
+  event, retried with back-off), success sets the capabilities and makes it configured;
+* configured: every cycle inputs -> ``profile.inputs`` -> ``hub.update(comm=online, ...)``
+  and ``profile.outputs(hub.desired(id))`` -> the next Data_Exchange;
+* extended diagnosis (changed) -> ``profile.on_ext_diag`` -> hub events (every read, empty
+  ones included, for a profile with ``sees_every_diag = True``: it keeps its own memory);
+* a profile with ``wants_codes`` / ``read_codes(channel)`` (the WEG drives: fault and alarm
+  codes not mapped in the telegram) gets them read over DP-V1 when it asks;
+* leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
+
+The port disappearing never crashes the gateway: drives go offline and the port is
+reopened with back-off. On cancellation the master sends Global_Control Clear to every
+slave and closes the port. With ``simulate = true`` the adapter makes a pty pair and runs
+its drives' simulated devices on the other end, in-process.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, ClassVar, Final
+
+from gateway.adapter import EventKind, HubPort, ParamValue
+from gateway.config import BusConfig, DriveConfig
+from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
+from gateway.schema import Table
+
+from . import options as opts
+from .dp import GlobalControl
+from .driver import LineDriver
+from .link import OPEN_ERRORS, SerialLink, open_link
+from .master import (
+    DiagnosisRead,
+    InputsReceived,
+    LineMode,
+    LineNoise,
+    Master,
+    RecordDone,
+    RecordFailure,
+    SlaveDown,
+    SlaveFault,
+    SlaveParams,
+    SlaveState,
+    SlaveStateChanged,
+    SlaveUp,
+)
+from .profile import PROFILES, DpProfile, RecordAccessError, SlaveSetup
+
+if TYPE_CHECKING:
+    from .sim.line import SimLine
+    from .sim.port import SimPort
+
+log = logging.getLogger(__name__)
+
+REOPEN_BACKOFF: Final = (0.5, 10.0)  # s, first and longest pause before reopening the port
+CONNECT_BACKOFF: Final = (2.0, 60.0)  # s, between on_connect attempts of a drive
+CONTROL_CHECK: Final = 0.1  # s between checks of lost northbound control
+CODES_RETRY: Final = 1.0  # s before reading a profile's fault codes again after a failure
+LEAVE_MARGIN: Final = 0.01  # s after the last Clear before the port is closed
+
+CONNECTING_STATES: Final = frozenset(
+    {
+        SlaveState.SET_PRM,
+        SlaveState.CHK_CFG,
+        SlaveState.WAIT_READY,
+        SlaveState.GET_CFG,
+        SlaveState.FAULT,
+    }
+)
+
+DIAG_KINDS: Final[Mapping[str, EventKind]] = {
+    "fault": EventKind.FAULT,
+    "trip": EventKind.TRIP,
+    "alarm": EventKind.ALARM,
+    "parameter": EventKind.PARAMETER,
+    "info": EventKind.BUS,
+    "config": EventKind.CONFIG,
+}
+
+
+@dataclass
+class _Drive:
+    config: DriveConfig  # with the profile's options
+    profile: DpProfile
+    setup: SlaveSetup
+    up: bool = False  # in data exchange
+    configured: bool = False  # on_connect succeeded
+    connect_task: asyncio.Task[None] | None = None
+    codes_task: asyncio.Task[None] | None = None
+    codes_retry_at: float = 0.0
+    lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    last_ext: bytes = b""
+    absent_reported: bool = False
+    connect_error: str | None = None
+
+    @property
+    def id(self) -> str:
+        return self.config.id
+
+    @property
+    def address(self) -> int:
+        return self.config.address
+
+
+class _Channel:
+    """DP-V1 MSAC_C1 access to one slave (the profiles' RecordChannel)."""
+
+    def __init__(self, adapter: ProfibusAdapter, drive: _Drive) -> None:
+        self._adapter = adapter
+        self._drive = drive
+
+    async def read_record(self, slot: int, index: int, length: int) -> bytes:
+        address = self._drive.address
+        return await self._adapter._record(
+            self._drive, lambda m, now: m.read_record(address, slot, index, length, now)
+        )
+
+    async def write_record(self, slot: int, index: int, data: bytes) -> None:
+        address = self._drive.address
+        await self._adapter._record(
+            self._drive, lambda m, now: m.write_record(address, slot, index, data, now)
+        )
+
+
+class ProfibusAdapter:
+    """A Profibus DP class-1 master line (see the module docstring)."""
+
+    devices: ClassVar[frozenset[Device]] = frozenset(
+        {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
+    )
+    address_range: ClassVar[tuple[int, int]] = (0, 125)
+    profiles: ClassVar[Mapping[Device, str]] = PROFILES
+    sim_devices: ClassVar[Mapping[Device, str] | None] = None  # None: sim.devices.SIM_DEVICES
+
+    # ------------------------------------------------------------------ config
+
+    @classmethod
+    def parse_bus_options(cls, table: Table) -> opts.ProfibusOptions:
+        return opts.parse_bus_options(table)
+
+    @classmethod
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
+        profile_options = cls.profile_class(drive.device).parse_options(table, drive)
+        return opts.parse_drive_options(table, drive, profile_options)
+
+    @classmethod
+    def profile_class(cls, device: Device) -> Any:
+        try:
+            target = cls.profiles[device]
+        except KeyError:
+            raise GatewayError(f"no Profibus profile for {device.value}") from None
+        module_name, _, class_name = target.partition(":")
+        return getattr(importlib.import_module(module_name), class_name)
+
+    # ------------------------------------------------------------------ construction
+
+    def __init__(self, bus: BusConfig) -> None:
+        self.bus = bus
+        self.name = bus.name
+        self.options: opts.ProfibusOptions = bus.options or opts.ProfibusOptions(simulate=True)
+        self._drives: dict[str, _Drive] = {}
+        self._by_address: dict[int, _Drive] = {}
+        slaves: list[SlaveParams] = []
+        for d in bus.drives:
+            drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
+            inner = replace(d, options=drive_opts.profile if drive_opts else d.options)
+            profile: DpProfile = self.profile_class(d.device)(inner)
+            setup = profile.setup()
+            drive = _Drive(config=inner, profile=profile, setup=setup)
+            self._drives[d.id] = drive
+            self._by_address[d.address] = drive
+            watchdog = self.options.watchdog
+            if drive_opts is not None and drive_opts.watchdog is not None:
+                watchdog = drive_opts.watchdog
+            slaves.append(_slave_params(d.address, setup, watchdog))
+        self.master = Master(self.options.bus_params(), slaves)
+        self._hub: HubPort | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._link: SerialLink | None = None
+        self._driver: LineDriver | None = None
+        self._futures: dict[int, asyncio.Future[RecordDone]] = {}
+        self._port = self.options.port
+        self._port_state = "closed"
+        self._port_error: str | None = None
+        self._reopens = 0
+        self._control_timer: asyncio.TimerHandle | None = None
+        self.sim: SimPort | None = None
+        self.sim_line: SimLine | None = None  # the simulated slaves (simulate = true)
+
+    # ------------------------------------------------------------------ running
+
+    async def run(self, hub: HubPort) -> None:
+        self._hub = hub
+        self._loop = asyncio.get_running_loop()
+        for drive in self._drives.values():
+            hub.set_capabilities(drive.id, drive.profile.capabilities())
+            hub.update(drive.id, comm=CommState.OFFLINE)
+        try:
+            if self.options.simulate:
+                self._port = self._start_simulation()
+            if self.options.clear_on_lost_control:
+                self._control_timer = self._loop.call_later(CONTROL_CHECK, self._check_control)
+            await self._serve()
+        finally:
+            await self._leave()
+
+    async def _serve(self) -> None:
+        loop = self._loop
+        if loop is None or self._port is None:
+            raise GatewayError("profibus adapter: no port")
+        pause = REOPEN_BACKOFF[0]
+        while True:
+            failed: asyncio.Future[BaseException] = loop.create_future()
+
+            def on_error(
+                exc: BaseException, failed: asyncio.Future[BaseException] = failed
+            ) -> None:
+                if not failed.done():
+                    failed.set_result(exc)
+
+            try:
+                link = await open_link(
+                    self._port,
+                    self.options.baudrate,
+                    loop,
+                    _ignore,
+                    on_error,
+                    rs485=self.options.rs485,
+                )
+            except OPEN_ERRORS as exc:
+                self._port_down(f"cannot open {self._port}: {exc}")
+                await asyncio.sleep(pause)
+                pause = min(2 * pause, REOPEN_BACKOFF[1])
+                continue
+            pause = REOPEN_BACKOFF[0]
+            self._attach(link)
+            lost = await failed
+            await self._detach()
+            self._port_down(f"serial port {self._port} lost: {lost}")
+            await asyncio.sleep(pause)
+
+    def _attach(self, link: SerialLink) -> None:
+        if self._port_state == "reopening":
+            self._reopens += 1
+        self._port_state = "open"
+        self._port_error = None
+        self._link = link
+        self._driver = LineDriver(self.master, link, self._on_action, self._on_flushed_noise)
+        if self._loop is not None:
+            self._dispatch(self.master.reset(self._loop.time()))
+        self._driver.start()
+        log.info("%s: Profibus master %d on %s", self.name, self.master.address, self._port)
+
+    async def _detach(self) -> None:
+        link = self._link
+        if self._driver is not None:
+            self._driver.stop()
+        self._driver = None
+        self._link = None
+        for drive in self._drives.values():
+            self._lost(drive, "the serial port closed")
+        if link is not None:
+            await link.aclose()
+
+    def _port_down(self, text: str) -> None:
+        if self._port_error != text:
+            log.warning("%s: %s", self.name, text)
+            for drive in self._drives.values():
+                self._event(drive, EventKind.BUS, text)
+        self._port_error = text
+        self._port_state = "reopening"
+
+    async def _leave(self) -> None:
+        """Leave the line: Global_Control Clear to all, then close the port (rule 4)."""
+        if self._control_timer is not None:
+            self._control_timer.cancel()
+            self._control_timer = None
+        tasks = [
+            t
+            for d in self._drives.values()
+            for t in (d.connect_task, d.codes_task)
+            if t is not None
+        ]
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        driver, link, loop = self._driver, self._link, self._loop
+        if driver is not None and link is not None and loop is not None:
+            driver.stop()
+            transmits = self.master.leave(loop.time())
+            for t in transmits:
+                wait = t.not_before - loop.time()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                link.write(t.data)
+            tail = self.master.bus.tx_time(sum(len(t.data) for t in transmits))
+            await asyncio.sleep(tail + LEAVE_MARGIN)
+            if self.sim is not None:
+                await self.sim.settle()
+            log.info("%s: Global_Control Clear sent; closing %s", self.name, self._port)
+        await self._detach()
+        self._port_state = "closed"
+        if self.sim is not None:
+            self.sim.close()
+            self.sim = None
+        for future in self._futures.values():
+            if not future.done():
+                future.cancel()
+
+    def _start_simulation(self) -> str:
+        from .sim.devices import SIM_DEVICES, make_device
+        from .sim.line import SimLine
+        from .sim.port import SimPort
+        from .sim.slave import DpSlave
+
+        table = self.sim_devices if self.sim_devices is not None else SIM_DEVICES
+        line = SimLine(
+            DpSlave(d.address, make_device(d.config.device, d.config, table))
+            for d in self._drives.values()
+        )
+        sim, path = SimPort.on_pty(line)
+        sim.start()
+        self.sim = sim
+        self.sim_line = line
+        log.info("%s: simulated line on %s (%d slaves)", self.name, path, len(line.slaves))
+        return path
+
+    # ------------------------------------------------------------------ engine actions
+
+    def _dispatch(self, actions: list[Any]) -> None:
+        for action in actions:
+            self._on_action(action)
+
+    def _on_action(self, action: Any) -> None:
+        handler = _ACTION_HANDLERS.get(type(action))
+        if handler is not None:
+            handler(self, action)
+
+    def _on_flushed_noise(self, noise: LineNoise) -> None:
+        self.master.count_noise(noise.error)
+
+    def _drive_at(self, address: int) -> _Drive | None:
+        return self._by_address.get(address)
+
+    def _on_state(self, action: SlaveStateChanged) -> None:
+        drive = self._drive_at(action.address)
+        if drive is None or self._hub is None:
+            return
+        if action.new in CONNECTING_STATES:
+            drive.absent_reported = False
+            self._hub.update(drive.id, comm=CommState.CONNECTING)
+        elif action.new is SlaveState.ABSENT:
+            self._hub.update(drive.id, comm=CommState.OFFLINE, running=False)
+            if not drive.absent_reported:
+                drive.absent_reported = True
+                self._event(drive, EventKind.COMM, f"no answer at address {drive.address}")
+
+    def _on_up(self, action: SlaveUp) -> None:
+        drive = self._drive_at(action.address)
+        if drive is None or self._hub is None or self._loop is None:
+            return
+        drive.up = True
+        drive.configured = False
+        drive.absent_reported = False
+        self._hub.update(drive.id, comm=CommState.CONNECTING)
+        self._set_outputs(drive, self._safe(drive), self._loop.time())
+        drive.connect_task = self._loop.create_task(
+            self._connect(drive), name=f"profibus-connect-{drive.id}"
+        )
+
+    def _on_down(self, action: SlaveDown) -> None:
+        drive = self._drive_at(action.address)
+        if drive is not None:
+            self._lost(drive, action.reason)
+
+    def _lost(self, drive: _Drive, reason: str) -> None:
+        was_up = drive.up
+        drive.up = False
+        drive.configured = False
+        drive.last_ext = b""
+        for task in (drive.connect_task, drive.codes_task):
+            if task is not None:
+                task.cancel()
+        drive.connect_task = drive.codes_task = None
+        if not was_up:
+            return
+        drive.profile.on_comm_lost()
+        if self._hub is not None:
+            self._hub.update(drive.id, comm=CommState.OFFLINE, running=False)
+            self._event(drive, EventKind.COMM, f"left data exchange: {reason}")
+
+    def _on_fault(self, action: SlaveFault) -> None:
+        drive = self._drive_at(action.address)
+        if drive is not None:
+            self._event(drive, EventKind.CONFIG, action.text, fault=action.kind.value)
+
+    def _on_inputs(self, action: InputsReceived) -> None:
+        drive = self._drive_at(action.address)
+        if drive is None or self._hub is None or self._loop is None:
+            return
+        now = self._loop.time()
+        if drive.configured:
+            changes = drive.profile.inputs(action.data, now)
+            self._hub.update(drive.id, comm=CommState.ONLINE, **changes)
+            desired = self._hub.desired(drive.id)
+            if getattr(drive.profile, "wants_codes", False):
+                self._read_codes(drive, now)
+        else:
+            desired = self._safe(drive)
+        if self.master.outputs_pending(drive.address):
+            return  # the last outputs computed have not gone out: they go first
+        self._set_outputs(drive, desired, now)
+
+    def _read_codes(self, drive: _Drive, now: float) -> None:
+        """The profile wants fault/alarm codes its telegram does not carry: read them."""
+        if drive.codes_task is not None or now < drive.codes_retry_at or self._loop is None:
+            return
+        drive.codes_task = self._loop.create_task(
+            self._codes(drive), name=f"profibus-codes-{drive.id}"
+        )
+
+    async def _codes(self, drive: _Drive) -> None:
+        read = getattr(drive.profile, "read_codes", None)
+        try:
+            if callable(read) and self._hub is not None:
+                async with drive.lock:
+                    changes = await read(_Channel(self, drive))
+                if changes and drive.up:
+                    self._hub.update(drive.id, **dict(changes))
+        except GatewayError as exc:
+            log.info("%s: fault codes not read: %s", drive.id, exc)
+            if self._loop is not None:
+                drive.codes_retry_at = self._loop.time() + CODES_RETRY
+        finally:
+            drive.codes_task = None
+
+    def _on_diag(self, action: DiagnosisRead) -> None:
+        drive = self._drive_at(action.address)
+        if drive is None:
+            return
+        # A profile with ``sees_every_diag`` (MCD 600) keeps its own memory of the diagnosis.
+        every = getattr(drive.profile, "sees_every_diag", False)
+        if action.ext == drive.last_ext and not every:
+            return
+        drive.last_ext = action.ext
+        if not action.ext and not every:
+            return
+        try:
+            events = drive.profile.on_ext_diag(action.ext)
+        except (GatewayError, ValueError) as exc:
+            self._event(drive, EventKind.BUS, f"extended diagnosis not understood: {exc}")
+            return
+        for ev in events:
+            self._event(drive, DIAG_KINDS.get(ev.kind, EventKind.BUS), ev.text, **dict(ev.data))
+
+    def _on_record(self, action: RecordDone) -> None:
+        future = self._futures.pop(action.job, None)
+        if future is not None and not future.done():
+            future.set_result(action)
+
+    # ------------------------------------------------------------------ helpers
+
+    def _event(self, drive: _Drive, kind: EventKind, text: str, **data: Any) -> None:
+        if self._hub is not None:
+            self._hub.event(drive.id, kind, text, address=drive.address, **data)
+
+    def _safe(self, drive: _Drive) -> DesiredCommand:
+        """The desired command with run and jog off (fault_reset_seq kept: no new edge)."""
+        if self._hub is None:
+            return DesiredCommand()
+        return self._hub.desired(drive.id).stopped(StopAction.RAMP_STOP, Source.GATEWAY)
+
+    def _set_outputs(self, drive: _Drive, desired: DesiredCommand, now: float) -> None:
+        self.master.set_outputs(drive.address, drive.profile.outputs(desired, now))
+
+    async def _connect(self, drive: _Drive) -> None:
+        """on_connect until it succeeds (back-off between attempts, an event on each new error)."""
+        hub = self._hub
+        if hub is None:
+            return
+        pause = CONNECT_BACKOFF[0]
+        channel = _Channel(self, drive)
+        while drive.up:
+            try:
+                async with drive.lock:
+                    changes = await drive.profile.on_connect(channel, self._sink(drive))
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # the profile's failure: the drive stays not configured
+                if not isinstance(exc, GatewayError):
+                    log.exception("%s: on_connect failed", drive.id)
+                text = f"not configured: {exc}"
+                if text != drive.connect_error:
+                    drive.connect_error = text
+                    self._event(drive, EventKind.CONFIG, text)
+                hub.update(drive.id, comm=CommState.CONNECTING)
+                await asyncio.sleep(pause)
+                pause = min(2 * pause, CONNECT_BACKOFF[1])
+                continue
+            drive.connect_error = None
+            hub.set_capabilities(drive.id, drive.profile.capabilities())
+            drive.configured = True
+            if changes:
+                hub.update(drive.id, **dict(changes))
+            self._event(drive, EventKind.COMM, "configured: data exchange with the drive's profile")
+            return
+
+    def _sink(self, drive: _Drive) -> Callable[..., None]:
+        def sink(text: str, kind: str = "info", **data: Any) -> None:
+            self._event(drive, DIAG_KINDS.get(kind, EventKind.BUS), text, **data)
+
+        return sink
+
+    async def _record(self, drive: _Drive, submit: Callable[[Master, float], int]) -> bytes:
+        loop = asyncio.get_running_loop()
+        if self._driver is None or not drive.up:
+            raise DriveOffline(f"drive {drive.id} is not in data exchange")
+        future: asyncio.Future[RecordDone] = loop.create_future()
+        job = submit(self.master, loop.time())
+        self._futures[job] = future
+        self._driver.poke()
+        try:
+            done = await future
+        except asyncio.CancelledError:
+            self.master.cancel_record(job)
+            raise
+        finally:
+            self._futures.pop(job, None)
+        return _record_result(drive, done)
+
+    def _check_control(self) -> None:
+        """clear_on_lost_control: Clear while any drive's command is the gateway's own."""
+        self._control_timer = None
+        hub, loop = self._hub, self._loop
+        if hub is None or loop is None:
+            return
+        lost = [d.id for d in self._drives.values() if hub.desired(d.id).source is Source.GATEWAY]
+        mode = LineMode.CLEAR if lost else LineMode.OPERATE
+        if mode is not self.master.mode:
+            text = (
+                f"line in Clear: northbound control lost ({', '.join(lost)})"
+                if lost
+                else "line back in Operate"
+            )
+            log.warning("%s: %s", self.name, text)
+            for drive in self._drives.values():
+                self._event(drive, EventKind.BUS, text)
+            self.master.set_mode(mode, loop.time())
+            if self._driver is not None:
+                self._driver.poke()
+        self._control_timer = loop.call_later(CONTROL_CHECK, self._check_control)
+
+    # ------------------------------------------------------------------ DriveAdapter
+
+    def _drive(self, drive_id: str) -> _Drive:
+        try:
+            return self._drives[drive_id]
+        except KeyError:
+            raise UnknownDrive(f"no drive {drive_id!r} on bus {self.name}") from None
+
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
+        drive = self._drive(drive_id)
+        if not drive.up:
+            raise DriveOffline(f"drive {drive_id} is not in data exchange")
+        async with drive.lock:
+            return await drive.profile.read_param(_Channel(self, drive), number, subindex)
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: ParamValue
+    ) -> None:
+        drive = self._drive(drive_id)
+        if not drive.up:
+            raise DriveOffline(f"drive {drive_id} is not in data exchange")
+        async with drive.lock:
+            await drive.profile.write_param(_Channel(self, drive), number, subindex, value)
+
+    def global_control(
+        self,
+        *,
+        sync: bool = False,
+        unsync: bool = False,
+        freeze: bool = False,
+        unfreeze: bool = False,
+        groups: tuple[int, ...] = (),
+    ) -> None:
+        """Sync/Freeze (fact sheet 1.9) to the groups (1-8; none = every slave)."""
+        control = GlobalControl(
+            unfreeze=unfreeze,
+            freeze=freeze,
+            unsync=unsync,
+            sync=sync,
+            clear_data=self.master.mode is LineMode.CLEAR,
+            group_select=GlobalControl.groups_mask(groups),
+        )
+        self.master.global_control(control)
+        if self._driver is not None:
+            self._driver.poke()
+
+    def live_list(self) -> list[int]:
+        return self.master.live_list()
+
+    def diagnostics(self) -> dict[str, Any]:
+        drives = {}
+        for drive in self._drives.values():
+            drives[drive.id] = {
+                **self.master.slave_diagnostics(drive.address),
+                "device": drive.config.device.value,
+                "configured": drive.configured,
+                "not_configured_reason": drive.connect_error,
+            }
+        return {
+            "port": self._port,
+            "simulated": self.options.simulate,
+            "port_state": self._port_state,
+            "port_error": self._port_error,
+            "reopens": self._reopens,
+            **self.master.line_diagnostics(),
+            "drives": drives,
+        }
+
+
+def _ignore(data: bytes, now: float) -> None:
+    return
+
+
+def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlaveParams:
+    return SlaveParams(
+        address=address,
+        ident_number=setup.ident_number,
+        cfg=setup.cfg,
+        user_prm=setup.user_prm,
+        input_len=setup.input_len,
+        output_len=setup.output_len,
+        dpv1=setup.dpv1,
+        group=setup.group,
+        watchdog=watchdog or None,
+    )
+
+
+def _record_result(drive: _Drive, done: RecordDone) -> bytes:
+    """The data of a finished DP-V1 job, or the error the RecordChannel contract names."""
+    if done.error is not None:
+        table = getattr(drive.profile, "record_error_texts", None)
+        text = done.error.text_in(table) if table else done.error.text
+        raise RecordAccessError(
+            text, done.error.error_code_1, done.error.error_code_2, done.error.error_decode
+        )
+    if done.failure is RecordFailure.TIMEOUT:
+        raise GatewayTimeout(done.text)
+    if done.failure in (RecordFailure.OFFLINE, RecordFailure.CANCELLED):
+        raise DriveOffline(done.text)
+    if done.failure is not None:
+        raise RecordAccessError(done.text, 0, 0, 0)
+    return done.data or b""
+
+
+_ACTION_HANDLERS: Final[dict[type, Callable[[ProfibusAdapter, Any], None]]] = {
+    SlaveStateChanged: ProfibusAdapter._on_state,
+    SlaveUp: ProfibusAdapter._on_up,
+    SlaveDown: ProfibusAdapter._on_down,
+    SlaveFault: ProfibusAdapter._on_fault,
+    InputsReceived: ProfibusAdapter._on_inputs,
+    DiagnosisRead: ProfibusAdapter._on_diag,
+    RecordDone: ProfibusAdapter._on_record,
+}

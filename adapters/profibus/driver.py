@@ -1,0 +1,171 @@
+"""Runs a sans-IO engine (the master or a live-list scan) on a :class:`SerialLink`.
+
+Everything happens in loop callbacks, never in a blocking call: bytes from the link go
+through the streaming decoder into ``engine.step(now, event)``; each resulting
+:class:`~adapters.profibus.master.Transmit` is written once its ``not_before`` (the TSYN idle
+time, fact sheet 1.1) has come; the other actions go to ``on_action``; a timer steps the
+engine at ``engine.next_deadline()``. Before each request the decoder is told the line was
+idle, so a reply cut short by noise cannot swallow the next one.
+
+A wait shorter than :data:`SPIN_LIMIT` (TSYN is 66 us at 500 kbit/s) is spun out on the
+monotonic clock: the event loop's timers cannot sleep less than a millisecond.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Final, Protocol
+
+from .fdl import DataTelegram, Discarded, NeedMore, ShortAck, TelegramDecoder, TokenTelegram
+from .link import SerialLink
+from .master import Event, LineNoise, Received, Receiving, Transmit
+
+log = logging.getLogger(__name__)
+
+SPIN_LIMIT: Final = 0.001  # s: shorter waits before a request are spun, longer ones slept
+
+
+class Engine(Protocol):
+    def step(self, now: float, event: Event | None = None) -> Sequence[Any]: ...
+
+    def next_deadline(self) -> float | None: ...
+
+
+class LineDriver:
+    """Glue between one engine and one link (see the module docstring)."""
+
+    def __init__(
+        self,
+        engine: Engine,
+        link: SerialLink,
+        on_action: Callable[[Any], None] = lambda action: None,
+        on_noise: Callable[[LineNoise], None] = lambda noise: None,
+        on_stepped: Callable[[], None] = lambda: None,
+    ) -> None:
+        self.engine = engine
+        self.link = link
+        self.loop = link.loop
+        self.on_action = on_action
+        self.on_noise = on_noise
+        self.on_stepped = on_stepped
+        self.decoder = TelegramDecoder()
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+        self._delayed: asyncio.TimerHandle | None = None
+        self._stepping = False
+        self._again = False
+        self._stopped = False
+        link.on_data = self._on_data
+
+    def start(self) -> None:
+        self.poke()
+
+    def stop(self) -> None:
+        """No more stepping (the link stays open: the caller closes it)."""
+        self._stopped = True
+        for handle in (self._timer, self._delayed):
+            if handle is not None:
+                handle.cancel()
+        self._timer = self._delayed = None
+
+    def poke(self) -> None:
+        """Step the engine now (after a command: new outputs, a DP-V1 job...)."""
+        self._step(None)
+
+    # ------------------------------------------------------------------ stepping
+
+    def _step(self, event: Event | None) -> None:
+        if self._stopped:
+            return
+        if self._stepping:  # a callback poked us from inside a step: once more afterwards
+            self._again = True
+            return
+        self._stepping = True
+        try:
+            self._run(self.engine.step(self.loop.time(), event))
+            while self._again and not self._stopped:
+                self._again = False
+                self._run(self.engine.step(self.loop.time()))
+        finally:
+            self._stepping = False
+        self._arm()
+        self.on_stepped()
+
+    def _run(self, actions: Sequence[Any]) -> None:
+        for action in actions:
+            if isinstance(action, Transmit):
+                self._transmit(action)
+                continue
+            try:
+                self.on_action(action)
+            except Exception:  # a profile bug must not stop the line
+                log.exception("handling %r failed", action)
+
+    def _arm(self) -> None:
+        """A timer for the engine's next deadline.
+
+        A timer already armed for an earlier time is kept: it fires early, the step finds
+        nothing due and arms again. The deadline of a request moves on with every message,
+        so this saves a timer per message; a later deadline is rescheduled only when due.
+        """
+        if self._stopped:
+            return
+        deadline = self.engine.next_deadline()
+        if deadline is None:
+            return  # nothing due: an armed timer only causes one idle step
+        if self._timer is not None and self._timer_at is not None and self._timer_at <= deadline:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = deadline
+        self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self._timer_at = None
+        self._step(None)
+
+    # ------------------------------------------------------------------ receiving
+
+    def _on_data(self, data: bytes, now: float) -> None:
+        self.decoder.feed(data)
+        for event in self._events():
+            self._step(event)
+        if self.decoder.buffered:
+            self._step(Receiving())
+
+    def _events(self) -> list[Event]:
+        out: list[Event] = []
+        while True:
+            item = self.decoder.next_frame()
+            if isinstance(item, NeedMore):
+                return out
+            if isinstance(item, Discarded):
+                out.append(LineNoise(item.error))
+            elif isinstance(item, DataTelegram | ShortAck | TokenTelegram):
+                out.append(Received(item))
+
+    # ------------------------------------------------------------------ sending
+
+    def _transmit(self, action: Transmit) -> None:
+        # 1.1: the line was idle before this request; nothing before it is a telegram
+        self.decoder.mark_idle()
+        if self.decoder.buffered:
+            for event in self._events():
+                if isinstance(event, LineNoise):
+                    self.on_noise(event)
+        wait = action.not_before - self.loop.time()
+        if wait > SPIN_LIMIT:
+            self._delayed = self.loop.call_at(action.not_before, self._write, action.data)
+            return
+        while time.monotonic() < action.not_before:  # the loop's clock is time.monotonic
+            pass
+        self.link.write(action.data)
+
+    def _write(self, data: bytes) -> None:
+        self._delayed = None
+        if not self._stopped:
+            self.link.write(data)

@@ -1,0 +1,105 @@
+"""Counters and timing figures of a Profibus line and of each slave (the master's diagnostics).
+
+Plain data kept by the master engine; ``to_json()`` gives the form the adapter publishes
+(times in milliseconds). Minimum and maximum are over the whole run, the median over the
+last :data:`WINDOW` samples.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+WINDOW: Final = 256
+
+
+class Samples:
+    """Durations in seconds: last, all-time min/max, median of the last ``size``."""
+
+    def __init__(self, size: int = WINDOW) -> None:
+        self._recent: deque[float] = deque(maxlen=size)
+        self.count = 0
+        self.last = math.nan
+        self.min = math.inf
+        self.max = 0.0
+
+    def add(self, value: float) -> None:
+        self._recent.append(value)
+        self.count += 1
+        self.last = value
+        self.min = min(self.min, value)
+        self.max = max(self.max, value)
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self._recent) if self._recent else math.nan
+
+    def to_json(self) -> dict[str, float] | None:
+        """``{"last", "min", "median", "max"}`` in ms, or None before the first sample."""
+        if not self.count:
+            return None
+        return {
+            "last": round(self.last * 1e3, 3),
+            "min": round(self.min * 1e3, 3),
+            "median": round(self.median * 1e3, 3),
+            "max": round(self.max * 1e3, 3),
+        }
+
+
+@dataclass
+class ErrorCounters:
+    """What went wrong on the line, counted where it was seen."""
+
+    retries: int = 0  # requests repeated after no reply or a garbled one
+    timeouts: int = 0  # waits that ended without a valid reply
+    fcs_errors: int = 0  # telegrams with a bad checksum
+    framing_errors: int = 0  # other undecodable bytes (delimiters, lengths, FC)
+    invalid_replies: int = 0  # well-formed telegrams that do not answer the request
+
+    def counters(self) -> dict[str, int]:
+        return {
+            "retries": self.retries,
+            "timeouts": self.timeouts,
+            "fcs_errors": self.fcs_errors,
+            "framing_errors": self.framing_errors,
+            "invalid_replies": self.invalid_replies,
+        }
+
+
+@dataclass
+class SlaveStats(ErrorCounters):
+    requests: int = 0
+    exchanges: int = 0  # successful Data_Exchange cycles
+    restarts: int = 0  # times the slave left data exchange
+    response: Samples = field(default_factory=Samples)  # request sent -> reply received
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "requests": self.requests,
+            "exchanges": self.exchanges,
+            "restarts": self.restarts,
+            **self.counters(),
+            "response_ms": self.response.to_json(),
+        }
+
+
+@dataclass
+class LineStats(ErrorCounters):
+    cycles: int = 0
+    telegrams: int = 0  # requests and broadcasts sent
+    discarded_bytes: int = 0
+    unexpected: int = 0  # telegrams nobody waited for (late replies, other stations)
+    cycle: Samples = field(default_factory=Samples)  # first request -> end of the cycle
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "cycles": self.cycles,
+            "telegrams": self.telegrams,
+            **self.counters(),
+            "discarded_bytes": self.discarded_bytes,
+            "unexpected_telegrams": self.unexpected,
+            "cycle_ms": self.cycle.to_json(),
+        }

@@ -1,0 +1,172 @@
+"""The keys of a Profibus bus table and of its drives (docs/devices.md lists them).
+
+Bus (``[buses.<name>]`` with ``adapter = "profibus"``)::
+
+    port = "/dev/ttyUSB0"        device path or pyserial URL (rfc2217://, socket://)
+    simulate = false             true: a pty pair with the drives simulated in-process
+    baudrate = 500000            9600, 19200, 45450, 93750, 187500, 500000, 1500000, ...
+    rs485 = "auto"               kernel RS-485 mode (RTS drives the transmitter): "auto"
+                                 asks and tolerates a driver without it, "on" insists,
+                                 "off" leaves RTS alone (link.py)
+    master_address = 2           0-125, never a drive's address
+    tsl = <per baud rate>        slot time, bit times (fact sheet 1.1 table)
+    min_tsdr = 11                bit times
+    max_tsdr = <per baud rate>   bit times
+    retries = 1                  1-15
+    watchdog = 0.5               s, DP watchdog sent in Set_Prm (0 = off)
+    acyclic_timeout = 1.0        s, bound of one DP-V1 read or write
+    clear_on_lost_control = false  Global_Control Clear while a drive's command watchdog fired
+    latency = 0.01               s added to every reply wait (converter and OS delay)
+    cycle_time = 0.01            s, a bus cycle starts at most this often (0 = back to back)
+    absent_retry = 1.0           s between probes of an absent slave
+    fault_retry = 2.0            s before a slave with a Cfg/Prm fault is started up again
+    live_list_period = 1.0       s between FDL status probes of unconfigured addresses (0 = off)
+
+Drive: the profile's keys (delegated to its ``parse_options``) plus ``watchdog`` (s, this
+slave's own DP watchdog instead of the bus's).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Final
+
+from gateway.config import DriveConfig
+from gateway.errors import ConfigError
+from gateway.schema import Table
+
+from .link import URL_SCHEMES, Rs485, is_url
+from .timing import BAUD_RATES, BusParams, bus_problems, defaults_for
+
+WATCHDOG_MIN: Final = 0.01  # 1.6: 10 ms base x 1 x 1
+WATCHDOG_MAX: Final = 650.25  # 1.6: 10 ms x 255 x 255
+
+
+@dataclass(frozen=True)
+class ProfibusOptions:
+    """A Profibus line's settings (defaults: see the module docstring)."""
+
+    port: str | None = None
+    simulate: bool = False
+    baudrate: int = 500000
+    rs485: Rs485 = Rs485.AUTO
+    master_address: int = 2
+    tsl: int = 200
+    min_tsdr: int = 11
+    max_tsdr: int = 100
+    retries: int = 1
+    watchdog: float = 0.5
+    acyclic_timeout: float = 1.0
+    clear_on_lost_control: bool = False
+    latency: float = 0.01
+    cycle_time: float = 0.01
+    absent_retry: float = 1.0
+    fault_retry: float = 2.0
+    live_list_period: float = 1.0
+
+    def bus_params(self) -> BusParams:
+        return BusParams(
+            baudrate=self.baudrate,
+            master_address=self.master_address,
+            tsl=self.tsl,
+            min_tsdr=self.min_tsdr,
+            max_tsdr=self.max_tsdr,
+            retries=self.retries,
+            latency=self.latency,
+            cycle_time=self.cycle_time,
+            absent_retry=self.absent_retry,
+            fault_retry=self.fault_retry,
+            acyclic_timeout=self.acyclic_timeout,
+            live_list_period=self.live_list_period,
+        )
+
+
+@dataclass(frozen=True)
+class ProfibusDriveOptions:
+    """A drive's options: its profile's own, and the master's per-slave settings."""
+
+    profile: Any = None
+    watchdog: float | None = None  # None: the bus's watchdog
+
+
+def parse_bus_options(t: Table) -> ProfibusOptions:
+    d = ProfibusOptions()
+    baudrate: int = t.integer(
+        "baudrate", d.baudrate, allowed=BAUD_RATES, what="a Profibus DP baud rate"
+    )
+    defaults = defaults_for(baudrate)
+    simulate: bool = t.boolean("simulate", d.simulate)
+    options = ProfibusOptions(
+        port=_port(t, simulate),
+        simulate=simulate,
+        baudrate=baudrate,
+        rs485=t.enum("rs485", Rs485, d.rs485),
+        master_address=t.integer("master_address", d.master_address, minimum=0, maximum=125),
+        tsl=t.integer("tsl", defaults.tsl, minimum=1, maximum=16383),
+        min_tsdr=t.integer("min_tsdr", defaults.min_tsdr, minimum=0, maximum=255),
+        max_tsdr=t.integer("max_tsdr", defaults.max_tsdr, minimum=1, maximum=16383),
+        retries=t.integer("retries", d.retries, minimum=1, maximum=15),
+        watchdog=_watchdog(t, "watchdog", d.watchdog),
+        acyclic_timeout=t.number("acyclic_timeout", d.acyclic_timeout, minimum=0.01, maximum=60.0),
+        clear_on_lost_control=t.boolean("clear_on_lost_control", d.clear_on_lost_control),
+        latency=t.number("latency", d.latency, minimum=0.0, maximum=1.0),
+        cycle_time=t.number("cycle_time", d.cycle_time, minimum=0.0, maximum=10.0),
+        absent_retry=t.number("absent_retry", d.absent_retry, minimum=0.01, maximum=3600.0),
+        fault_retry=t.number("fault_retry", d.fault_retry, minimum=0.01, maximum=3600.0),
+        live_list_period=t.number(
+            "live_list_period", d.live_list_period, minimum=0.0, maximum=3600.0
+        ),
+    )
+    for key, reason in bus_problems(options.bus_params()):
+        raise t.error(key, reason)
+    _check_addresses(t, options.master_address)
+    return options
+
+
+def _port(t: Table, simulate: bool) -> str | None:
+    if simulate:
+        if t.has("port"):
+            t.raw("port")
+            raise t.error("port", "not used with simulate = true (the gateway makes a pty)")
+        return None
+    port: str = t.string("port")
+    if is_url(port):
+        scheme = port.partition("://")[0]
+        if scheme not in URL_SCHEMES:
+            raise t.error(
+                "port", f"{port!r}: unknown pyserial URL scheme (known: {', '.join(URL_SCHEMES)})"
+            )
+    elif not port.startswith("/"):
+        raise t.error(
+            "port",
+            f"{port!r} is not a device path (/dev/ttyUSB0) or a pyserial URL "
+            "(rfc2217://host:port, socket://host:port)",
+        )
+    return port
+
+
+def _watchdog(t: Table, key: str, default: float | None) -> Any:
+    value = t.number(key, default, minimum=0.0, maximum=WATCHDOG_MAX)
+    if value is not None and 0 < value < WATCHDOG_MIN:
+        raise t.error(key, f"{value} is below the minimum {WATCHDOG_MIN} (0 turns it off)")
+    return value
+
+
+def _check_addresses(t: Table, master_address: int) -> None:
+    """No drive may sit at the master's own address (its tables are read later)."""
+    drives = t.data.get("drives", [])
+    if not isinstance(drives, list):
+        return
+    for i, drive in enumerate(drives):
+        if isinstance(drive, Mapping) and drive.get("address") == master_address:
+            raise ConfigError(
+                t.file,
+                f"{t.key('drives')}[{i}].address",
+                f"{master_address} is the master's own address (master_address)",
+            )
+
+
+def parse_drive_options(t: Table, drive: DriveConfig, profile_options: Any) -> ProfibusDriveOptions:
+    """The master's per-drive keys; ``profile_options`` come from the profile's parser."""
+    return ProfibusDriveOptions(profile=profile_options, watchdog=_watchdog(t, "watchdog", None))

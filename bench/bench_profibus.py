@@ -1,0 +1,530 @@
+"""Profibus DP master: message cycles over a pty against the transport's own limit.
+
+Master: the engine, the driver and the serial link (pyserial on the pty's slave side) in
+this process, exchanging data as fast as the line allows (``cycle_time = 0``) with 1 and
+32 simulated DP slaves (echo devices, 8 bytes in and out, like a drive's 4 words) that run
+in a child process on the pty's other side. The figure is message cycles (Data_Exchange
+request and reply) per second, and the master's CPU time per message cycle.
+
+The child answers every telegram through the simulated slaves (start-up, diagnosis,
+Global_Control, Data_Exchange) and keeps the reply of each Data_Exchange telegram it has
+answered: the same telegram again (same slave, FCB, outputs: an echo device's answer cannot
+change, no watchdog runs) gets that reply at once. So the other end costs what a bare
+responder costs, and the run measures the master, not the simulator. A check figure shows
+it: a bare requester against that child is as fast as against the bare responder.
+
+Reference, same run, same kind of pty, same sizes (a Data_Exchange with 8 bytes is an SD3
+telegram of 14 bytes, its reply too): raw request/response round trips between a bare
+requester here and a bare responder in a child process. The target ratio (>= 0.66) is
+against a bare requester on the event loop (``loop.add_reader``, the I/O any master on
+the loop has to do, and what this one does); the ratio against a blocking requester (no
+event loop at all) is reported too. Rounds alternate reference / master and the best
+round of each counts (the machine's noise only ever slows a round down).
+
+The master's own time per message cycle (engine, decoder, driver) is also timed without
+the pty and the event loop, replaying the simulated slaves' replies: the steadiest figure
+on a machine shared with other work.
+
+From the measured turnaround (reply in -> next request out, inside the master) comes what
+the master could sustain on a real line: the Felser estimate of a DP cycle,
+T = (380 + 300 x slaves + 11 x bytes) x t_bit + 75 us (bytes: all the I/O bytes of the
+slaves), against the same estimate plus the master's turnaround for every message cycle,
+at 500 and 187.5 kbit/s.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import multiprocessing
+import os
+import select
+import statistics
+import termios
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Final
+
+from adapters.profibus.dp import DataExchange, build_request
+from adapters.profibus.driver import LineDriver
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.fdl import (
+    DataTelegram,
+    FcbState,
+    RequestFunction,
+    ResponseFc,
+    ResponseStatus,
+    decode_telegram,
+)
+from adapters.profibus.link import SerialLink, open_link
+from adapters.profibus.master import InputsReceived, Master, SlaveParams, SlaveState
+from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
+from adapters.profibus.sim.line import SimLine
+from adapters.profibus.sim.slave import DpSlave
+from adapters.profibus.timing import BusParams
+from bench.common import Figure
+
+SIZE: Final = 8  # bytes in and out per slave (4 words)
+OUTPUTS: Final = bytes(range(SIZE))  # what the master sends every slave
+FIRST: Final = 3  # the first slave address
+MASTER: Final = 2
+ROUNDS: Final = 3  # reference / master rounds per slave count
+MEASURE: Final = 0.7  # s measured per round
+SETTLE: Final = 0.2  # s of exchange before a master round is measured
+REPLY_TIMEOUT: Final = 2.0  # s: a bare requester gives up (a benchmark never hangs)
+TARGET: Final = "ratio >= 0.66"
+# On a pty the baud rate means nothing; 12 Mbit/s keeps TSYN (2.75 us) out of the figures.
+BUS: Final = BusParams.for_baudrate(12000000, master_address=MASTER, latency=0.05, gc_period=0.1)
+
+
+# ---------------------------------------------------------------------------------------
+# the telegrams, as the master sends them
+
+
+def exchange_frames(slaves: int) -> list[bytes]:
+    """Data_Exchange telegrams for each slave, two rounds so the FCB alternates (1.3)."""
+    out: list[bytes] = []
+    fcbs = {FIRST + i: FcbState(fcb=True, fcv=True) for i in range(slaves)}
+    for _ in range(2):
+        for address, fcb in fcbs.items():
+            fc = fcb.fc(RequestFunction.SRD_HIGH)
+            out.append(build_request(DataExchange(OUTPUTS), da=address, sa=MASTER, fc=fc).encode())
+            fcbs[address] = fcb.acknowledged()
+    return out
+
+
+def reply_frame() -> bytes:
+    """An echo slave's Data_Exchange reply: DL with the outputs as inputs."""
+    return DataTelegram(MASTER, FIRST, ResponseFc(ResponseStatus.DL), data=OUTPUTS).encode()
+
+
+REQUEST_LEN: Final = len(exchange_frames(1)[0])
+REPLY_LEN: Final = len(reply_frame())
+
+
+# ---------------------------------------------------------------------------------------
+# the other side of the pty, in a child process
+
+
+def _is_exchange(chunk: bytes) -> bool:
+    try:
+        telegram = decode_telegram(chunk)
+    except ProfibusDecodeError:
+        return False
+    return isinstance(telegram, DataTelegram) and telegram.is_request and telegram.dsap is None
+
+
+def _serve_slaves(fd: int, slaves: int) -> None:
+    """Simulated slaves, Data_Exchange replies remembered (see the module docstring)."""
+    line = SimLine(DpSlave(FIRST + i, EchoSim(SIZE)) for i in range(slaves))
+    known: dict[bytes, bytes] = {}
+    while True:
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            return
+        reply = known.get(chunk)
+        if reply is not None and not line.decoder.buffered:
+            os.write(fd, reply)
+            continue
+        outgoing = line.receive(chunk, time.monotonic())
+        for out in outgoing:
+            os.write(fd, out.data)
+        if len(outgoing) == 1 and _is_exchange(chunk):
+            known[chunk] = outgoing[0].data
+
+
+def _serve_raw(fd: int, request_len: int, reply: bytes) -> None:
+    buf = bytearray()
+    while True:
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            return
+        buf += chunk
+        while len(buf) >= request_len:
+            del buf[:request_len]
+            os.write(fd, reply)
+
+
+@contextlib.contextmanager
+def _child(target: Callable[..., None], *args: Any) -> Any:
+    """A pty pair: ``target(master_fd, *args)`` in a child process, the slave path for us."""
+    master_fd, slave_fd = os.openpty()
+    tty.setraw(slave_fd)
+    tty.setraw(master_fd)
+    ctx = multiprocessing.get_context("fork")
+    proc = ctx.Process(target=target, args=(master_fd, *args), daemon=True)
+    proc.start()
+    try:
+        yield os.ttyname(slave_fd)
+    finally:
+        proc.terminate()
+        proc.join(5)
+        os.close(master_fd)
+        os.close(slave_fd)
+
+
+@contextlib.contextmanager
+def _open_raw(path: str) -> Any:
+    fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
+    try:
+        tty.setraw(fd)
+        termios.tcflush(fd, termios.TCIOFLUSH)  # a reply left over from an earlier run
+        yield fd
+    finally:
+        os.close(fd)
+
+
+# ---------------------------------------------------------------------------------------
+# bare requesters
+
+
+def blocking_round_trips(fd: int, requests: list[bytes], reply_len: int, duration: float) -> float:
+    """Round trips per second without an event loop: write, read the whole reply, again."""
+    os.set_blocking(fd, True)
+    done = 0
+    start = time.perf_counter()
+    end = start + duration
+    while time.perf_counter() < end:
+        for request in requests:
+            os.write(fd, request)
+            got = 0
+            while got < reply_len:
+                if not select.select([fd], [], [], REPLY_TIMEOUT)[0]:
+                    raise RuntimeError(f"no {reply_len}-byte reply within {REPLY_TIMEOUT} s")
+                got += len(os.read(fd, 4096))
+            done += 1
+    return done / (time.perf_counter() - start)
+
+
+@dataclass
+class RawRun:
+    round_trips_per_s: float
+    cpu_per_round_trip: float  # s, this process
+
+
+async def loop_round_trips(
+    fd: int, requests: list[bytes], reply_len: int, duration: float
+) -> RawRun:
+    """Round trips on the event loop: ``add_reader``, non-blocking write, nothing else."""
+    loop = asyncio.get_running_loop()
+    os.set_blocking(fd, False)
+    finished: asyncio.Future[None] = loop.create_future()
+    state = {"got": 0, "done": 0, "next": 0}
+    end = loop.time() + duration
+
+    def send() -> None:
+        request = requests[state["next"]]
+        state["next"] = (state["next"] + 1) % len(requests)
+        os.write(fd, request)
+
+    def readable() -> None:
+        try:
+            state["got"] += len(os.read(fd, 4096))
+        except BlockingIOError:
+            return
+        if state["got"] < reply_len:
+            return
+        state["got"] -= reply_len
+        state["done"] += 1
+        if loop.time() >= end:
+            if not finished.done():
+                finished.set_result(None)
+            return
+        send()
+
+    loop.add_reader(fd, readable)
+    start, start_cpu = time.perf_counter(), time.process_time()
+    try:
+        send()
+        await asyncio.wait_for(finished, duration + REPLY_TIMEOUT)
+    finally:
+        loop.remove_reader(fd)
+    done = max(state["done"], 1)
+    return RawRun(done / (time.perf_counter() - start), (time.process_time() - start_cpu) / done)
+
+
+# ---------------------------------------------------------------------------------------
+# the master
+
+
+@dataclass
+class MasterRun:
+    cycles_per_s: float
+    cpu_per_cycle: float  # s
+    turnaround: float  # s, median: reply in -> next request out
+
+
+def _params(slaves: int) -> list[SlaveParams]:
+    return [
+        SlaveParams(
+            address=FIRST + i,
+            ident_number=ECHO_IDENT,
+            cfg=echo_cfg(SIZE),
+            input_len=SIZE,
+            output_len=SIZE,
+            watchdog=None,  # the bare requester takes over afterwards
+        )
+        for i in range(slaves)
+    ]
+
+
+async def run_master(path: str, slaves: int, duration: float) -> MasterRun:
+    loop = asyncio.get_running_loop()
+    master = Master(BUS, _params(slaves), loop.time())
+    exchanges = 0
+    turnarounds: list[float] = []
+
+    def on_action(action: Any) -> None:
+        nonlocal exchanges
+        if isinstance(action, InputsReceived):
+            exchanges += 1
+            master.set_outputs(action.address, OUTPUTS)  # what an adapter does each cycle
+
+    link = await open_link(path, BUS.baudrate, loop, lambda d, n: None, lambda e: None)
+    driver = LineDriver(master, link, on_action)
+    _time_turnaround(link, turnarounds)
+    try:
+        driver.start()
+        async with asyncio.timeout(10):
+            # The bench drives the engine without a hub: poll its states.
+            while not all(master.state_of(a) is SlaveState.DATA_EXCHANGE for a in master.addresses):  # noqa: ASYNC110
+                await asyncio.sleep(0.01)
+        await asyncio.sleep(SETTLE)
+        turnarounds.clear()
+        start_n, start_t, start_cpu = exchanges, time.perf_counter(), time.process_time()
+        await asyncio.sleep(duration)
+        n = exchanges - start_n
+        wall = time.perf_counter() - start_t
+        cpu = time.process_time() - start_cpu
+    finally:
+        driver.stop()
+        await link.aclose()
+    return MasterRun(n / wall, cpu / max(n, 1), statistics.median(turnarounds))
+
+
+def _time_turnaround(link: SerialLink, out: list[float]) -> None:
+    """Wrap the link: when a reply's bytes come in, when the next request goes out."""
+    on_data = link.on_data
+    write = link.write
+    rx_at = [0.0]
+
+    def timed_data(data: bytes, now: float) -> None:
+        rx_at[0] = time.perf_counter()
+        on_data(data, now)
+
+    def timed_write(data: bytes) -> None:
+        if rx_at[0]:
+            out.append(time.perf_counter() - rx_at[0])
+            rx_at[0] = 0.0
+        write(data)
+
+    link.on_data = timed_data
+    link.write = timed_write  # type: ignore[method-assign]
+
+
+@dataclass
+class Case:
+    """The best rounds of one slave count (the machine's noise only ever slows a round)."""
+
+    master: MasterRun
+    loop_raw: RawRun  # event-loop requester against the bare responder
+    blocking_raw: float  # blocking requester against the bare responder
+    peer_check: float  # blocking requester against the master's other end
+
+
+def measure(slaves: int) -> Case:
+    frames = exchange_frames(slaves)
+    runs: list[MasterRun] = []
+    loop_raw: list[RawRun] = []
+    blocking_raw: list[float] = []
+    peer_check: list[float] = []
+    with (
+        _child(_serve_raw, REQUEST_LEN, reply_frame()) as raw_path,
+        _open_raw(raw_path) as raw,
+        _child(_serve_slaves, slaves) as path,
+    ):
+        for _ in range(ROUNDS):
+            loop_raw.append(asyncio.run(loop_round_trips(raw, frames, REPLY_LEN, MEASURE)))
+            runs.append(asyncio.run(run_master(path, slaves, MEASURE)))
+            blocking_raw.append(blocking_round_trips(raw, frames, REPLY_LEN, MEASURE / 2))
+            with _open_raw(path) as peer:
+                peer_check.append(blocking_round_trips(peer, frames, REPLY_LEN, MEASURE / 2))
+    best = max(runs, key=lambda r: r.cycles_per_s)
+    return Case(
+        MasterRun(
+            best.cycles_per_s,
+            min(r.cpu_per_cycle for r in runs),
+            min(r.turnaround for r in runs),
+        ),
+        RawRun(
+            max(r.round_trips_per_s for r in loop_raw),
+            min(r.cpu_per_round_trip for r in loop_raw),
+        ),
+        max(blocking_raw),
+        max(peer_check),
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# the master without I/O
+
+
+class _NoLink:
+    """Takes the driver's writes; the bench hands it the replies (no port, no event loop)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.on_data: Callable[[bytes, float], None] = lambda data, now: None
+        self.sent: list[bytes] = []
+
+    def write(self, data: bytes) -> None:
+        self.sent.append(data)
+
+
+ENGINE_MESSAGES: Final = 20000
+
+
+async def engine_cost(slaves: int, messages: int = ENGINE_MESSAGES) -> float:
+    """Seconds per message cycle of the master's own code (engine, decoder, driver).
+
+    The replies come from the simulated slaves, each computed once and then replayed, so
+    only the master's side is timed: what remains of a message cycle without the pty.
+    """
+    loop = asyncio.get_running_loop()
+    master = Master(BUS, _params(slaves), loop.time())
+    link = _NoLink(loop)
+
+    def on_action(action: Any) -> None:
+        if isinstance(action, InputsReceived):
+            master.set_outputs(action.address, OUTPUTS)
+
+    driver = LineDriver(master, link, on_action)  # type: ignore[arg-type]
+    line = SimLine(DpSlave(FIRST + i, EchoSim(SIZE)) for i in range(slaves))
+    known: dict[bytes, list[bytes]] = {}
+
+    def exchange(count: int) -> None:
+        for _ in range(count):
+            while not link.sent:
+                driver.poke()
+            request = link.sent.pop(0)
+            replies = known.get(request)
+            if replies is None:
+                replies = [out.data for out in line.receive(request, loop.time())]
+                if _is_exchange(request):
+                    known[request] = replies
+            for reply in replies:
+                link.on_data(reply, loop.time())
+
+    driver.start()
+    try:
+        async with asyncio.timeout(10):
+            while not all(master.state_of(a) is SlaveState.DATA_EXCHANGE for a in master.addresses):
+                exchange(1)
+                await asyncio.sleep(0)
+        exchange(2 * slaves + 100)
+        start = time.perf_counter()
+        exchange(messages)
+        return (time.perf_counter() - start) / messages
+    finally:
+        driver.stop()
+
+
+# ---------------------------------------------------------------------------------------
+# a real line
+
+
+def felser_cycle(slaves: int, baudrate: int) -> float:
+    """T = (380 + 300 x slaves + 11 x bytes) x t_bit + 75 us, bytes = I/O of all slaves."""
+    io_bytes = slaves * 2 * SIZE
+    return (380 + 300 * slaves + 11 * io_bytes) / baudrate + 75e-6
+
+
+def _engine_figure(slaves: int, cost: float) -> Figure:
+    return Figure(
+        f"profibus_master_own_time_per_msg_cycle_{slaves}_slaves",
+        cost * 1e6,
+        "us",
+        note="engine, decoder and driver per message cycle, without the pty and the event loop",
+    )
+
+
+def _case_figures(slaves: int, case: Case) -> list[Figure]:
+    sizes = f"{REQUEST_LEN} B request, {REPLY_LEN} B reply"
+    return [
+        Figure(
+            f"profibus_master_msg_cycles_{slaves}_slaves",
+            case.master.cycles_per_s,
+            "1/s",
+            reference=case.loop_raw.round_trips_per_s,
+            target=TARGET,
+            note=f"reference: bare event-loop requester, raw round trips over a pty, {sizes}",
+        ),
+        Figure(
+            f"profibus_master_vs_blocking_raw_{slaves}_slaves",
+            case.master.cycles_per_s,
+            "1/s",
+            reference=case.blocking_raw,
+            note=f"reference: bare blocking requester (no event loop), {sizes}",
+        ),
+        Figure(
+            f"profibus_peer_check_{slaves}_slaves",
+            case.peer_check,
+            "1/s",
+            reference=case.blocking_raw,
+            note="blocking requester against the master's simulated slaves vs the bare responder",
+        ),
+        Figure(
+            f"profibus_master_cpu_per_msg_cycle_{slaves}_slaves",
+            case.master.cpu_per_cycle * 1e6,
+            "us",
+            reference=case.loop_raw.cpu_per_round_trip * 1e6,
+            note="master process CPU time (engine, driver, link) per message cycle; "
+            "reference: the bare event-loop requester's CPU time per round trip",
+        ),
+        Figure(
+            f"profibus_master_turnaround_{slaves}_slaves",
+            case.master.turnaround * 1e6,
+            "us",
+            note="median, reply bytes in -> next request written",
+        ),
+    ]
+
+
+def _line_figures(turnaround: dict[int, float]) -> list[Figure]:
+    figures: list[Figure] = []
+    for baudrate in (500000, 187500):
+        kbit = f"{baudrate / 1000:g}k".replace(".", "_")
+        for slaves, master_time in turnaround.items():
+            bus = felser_cycle(slaves, baudrate)
+            with_master = bus + slaves * master_time
+            figures.append(
+                Figure(
+                    f"profibus_line_{kbit}_{slaves}_slaves_cycle",
+                    with_master * 1e3,
+                    "ms",
+                    reference=bus * 1e3,
+                    note="Felser estimate plus the master's turnaround; reference: estimate alone",
+                )
+            )
+            figures.append(
+                Figure(
+                    f"profibus_line_{kbit}_{slaves}_slaves_efficiency",
+                    bus / with_master,
+                    "ratio",
+                    note="Felser estimate / (estimate + the master's turnaround)",
+                )
+            )
+    return figures
+
+
+def run() -> list[Figure]:
+    figures: list[Figure] = []
+    turnaround: dict[int, float] = {}
+    for slaves in (1, 32):
+        case = measure(slaves)
+        turnaround[slaves] = case.master.turnaround
+        figures += _case_figures(slaves, case)
+        figures.append(_engine_figure(slaves, asyncio.run(engine_cost(slaves))))
+    return figures + _line_figures(turnaround)

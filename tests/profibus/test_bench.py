@@ -1,0 +1,40 @@
+"""The Profibus benchmark's own machinery, run very short (the figures are `make bench`'s)."""
+
+from __future__ import annotations
+
+import pytest
+
+from adapters.profibus.fdl import SD3, decode_telegram
+from bench import bench_profibus as bench
+
+
+def test_the_reference_has_the_sizes_of_the_masters_telegrams() -> None:
+    # 8 bytes without SAPs: LE = 11, so request and reply are SD3 telegrams (1.2)
+    frames = bench.exchange_frames(2)
+    assert {len(f) for f in frames} == {bench.REQUEST_LEN} == {14}
+    assert bench.REPLY_LEN == 14
+    assert all(f[0] == SD3 for f in [*frames, bench.reply_frame()])
+    assert [decode_telegram(f).fc.encode() for f in frames] == [0x7D, 0x7D, 0x5D, 0x5D]  # type: ignore[union-attr]
+
+
+def test_felser_estimate() -> None:
+    # (380 + 300 + 11 x 16) bit times at 500 kbit/s + 75 us
+    assert bench.felser_cycle(1, 500000) == pytest.approx(1.787e-3)
+    assert bench.felser_cycle(32, 187500) == pytest.approx((380 + 9600 + 11 * 512) / 187500 + 75e-6)
+
+
+async def test_the_masters_own_time_without_io() -> None:
+    assert 0 < await bench.engine_cost(3, messages=200) < 0.01
+
+
+def test_one_short_round_measures_everything(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Master and both bare requesters get their replies (a wrong length would hang)."""
+    monkeypatch.setattr(bench, "MEASURE", 0.05)
+    monkeypatch.setattr(bench, "SETTLE", 0.01)
+    monkeypatch.setattr(bench, "ROUNDS", 1)
+    case = bench.measure(2)
+    assert case.master.cycles_per_s > 0
+    assert case.master.cpu_per_cycle > 0
+    assert case.loop_raw.round_trips_per_s > 0
+    assert case.blocking_raw > 0
+    assert case.peer_check > 0

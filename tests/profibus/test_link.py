@@ -1,0 +1,259 @@
+"""The serial link and the driver on real file descriptors (ptys), without blocking the loop."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import socket
+import termios
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import serial
+
+from adapters.profibus.driver import SPIN_LIMIT, LineDriver
+from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
+from adapters.profibus.master import Transmit
+
+from .support import until
+
+
+@contextlib.contextmanager
+def pty_pair() -> Iterator[tuple[int, str]]:
+    master, slave = os.openpty()
+    try:
+        yield master, os.ttyname(slave)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.mark.parametrize("baudrate", [9600, 45450, 93750, 187500, 500000, 1500000, 12000000])
+def test_every_baud_rate_opens_on_a_pty(baudrate: int) -> None:
+    with pty_pair() as (_, path):
+        ser = open_port(path, baudrate)
+        try:
+            attrs = termios.tcgetattr(ser.fileno())
+            assert attrs[2] & termios.CSIZE == termios.CS8
+            assert ser.parity == serial.PARITY_EVEN or not attrs[2] & termios.PARENB
+        finally:
+            ser.close()
+
+
+class _Port:
+    """Stands for a pyserial port on a real UART: its driver has RS-485 mode or not."""
+
+    def __init__(self, supported: bool) -> None:
+        self.supported = supported
+        self.applied: list[Any] = []
+        self._mode: Any = None
+
+    @property
+    def rs485_mode(self) -> Any:
+        return self._mode
+
+    @rs485_mode.setter
+    def rs485_mode(self, value: Any) -> None:
+        self._mode = value  # pyserial keeps the value, then applies it (TIOCSRS485)
+        if value is not None and not self.supported:
+            raise ValueError("Failed to set RS485 mode: [Errno 25] Inappropriate ioctl")
+        self.applied.append(value)
+
+
+def test_rs485_mode_is_set_on_a_real_port() -> None:
+    for mode in (Rs485.AUTO, Rs485.ON):
+        port = _Port(supported=True)
+        assert set_rs485(port, "/dev/ttyS1", mode)
+        (settings,) = port.applied
+        assert settings.rts_level_for_tx is True  # RTS drives the transmitter
+        assert settings.rts_level_for_rx is False
+        assert port.rs485_mode is settings
+
+
+def test_a_driver_without_rs485_mode() -> None:
+    port = _Port(supported=False)
+    assert not set_rs485(port, "/dev/ttyUSB0", Rs485.AUTO)  # auto-direction converter
+    assert port.rs485_mode is None  # left as it was, not half set
+    with pytest.raises(serial.SerialException, match="the driver refuses RS-485 mode"):
+        set_rs485(_Port(supported=False), "/dev/ttyUSB0", Rs485.ON)
+
+
+def test_rs485_off_and_url_ports_are_left_alone() -> None:
+    for port_name, mode in (("/dev/ttyS1", Rs485.OFF), ("socket://127.0.0.1:1", Rs485.ON)):
+        port = _Port(supported=True)
+        assert not set_rs485(port, port_name, mode)
+        assert port.applied == []
+
+
+@pytest.mark.parametrize("mode", list(Rs485))
+def test_rs485_mode_on_a_pty_is_tolerated(mode: Rs485) -> None:
+    with pty_pair() as (_, path):
+        ser = open_port(path, 500000, mode)  # the pty refuses TIOCSRS485: no failure
+        try:
+            assert ser.is_open
+            assert ser.rs485_mode is None  # no stale RS-485 request left in pyserial
+        finally:
+            ser.close()
+
+
+def test_is_pty() -> None:
+    with pty_pair() as (_, path):
+        assert is_pty(path)
+    assert not is_pty("/dev/null")
+    assert not is_pty("socket://127.0.0.1:1")
+    assert not is_pty("/dev/ttyNOSUCH")
+
+
+async def test_bytes_both_ways_and_a_full_buffer_does_not_block() -> None:
+    loop = asyncio.get_running_loop()
+    received: list[bytes] = []
+    errors: list[BaseException] = []
+    with pty_pair() as (master, path):
+        os.set_blocking(master, False)
+        link = await open_link(path, 500000, loop, lambda d, now: received.append(d), errors.append)
+        try:
+            os.write(master, b"\x10\x02\x05\x00\x07\x16")
+            await until(lambda: b"".join(received) == b"\x10\x02\x05\x00\x07\x16")
+            big = bytes(range(256)) * 1024  # more than the pty holds
+            link.write(big)
+            assert link.pending_output > 0  # the rest waits for the port, the loop goes on
+            got = bytearray()
+
+            def drain() -> bool:
+                with contextlib.suppress(BlockingIOError):
+                    got.extend(os.read(master, 65536))
+                return len(got) == len(big)
+
+            await until(drain)
+            assert bytes(got) == big and link.pending_output == 0
+            assert (link.bytes_out, link.bytes_in) == (len(big), 6)
+        finally:
+            await link.aclose()
+        assert errors == []
+
+
+async def test_a_dead_port_is_reported_once() -> None:
+    loop = asyncio.get_running_loop()
+    errors: list[BaseException] = []
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    link = await open_link(path, 500000, loop, lambda d, now: None, errors.append)
+    try:
+        os.close(master)  # the other end is gone: reads fail (EIO)
+        os.close(slave)
+        await until(lambda: bool(errors))
+        link.write(b"\x00")
+        await asyncio.sleep(0.01)
+        assert len(errors) == 1 and isinstance(errors[0], OSError)
+    finally:
+        link.close()
+        link.close()  # twice is fine
+    assert link.closed
+
+
+async def test_a_missing_device_raises_on_open() -> None:
+    loop = asyncio.get_running_loop()
+    with pytest.raises(serial.SerialException):
+        await open_link("/dev/ttyNOSUCHPORT9", 500000, loop, lambda d, n: None, lambda e: None)
+
+
+async def test_a_socket_url_with_no_delay() -> None:
+    loop = asyncio.get_running_loop()
+    got: list[bytes] = []
+    server_seen: list[bytes] = []
+
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        server_seen.append(await reader.read(100))
+        writer.write(b"\xe5")
+        await writer.drain()
+        await reader.read(100)
+        writer.close()
+
+    server = await asyncio.start_server(handle, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    link = await open_link(
+        f"socket://127.0.0.1:{port}", 500000, loop, lambda d, n: got.append(d), print
+    )
+    try:
+        fd = link.ser.fileno()
+        with socket.fromfd(fd, socket.AF_INET, socket.SOCK_STREAM) as s:
+            assert s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
+        link.write(b"\x10\x05\x02\x49\x50\x16")
+        await until(lambda: got == [b"\xe5"])
+        assert server_seen == [b"\x10\x05\x02\x49\x50\x16"]
+    finally:
+        await link.aclose()
+        server.close()
+        await server.wait_closed()
+
+
+async def test_in_thread_returns_and_raises() -> None:
+    assert await in_thread(lambda: 42) == 42
+    with pytest.raises(ZeroDivisionError):
+        await in_thread(lambda: 1 / 0)
+
+
+class _Engine:
+    """Sends what it is told, when told; counts its steps."""
+
+    def __init__(self) -> None:
+        self.queue: list[Transmit] = []
+        self.steps = 0
+        self.deadline: float | None = None
+
+    def step(self, now: float, event: Any = None) -> list[Any]:
+        self.steps += 1
+        out, self.queue = self.queue, []
+        return out
+
+    def next_deadline(self) -> float | None:
+        return self.deadline
+
+
+async def test_the_driver_keeps_the_idle_time_before_a_request() -> None:
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (master, path):
+        os.set_blocking(master, False)
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Engine()
+        driver = LineDriver(engine, link)
+        try:
+            soon = loop.time() + SPIN_LIMIT / 2  # spun out
+            engine.queue.append(Transmit(b"\x01", soon))
+            driver.poke()
+            assert loop.time() >= soon
+            later = loop.time() + 0.02  # slept on a timer: the loop goes on meanwhile
+            engine.queue.append(Transmit(b"\x02", later))
+            driver.poke()
+            assert loop.time() < later
+            got = bytearray()
+
+            def read() -> bool:
+                with contextlib.suppress(BlockingIOError):
+                    got.extend(os.read(master, 10))
+                return got == b"\x01\x02"
+
+            await until(read)
+            assert loop.time() >= later
+        finally:
+            driver.stop()
+            link.close()
+
+
+async def test_the_driver_steps_at_the_engines_deadline() -> None:
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (_, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Engine()
+        engine.deadline = loop.time() + 0.01
+        driver = LineDriver(engine, link)
+        try:
+            driver.start()
+            steps = engine.steps
+            engine.deadline = None
+            await until(lambda: engine.steps > steps)
+        finally:
+            driver.stop()
+            link.close()

@@ -1,0 +1,161 @@
+"""Engine-level properties (hypothesis): whatever the line does, the master keeps the rules.
+
+* 1.1: one request at a time, and at least TSYN of idle line before each;
+* 1.3: a repeat keeps the FCB, a new request toggles it, a (re)start sends FCB=1 FCV=0;
+* 1.5: every slave that answers reaches data exchange; one that never answers never does,
+  and neither stalls the others;
+* nothing the line delivers (any telegram, any garbage) makes the engine raise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError
+from adapters.profibus.fdl import (
+    DataTelegram,
+    RequestFc,
+    RequestFunction,
+    ResponseFc,
+    ResponseStatus,
+    ShortAck,
+    StationType,
+    decode_fc,
+    decode_telegram,
+)
+from adapters.profibus.master import (
+    LineNoise,
+    Master,
+    Received,
+    Receiving,
+    SlaveState,
+    SlaveUp,
+    Transmit,
+)
+from adapters.profibus.sim.slave import DpSlave
+from gateway.sim import FaultInjector
+
+from .wire import FAST_BUS, Wire, echo_line, echo_params
+
+FAST = settings(max_examples=15, deadline=None)
+ADDRESSES = st.lists(st.integers(3, 12), min_size=1, max_size=5, unique=True)
+
+
+def check_line_rules(w: Wire) -> None:
+    bus = w.master.bus
+    for (t0, d0), (t1, _) in zip(w.sent, w.sent[1:], strict=False):
+        assert t1 >= t0 + bus.tx_time(len(d0)) + bus.tsyn - 1e-9  # 1.1: TSYN before each
+    last: dict[int, bytes] = {}
+    for _, data in w.sent:
+        telegram = decode_telegram(data)
+        assert isinstance(telegram, DataTelegram)
+        fc = telegram.fc
+        assert isinstance(fc, RequestFc)
+        if fc.function is not RequestFunction.SRD_HIGH:
+            continue
+        previous = last.get(telegram.da)
+        if not fc.fcv:
+            assert fc.fcb  # 1.3: after a (re)start FCB = 1, FCV = 0
+        elif previous is not None and previous != data:
+            before = decode_fc(previous[6] if previous[0] == 0x68 else previous[3])
+            assert isinstance(before, RequestFc)
+            assert before.fcb != fc.fcb  # 1.3: toggled after each acknowledged request
+        last[telegram.da] = data
+
+
+@FAST
+@given(present=ADDRESSES, absent=ADDRESSES, drop=st.floats(0.0, 0.3), seed=st.integers(0, 99))
+def test_present_slaves_reach_data_exchange_whatever_is_lost(
+    present: list[int], absent: list[int], drop: float, seed: int
+) -> None:
+    missing = [a for a in absent if a not in present]
+    master = Master(FAST_BUS, [echo_params(a) for a in present + missing])
+    line = echo_line(present)
+    line.faults = FaultInjector(seed=seed, drop_rate=drop)
+    w = Wire(master, line)
+    w.run(1.5)
+    up = {a.address for a in w.of(SlaveUp)}
+    assert up == set(present)
+    for a in missing:
+        assert master.state_of(a) is SlaveState.ABSENT
+    check_line_rules(w)
+
+
+@FAST
+@given(noise=st.floats(0.0, 0.02), seed=st.integers(0, 99))
+def test_line_rules_hold_under_noise(noise: float, seed: int) -> None:
+    master = Master(FAST_BUS, [echo_params(a) for a in (5, 6, 7)])
+    line = echo_line([5, 6, 7])
+    line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
+    w = Wire(master, line)
+    w.run(1.0)
+    check_line_rules(w)
+    assert {a.address for a in w.of(SlaveUp)} == {5, 6, 7}
+
+
+responses = st.builds(
+    DataTelegram,
+    da=st.sampled_from([2, 2, 2, 3]),
+    sa=st.integers(0, 12),
+    fc=st.builds(ResponseFc, st.sampled_from(ResponseStatus), st.sampled_from(StationType)),
+    dsap=st.one_of(st.none(), st.integers(0, 63)),
+    ssap=st.one_of(st.none(), st.sampled_from([51, 59, 60, 61, 62]), st.integers(0, 63)),
+    data=st.binary(max_size=40),
+)
+events = st.one_of(
+    responses.map(Received),
+    st.just(Received(ShortAck())),
+    st.builds(
+        lambda raw: LineNoise(FdlDecodeError(DecodeFailure.BAD_CHECKSUM, "noise", raw)),
+        st.binary(min_size=1, max_size=8),
+    ),
+    st.just(Receiving()),
+    st.builds(
+        lambda sa: Received(DataTelegram(5, 2, RequestFc(RequestFunction.SRD_HIGH), data=b"x")),
+        st.just(0),
+    ),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(script=st.lists(st.tuples(st.floats(0.0, 0.01), events), max_size=80))
+def test_nothing_from_the_line_makes_the_engine_raise(script: list[tuple[float, object]]) -> None:
+    bus = dataclasses.replace(FAST_BUS, live_list_period=0.001)
+    master = Master(bus, [echo_params(a) for a in (3, 5, 7)])
+    master.read_record(5, 0, 1, 4, 0.0)
+    now = 0.0
+    master.step(now)
+    for dt, event in script:
+        now += dt
+        actions = master.step(now, event)  # type: ignore[arg-type]
+        assert sum(1 for a in actions if isinstance(a, Transmit) and a.expect_reply) <= 1
+        deadline = master.next_deadline()
+        assert deadline is None or deadline > now  # never a busy loop
+    assert master.stats.telegrams >= 1
+
+
+requests = st.builds(
+    DataTelegram,
+    da=st.sampled_from([5, 5, 127, 6]),
+    sa=st.sampled_from([2, 3]),
+    fc=st.builds(RequestFc, st.sampled_from(RequestFunction), st.booleans(), st.booleans()),
+    dsap=st.one_of(st.none(), st.sampled_from([50, 51, 55, 56, 57, 58, 59, 60, 61, 62])),
+    ssap=st.one_of(st.none(), st.sampled_from([51, 62])),
+    data=st.binary(max_size=30),
+)
+
+
+@settings(max_examples=100, deadline=None)
+@given(script=st.lists(requests, max_size=40))
+def test_nothing_from_a_master_makes_the_simulated_slave_raise(script: list[DataTelegram]) -> None:
+    from adapters.profibus.sim.echo import EchoSim
+
+    slave = DpSlave(5, EchoSim())
+    for i, request in enumerate(script):
+        reply = slave.handle(request, i * 0.01)
+        if reply is not None:
+            reply.encode()
+        slave.tick(i * 0.01)

@@ -1,0 +1,155 @@
+"""The master engine wired to the simulated line in fake time (no I/O, no sleeping).
+
+Each Transmit reaches the simulated slaves when its last byte is on the line; their replies
+come back after ``turnaround`` plus their own transmission time, through the streaming
+decoder, as the link would deliver them.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import deque
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from adapters.profibus.fdl import (
+    DataTelegram,
+    Discarded,
+    NeedMore,
+    ShortAck,
+    TelegramDecoder,
+    TokenTelegram,
+)
+from adapters.profibus.master import (
+    Action,
+    LineNoise,
+    Master,
+    Received,
+    SlaveParams,
+    Transmit,
+)
+from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
+from adapters.profibus.sim.line import SimLine
+from adapters.profibus.sim.slave import DpSlave
+from adapters.profibus.timing import BusParams
+
+FAST_BUS = BusParams.for_baudrate(500000, latency=0.001, absent_retry=0.2, fault_retry=0.2)
+
+
+def echo_params(address: int, size: int = 4, **changes: Any) -> SlaveParams:
+    values: dict[str, Any] = {
+        "address": address,
+        "ident_number": ECHO_IDENT,
+        "cfg": echo_cfg(size),
+        "input_len": size,
+        "output_len": size,
+        "watchdog": 0.1,
+    }
+    values.update(changes)
+    return SlaveParams(**values)
+
+
+def echo_line(addresses: Iterable[int], size: int = 4) -> SimLine:
+    return SimLine(DpSlave(a, EchoSim(size)) for a in addresses)
+
+
+class Wire:
+    def __init__(
+        self, master: Master, line: SimLine, now: float = 0.0, turnaround: float = 50e-6
+    ) -> None:
+        self.master = master
+        self.line = line
+        self.bus = master.bus
+        self.now = now
+        self.turnaround = turnaround
+        self.decoder = TelegramDecoder()
+        self.actions: list[Action] = []
+        self.sent: list[tuple[float, bytes]] = []
+        self.received: list[tuple[float, bytes]] = []
+        self._arrivals: list[tuple[float, int, bytes]] = []
+        self._seq = 0
+        self._queue: deque[Action] = deque()
+        self.drop_replies = 0  # lose the next n replies
+        self.late_by = 0.0  # extra delay of every reply
+        self.on_action: Callable[[Action], None] | None = None  # the caller, as a driver's
+
+    # ------------------------------------------------------------------ driving
+
+    def poke(self) -> None:
+        """Step the master now (after a command)."""
+        self._queue.extend(self.master.step(self.now))
+        self._drain()
+
+    def run(self, duration: float) -> None:
+        self.run_until(lambda: False, duration)
+
+    def run_until(self, cond: Callable[[], bool], timeout: float = 5.0) -> bool:
+        end = self.now + timeout
+        self._queue.extend(self.master.step(self.now))
+        while True:
+            self._drain()
+            if cond():
+                return True
+            deadline = self.master.next_deadline()
+            times = [t for t in (deadline,) if t is not None]
+            if self._arrivals:
+                times.append(self._arrivals[0][0])
+            if not times or min(times) > end:
+                self.now = max(self.now, end)
+                self.line.tick(self.now)
+                return cond()
+            self.now = max(self.now, min(times))
+            if self._arrivals and self._arrivals[0][0] <= self.now:
+                _, _, data = heapq.heappop(self._arrivals)
+                self.received.append((self.now, data))
+                self.decoder.feed(data)
+                for event in self._events():
+                    self._queue.extend(self.master.step(self.now, event))
+            else:
+                self.line.tick(self.now)
+                self._queue.extend(self.master.step(self.now))
+
+    def _events(self) -> list[Received | LineNoise]:
+        out: list[Received | LineNoise] = []
+        while True:
+            ev = self.decoder.next_frame()
+            if isinstance(ev, NeedMore):
+                break
+            if isinstance(ev, Discarded):
+                out.append(LineNoise(ev.error))
+            elif isinstance(ev, DataTelegram | ShortAck | TokenTelegram):
+                out.append(Received(ev))
+        self.decoder.mark_idle()  # a reply arrives whole, as on a quiet line
+        tail = self.decoder.next_frame()
+        if isinstance(tail, Discarded):
+            out.append(LineNoise(tail.error))
+        return out
+
+    def _drain(self) -> None:
+        while self._queue:
+            action = self._queue.popleft()
+            if not isinstance(action, Transmit):
+                self.actions.append(action)
+                if self.on_action is not None:
+                    self.on_action(action)
+                continue
+            self.now = max(self.now, action.not_before)
+            self.sent.append((self.now, action.data))
+            end = self.now + self.bus.tx_time(len(action.data))
+            for out in self.line.receive(action.data, end):
+                if self.drop_replies:
+                    self.drop_replies -= 1
+                    continue
+                arrive = out.at + self.turnaround + self.late_by + self.bus.tx_time(len(out.data))
+                self._seq += 1
+                heapq.heappush(self._arrivals, (arrive, self._seq, out.data))
+
+    # ------------------------------------------------------------------ looking
+
+    def of(self, kind: type) -> list[Any]:
+        return [a for a in self.actions if isinstance(a, kind)]
+
+    def clear(self) -> None:
+        self.actions.clear()
+        self.sent.clear()
+        self.received.clear()
