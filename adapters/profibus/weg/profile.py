@@ -46,6 +46,18 @@ class DriveProgrammingMismatch(GatewayError):
     """The drive's programming (P0741, P0922/P751, P0742..) differs from the drive's config."""
 
 
+class StartupParamRefused(ParameterError):
+    """The drive refused a ``startup_params`` write: it stays "not configured".
+
+    Reads as the reason an operator sees: "startup P0313 = 9: parameter value out of the
+    limits (error 0x0002)".
+    """
+
+    def __str__(self) -> str:
+        code = "" if self.code is None else f" (error 0x{self.code:04X})"
+        return f"{self.text}{code}"
+
+
 @dataclass(frozen=True)
 class SpeedBase:
     """What the speed word's full scale means: ``rpm`` at ``full_scale`` (8192 or 4000h)."""
@@ -166,7 +178,10 @@ class WegProfile:
                 f"({self.spec.pname(684)} bit 6 is reserved, Table 4.3)"
             )
         scale = None if self.base is None else self.base.scale()
-        return Capabilities(speed_scale=scale, unsupported=unsupported)
+        # alarm texts of the model's manual (CFW-11 section 5, CFW700 6, CFW320 7)
+        return Capabilities(
+            speed_scale=scale, unsupported=unsupported, alarm_texts=self.spec.alarms
+        )
 
     # ------------------------------------------------------------------ connect
 
@@ -190,7 +205,7 @@ class WegProfile:
                 event(f"startup {name} = {value} written", "parameter", number=number, value=value)
             back = await self.params.read(channel, number)
         except ParameterError as exc:
-            raise ParameterError(f"startup {name} = {value}: {exc.text}", exc.code) from exc
+            raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
         if back != raw:
             raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
 
@@ -554,9 +569,13 @@ class WegProfile:
         else:
             self._polled_fault = None
             changes.update(fault_code=None, fault_text=None)
-        alarm = m.alarm if m.alarm is not None else self._polled_alarm
+        if m.alarm is not None:
+            alarm: int | None = m.alarm  # P0048 in a telegram word
+        elif self._alarm:
+            alarm = self._polled_alarm  # read by DP-V1 while the alarm bit stays set
+        else:
+            alarm = self._polled_alarm = None  # the bit dropped: that alarm is gone
         if not self._alarm and not alarm:
-            self._polled_alarm = None
             changes["alarm_code"] = None
         else:
             changes["alarm_code"] = alarm or None

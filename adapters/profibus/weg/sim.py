@@ -599,6 +599,15 @@ class WegSim:
         limit = float(self.values[134])
         return max(-limit, min(limit, rpm))
 
+    def _general_enabled(self, remote: bool) -> bool:
+        """General enable in force and nothing keeping the drive off (P0680 bit 9: "active
+        and the inverter is ready to run the motor"): P0684 bit 1 where the network gives
+        the run/stop commands (the HMI's enable otherwise), no fault, undervoltage or
+        configuration mode."""
+        network = self._sources(remote)[0] == sp.SRC_RUN_NET
+        enable = self.net.general_enable if network else True
+        return enable and not (self.fault or self.undervoltage or self.config_mode)
+
     def _drive_motor(self) -> None:
         """Commands in force -> motor: fault, disable, quick stop, JOG, run, stop."""
         m = self.motor
@@ -609,10 +618,9 @@ class WegSim:
         remote = self._remote()
         run_src, _, _, jog_src = self._sources(remote)
         network = run_src == sp.SRC_RUN_NET
-        enable = self.net.general_enable if network else True
         quick = network and self.net.quick_stop and self.spec.quick_stop
         jog = jog_src == sp.SRC_JOG_NET and self.net.jog
-        if self.fault or self.undervoltage or self.config_mode or not enable:
+        if not self._general_enabled(remote):
             m.coast()
         elif quick:
             if m.speed != 0.0:
@@ -687,7 +695,7 @@ class WegSim:
             config_mode=self.config_mode,
             alarm=self.alarm != 0,
             running=self.running,
-            general_enable=self.motor.enabled and not self.fault,
+            general_enable=self._general_enabled(self._remote()),
             forward=self.forward,
             jog=self.net.jog and self.motor.enabled,
             remote=self._remote(),

@@ -219,18 +219,36 @@ async def test_comm_lost_per_p0313(
         assert s["status"] is not DriveStatus.FAULTED
 
 
-@pytest.mark.parametrize(("action", "alarm", "fault"), [(1, 138, 0), (5, 0, 238)])
-async def test_clear_mode_per_p0313(action: int, alarm: int, fault: int) -> None:
-    loop = Loop(Device.CFW700, WegOptions(words=4, words_in=(48, 49)), params={313: action})
+@pytest.mark.parametrize(
+    ("action", "after"),  # after 5 s: speed, P0680 bit 9 (general enable), alarm, fault
+    [
+        (0, (900.0, True, 138, 0)),  # inactive: the last command stays in force
+        (1, (0.0, True, 138, 0)),  # ramp stop
+        (2, (0.0, False, 138, 0)),  # general disable: coasted to a stop (225 rpm/s)
+        (3, (0.0, True, 138, 0)),  # go to local: the HMI has no run command
+        (4, (900.0, True, 138, 0)),  # local keeping the network's run and reference
+        (5, (0.0, False, 0, 238)),  # fault F238: coasted to a stop
+    ],
+)
+@pytest.mark.parametrize("device", [Device.CFW700, Device.CFW320])
+async def test_clear_mode_per_p0313(
+    device: Device, action: int, after: tuple[float, bool, int, int]
+) -> None:
+    """P0313 after Global_Control Clear: A138 with the action, or F238 (Table 4.1)."""
+    speed_after, enabled, alarm, fault = after
+    loop = Loop(device, WegOptions(words=4, words_in=(48, 49)), params={313: action})
     await loop.connect()
     loop.command(run=True, speed_rpm=900.0)
     loop.until(lambda s: s["at_reference"], 3.0)
     loop.sim.clear_mode(loop.now)  # Global_Control Clear
     assert loop.sim.param(740) == 5
-    s = loop.step(100)  # outputs are ignored in clear mode; ramp stop or coast (F238)
+    s = loop.step(100)  # 5 s; the outputs are ignored in clear mode
     assert (s["alarm_code"] or 0, s["fault_code"] or 0) == (alarm, fault)
-    assert s["speed_rpm"] == 0.0
+    assert loop.sim.motor.speed == speed_after
+    assert bool(loop.sim.status_word() & 0x0200) is enabled
+    assert s["speed_rpm"] == speed_after
     loop.sim.clear_mode(loop.now, active=False)  # Operate: the A138 alarm goes
     s = loop.step()
     assert loop.sim.param(740) == 6
     assert s["alarm_code"] is None
+    assert s["status"] is (DriveStatus.FAULTED if fault else s["status"])

@@ -125,6 +125,8 @@ async def test_startup_refusal_raises_from_on_connect() -> None:
         await loop.connect()
     assert err.value.text == "startup P313 = 9: parameter value out of the limits"
     assert err.value.code == 2
+    # the adapter's "not configured" reason
+    assert str(err.value) == "startup P313 = 9: parameter value out of the limits (error 0x0002)"
 
 
 async def test_startup_cfg_refused_while_running() -> None:

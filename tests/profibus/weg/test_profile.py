@@ -142,12 +142,18 @@ def test_capabilities() -> None:
     assert caps.speed_scale.base_rpm == 1800.0
     assert caps.speed_scale.max_pct == pytest.approx(400.0, abs=0.02)
     assert caps.speed_scale.label == "8192 = 1800 rpm synchronous (configured)"
-    cfw320 = profile(Device.CFW320).capabilities()
-    assert "no quick stop" in cfw320.unsupported["quick_stop"]
+    cfw320_caps = profile(Device.CFW320).capabilities()
+    assert "no quick stop" in cfw320_caps.unsupported["quick_stop"]
     pdrive = profile(Device.CFW700, WegOptions(data_profile=DataProfile.PROFIDRIVE, max_rpm=1500))
     scale = pdrive.capabilities().speed_scale
     assert scale is not None
     assert (scale.base_rpm, scale.max_pct) == (1500.0, 100.0)
+    # alarm texts for the hub's events: each model's own manual
+    assert caps.alarm_texts[140] == "Profibus DP module access error"
+    assert cfw320_caps.alarm_texts == {
+        138: "Profibus DP interface in clear mode",
+        139: "Offline Profibus DP interface",
+    }
 
 
 # ----------------------------------------------------------------- outputs
@@ -350,3 +356,20 @@ async def test_fault_code_read_through_dpv1_when_no_word_carries_it() -> None:
     assert not loop.profile.wants_codes
     assert loop.step()["fault_code"] == 71  # kept while the fault lasts
     assert loop.profile.alarm_text(139) == "Profibus DP interface offline"
+
+
+async def test_an_alarm_read_through_dpv1_goes_with_the_status_bit() -> None:
+    loop = Loop(Device.CFW320)  # 2 words: P048 only through DP-V1
+    await loop.connect()
+    loop.step()  # online (the first exchange would clear an A139)
+    loop.sim.inject_alarm(139)
+    assert loop.step()["alarm"] is True
+    assert await loop.profile.read_codes(loop.channel) == {"alarm_code": 139}
+    assert loop.step()["alarm_code"] == 139  # kept while bit 7 stays set
+    loop.sim.clear_alarm()
+    s = loop.step()  # P680 bit 7 dropped: no alarm, and no stale code
+    assert (s["alarm"], s["alarm_code"]) == (False, None)
+    assert not loop.profile.wants_codes
+    loop.sim.inject_alarm(138)  # the next alarm is read again
+    loop.step()
+    assert loop.profile.wants_codes

@@ -177,6 +177,13 @@ def test_local_remote_and_sources() -> None:
 
 def test_general_enable_and_jog() -> None:
     sim = Cfw700Sim(params=NET)
+    # P0680 bit 9: "General Enable is active and the inverter is ready to run the motor",
+    # also at standstill with bit 1 set (run/stop 0)
+    assert exchange(sim, 0.05, 0x0016, 0)[0] & 0x0200
+    assert not exchange(sim, 0.1, 0x0014, 0)[0] & 0x0200  # bit 1 = 0
+    sim.undervoltage = True
+    assert not exchange(sim, 0.15, 0x0016, 0)[0] & 0x0200
+    sim = Cfw700Sim(params=NET)
     now = run_for(sim, 0.0, 3.0, RUN_FWD, 4096)
     status = exchange(sim, now, 0x0015, 4096)[0]  # general enable off: coast
     assert not sim.motor.enabled and not status & 0x0200
