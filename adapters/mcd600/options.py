@@ -12,6 +12,11 @@ Keys (all optional)::
     current_x10 = false     true for MCD6-0063B and smaller (currents in A come 10x, 4.2 note)
     ident_number = 0x0600   the card's PROFIBUS Ident_Number, from its GSD file
     group = 0               Global_Control group 1-8 for Sync/Freeze (0 = none)
+
+Simulator only (``simulate = true``; a real starter ignores them)::
+
+    sim_params = { 4 = 1, 9 = 1 }   the simulated starter's parameters (simparams.py)
+    sim_time_scale = 1.0    the simulated power section runs this many times faster
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
 from .layout import Mode
+from .simparams import PARAM_DEFS
 from .words import MotorSet
 
 if TYPE_CHECKING:
@@ -30,6 +36,7 @@ if TYPE_CHECKING:
 # is ours and the simulator uses it too. A site sets the real one with ``ident_number``.
 DEFAULT_IDENT_NUMBER: Final = 0x0600
 COMM_TIMEOUT_MAX: Final = 100  # guide 3.3: 0-100 s, default 10 s
+SIM_TIME_SCALE_MAX: Final = 1000.0
 
 MOTOR_SETS: Final[dict[str, MotorSet]] = {
     "remote_input": MotorSet.REMOTE_INPUT,
@@ -50,6 +57,8 @@ class Mcd600Options:
     current_x10: bool = False
     ident_number: int = DEFAULT_IDENT_NUMBER
     group: int = 0
+    sim_params: tuple[tuple[int, int], ...] = ()  # (number, value) for the simulator
+    sim_time_scale: float = 1.0
 
     @property
     def current_scale(self) -> float:
@@ -96,4 +105,23 @@ def parse_options(table: Table, drive: DriveConfig) -> Mcd600Options:
         current_x10=table.boolean("current_x10", d.current_x10),
         ident_number=table.integer("ident_number", d.ident_number, minimum=0, maximum=0xFFFF),
         group=table.integer("group", d.group, minimum=0, maximum=8),
+        sim_params=_sim_params(table),
+        sim_time_scale=table.number(
+            "sim_time_scale", d.sim_time_scale, minimum=0.01, maximum=SIM_TIME_SCALE_MAX
+        ),
     )
+
+
+def _sim_params(table: Table) -> tuple[tuple[int, int], ...]:
+    """``sim_params``: number = value pairs the simulated starter starts with, checked
+    against its parameter table (a number it does not have, a value out of its range)."""
+    sub = table.table("sim_params")
+    out: list[tuple[int, int]] = []
+    for key in map(str, sub.data):
+        number = int(key) if key.isdigit() else -1
+        p = PARAM_DEFS.get(number)
+        if p is None or not p.writable:
+            known = ", ".join(str(n) for n, q in PARAM_DEFS.items() if q.writable)
+            raise sub.error(key, f"is not a settable simulated parameter ({known})")
+        out.append((number, sub.integer(key, minimum=p.low, maximum=p.high)))
+    return tuple(sorted(out))

@@ -62,6 +62,10 @@ class Mcd600Profile:
     """:class:`adapters.profibus.profile.DpProfile` for the MCD 600 PROFIBUS card."""
 
     device: ClassVar[Device] = Device.MCD600
+    sees_every_diag: ClassVar[bool] = True
+    """Every diagnosis read comes here, even bytes equal to the last ones: after a reset the
+    card clears its telegram (5.1.1) without raising the alert, so the same trip again is
+    the same three bytes, and only this profile knows it is a new trip."""
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Mcd600Options:
@@ -87,8 +91,9 @@ class Mcd600Profile:
         self._run_armed = False  # start only after run was seen off (no restart, rule 1)
         self._start_sent = False
         self._reset_seen: int | None = None  # fault_reset_seq last acted on
-        self._reset_until: float | None = None
-        self._reset_sent = False
+        self._reset_until: float | None = None  # the pulse in progress ends then
+        self._reset_pending = False  # a pulse to start
+        self._reset_high = False  # the reset bit of the last output telegram
         self._status: DriveStatus | None = None
         self._poller.reset()
 
@@ -139,19 +144,28 @@ class Mcd600Profile:
         )
 
     def _reset_bit(self, seq: int, now: float) -> bool:
-        """One reset pulse (byte 1 bit 3) per growth of ``fault_reset_seq``, never repeated."""
+        """One reset pulse (byte 1 bit 3) per growth of ``fault_reset_seq``, never repeated;
+        a reset asked while the bit is still set gets one low telegram first, so the starter
+        sees a new edge."""
+        self._reset_high = self._next_reset_bit(seq, now)
+        return self._reset_high
+
+    def _next_reset_bit(self, seq: int, now: float) -> bool:
         if self._reset_seen is None or seq < self._reset_seen:
             self._reset_seen = seq  # first sight or a counter restart: no pulse
         elif seq > self._reset_seen:
             self._reset_seen = seq
+            self._reset_until = None
+            self._reset_pending = True
+            if self._reset_high:
+                return False  # the gap before the new edge; the pulse starts next cycle
+        if self._reset_pending:  # the pulse starts: held for reset_pulse, at least one cycle
+            self._reset_pending = False
             self._reset_until = now + self.options.reset_pulse
-            self._reset_sent = False
-        if self._reset_until is None:
-            return False
-        if self._reset_sent and now >= self._reset_until:
+            return True
+        if self._reset_until is None or now >= self._reset_until:
             self._reset_until = None
             return False
-        self._reset_sent = True
         return True
 
     # ------------------------------------------------------------------ inputs
@@ -212,6 +226,8 @@ class Mcd600Profile:
             if self._tripped_seen:  # the trip was reset: its code is history
                 self._tripped_seen = False
                 self._trip_code = None
+                # 5.1.1: the reset sets the telegram's trip code to 0 in the card too
+                self._diag = ExtDiag(0, self._diag.changed_param)
             return {"fault_code": None, "fault_text": None}
         self._tripped_seen = True
         self._run_armed = False  # a trip needs a new run command afterwards
@@ -221,8 +237,8 @@ class Mcd600Profile:
     # ------------------------------------------------------------------ diagnosis
 
     def on_ext_diag(self, data: bytes) -> list[DiagEvent]:
-        """Events from the card's diagnosis telegram (guide 5.1)."""
-        diag = ExtDiag.decode(data)
+        """Events from the card's diagnosis telegram (guide 5.1); no bytes: nothing to report."""
+        diag = ExtDiag.decode(data) if data else ExtDiag()
         old, self._diag = self._diag, diag
         events: list[DiagEvent] = []
         if diag.trip_code != old.trip_code:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import ClassVar, Final, Protocol
+from typing import TYPE_CHECKING, ClassVar, Final, Protocol, Self
 
 from adapters.profibus.profile import RecordAccessError
 from gateway.sim import FaultInjector, MotorParams
@@ -38,7 +38,7 @@ from .monitoring import (
     StarterState,
     StarterStateWord,
 )
-from .options import DEFAULT_IDENT_NUMBER, parse_user_prm
+from .options import DEFAULT_IDENT_NUMBER, Mcd600Options, parse_user_prm
 from .programming import ParamReply, ParamRequest
 from .simparams import (
     COMMAND_SOURCE,
@@ -48,6 +48,7 @@ from .simparams import (
     LOCKED_ROTOR_TIME,
     MOTOR_FLC,
     NETWORK_COMMS,
+    PROFIBUS_ADDRESS,
     START_RAMP_TIME,
     STOP_MODE,
     STOP_TIME,
@@ -59,6 +60,9 @@ from .simparams import (
 from .starter import SoftStarter, StarterSettings
 from .trips import NETWORK_FORCED_TRIP
 from .words import ControlWord, MotorSet, StatusWord, current_to_raw
+
+if TYPE_CHECKING:
+    from gateway.config import DriveConfig
 
 log = logging.getLogger(__name__)
 
@@ -104,8 +108,12 @@ class Mcd600Sim:
         required_start_pct: float = 250.0,
         version: tuple[int, int] = (1, 4),
         seed: int = 0,
+        time_scale: float = 1.0,
     ) -> None:
+        if not time_scale > 0:
+            raise ValueError(f"time scale must be positive, got {time_scale!r}")
         self.mode = mode
+        self.time_scale = time_scale  # the power section runs this many times faster
         self.layout = LAYOUTS[mode]
         self.ident_number = ident_number
         self.current_x10 = current_x10
@@ -146,6 +154,24 @@ class Mcd600Sim:
         self.reset_edges = 0
         self.starts = 0
         self.motor_set_used: MotorSet | None = None
+
+    @classmethod
+    def for_drive(cls, drive: DriveConfig) -> Self:
+        """The simulated starter a configured drive describes (``simulate = true``): its
+        mode, Ident_Number, FLC, small-model current scale, PROFIBUS address (parameter
+        12-7), ``sim_params`` and ``sim_time_scale``."""
+        o = drive.options if isinstance(drive.options, Mcd600Options) else Mcd600Options()
+        params = {PROFIBUS_ADDRESS: drive.address} if 1 <= drive.address <= 125 else {}
+        params.update(o.sim_params)
+        flc = 100 if o.flc_a is None else min(2000, max(1, round(o.flc_a)))  # param 2 range
+        return cls(
+            o.mode,
+            flc_a=params.pop(MOTOR_FLC, flc),  # the motor model follows parameter 2
+            params=params,
+            ident_number=o.ident_number,
+            current_x10=o.current_x10,
+            time_scale=o.sim_time_scale,
+        )
 
     # ------------------------------------------------------------------ SimDevice
 
@@ -293,7 +319,7 @@ class Mcd600Sim:
         if code is not None and not self.starter.tripped:
             self.starter.trip(code)  # an injected condition trips again until reset
         self.starter.available = self.reset_input_closed
-        self.starter.advance(dt, self.settings())
+        self.starter.advance(dt * self.time_scale, self.settings())
 
     def _comm_deadline(self) -> float | None:
         if self._lost_at is None or self._comm_acted or self.comm_timeout == 0:

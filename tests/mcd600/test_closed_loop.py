@@ -128,8 +128,13 @@ def test_trip_while_stopped_and_the_diagnosis_telegram() -> None:
     loop.fault_reset()
     loop.step(6)
     assert loop.sim.ext_diag() == b""  # 5.1.1: reset clears the trip code
-    [cleared] = loop.profile.on_ext_diag(bytes.fromhex("03 00 00"))
-    assert cleared.kind == "info"
+    assert loop.state.fault_code is None
+    # the profile saw the reset in the status word: a cleared telegram is no news
+    assert loop.profile.on_ext_diag(bytes.fromhex("03 00 00")) == []
+    loop.sim.trip(90)  # the same trip again: the same bytes, a new trip
+    loop.step()
+    [again] = loop.diag()
+    assert again.text.startswith("trip 90: Internal fault 90")
 
 
 def test_extended_mode_round_robin_fills_fields_and_leaves_unread_ones_none() -> None:

@@ -44,6 +44,8 @@ def test_all_keys() -> None:
             "current_x10": True,
             "ident_number": 0x1234,
             "group": 3,
+            "sim_params": {"9": 3, "4": 2},
+            "sim_time_scale": 10,
         }
     )
     assert options.mode is Mode.PARAMETER
@@ -51,6 +53,7 @@ def test_all_keys() -> None:
     assert options.motor_set is MotorSet.SECONDARY
     assert options.current_scale == 0.1
     assert options.group_mask == 0b100
+    assert options.sim_params == ((4, 2), (9, 3)) and options.sim_time_scale == 10.0
 
 
 @pytest.mark.parametrize(
@@ -62,6 +65,13 @@ def test_all_keys() -> None:
         ({"flc_a": 0}, "flc_a", "below the minimum"),
         ({"motor_set": "third"}, "motor_set", "is not one of"),
         ({"group": 9}, "group", "above the maximum 8"),
+        ({"sim_params": 4}, "sim_params", "must be a table"),
+        ({"sim_params": {"99": 1}}, "sim_params.99", "not a settable simulated parameter"),
+        ({"sim_params": {"12": 1}}, "sim_params.12", "not a settable simulated parameter"),
+        ({"sim_params": {"start": 1}}, "sim_params.start", "not a settable simulated"),
+        ({"sim_params": {"4": 0}}, "sim_params.4", "0 is below the minimum 1"),
+        ({"sim_params": {"4": 1.5}}, "sim_params.4", "must be an integer"),
+        ({"sim_time_scale": 0}, "sim_time_scale", "below the minimum"),
     ],
 )
 def test_errors_name_the_key(data: dict[str, Any], key: str, reason: str) -> None:

@@ -93,6 +93,16 @@ def test_fault_reset_is_one_pulse_never_repeated() -> None:
     assert words[0].reset
 
 
+def test_a_reset_asked_during_the_pulse_is_a_new_edge() -> None:
+    profile = Mcd600Profile(drive_config(reset_pulse=0.2))
+    control(profile, DesiredCommand(), 0.0)
+    resets = [control(profile, DesiredCommand(fault_reset_seq=1), t).reset for t in (0.1, 0.15)]
+    seq2 = [control(profile, DesiredCommand(fault_reset_seq=2), t / 100) for t in range(20, 60, 5)]
+    resets += [w.reset for w in seq2]
+    # pulse 1, one low telegram, pulse 2 for its full 0.2 s, then low
+    assert resets == [True, True, False, True, True, True, True, False, False, False]
+
+
 def test_reset_pulse_of_zero_still_sends_one_cycle() -> None:
     profile = Mcd600Profile(drive_config(reset_pulse=0.0))
     control(profile, DesiredCommand(), 0.0)
@@ -178,6 +188,32 @@ def test_ext_diag_events() -> None:
     changes = profile.inputs(bytes.fromhex("40 04"), 1.0)
     assert changes["fault_code"] == 90
     assert changes["fault_text"].startswith("Internal fault 90")
+
+
+def test_the_same_trip_after_a_reset_is_a_new_trip() -> None:
+    """5.1.1: a reset zeroes the card's trip code, so the same three bytes read after it are
+    a new trip (the card raises no alert for the cleared telegram; the master may never read it)."""
+    profile = Mcd600Profile(drive_config())
+    assert Mcd600Profile.sees_every_diag  # the master hands it every read (adapter contract)
+    profile.inputs(bytes.fromhex("40 04"), 1.0)  # tripped
+    first = profile.on_ext_diag(bytes.fromhex("03 02 05"))
+    assert [e.kind for e in first] == ["trip", "parameter"]
+    assert profile.on_ext_diag(bytes.fromhex("03 02 05")) == []  # the same read again
+    profile.inputs(bytes.fromhex("40 01"), 1.1)  # reset seen in the status word
+    profile.inputs(bytes.fromhex("40 04"), 1.2)  # tripped again
+    [again] = profile.on_ext_diag(bytes.fromhex("03 02 05"))  # the parameter is not new
+    assert (again.kind, again.text) == ("trip", "trip 2: Motor overload")
+    assert profile.inputs(bytes.fromhex("40 04"), 1.3)["fault_code"] == 2
+
+
+def test_an_empty_diagnosis_clears_the_trip_code() -> None:
+    profile = Mcd600Profile(drive_config())
+    profile.on_ext_diag(bytes.fromhex("03 02 00"))
+    [cleared] = profile.on_ext_diag(b"")
+    assert (cleared.kind, cleared.data) == ("info", {"code": 0})
+    assert profile.on_ext_diag(b"") == []
+    [again] = profile.on_ext_diag(bytes.fromhex("03 02 00"))
+    assert again.kind == "trip"
 
 
 def test_tripped_without_a_code_yet_says_nothing_stale() -> None:

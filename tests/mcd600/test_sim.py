@@ -2,22 +2,30 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
 from adapters.mcd600.monitoring import DataRequest, StarterState
+from adapters.mcd600.options import Mcd600Options
 from adapters.mcd600.sim import Mcd600Sim
 from adapters.mcd600.simparams import (
     COMMAND_SOURCE,
     CURRENT_LIMIT,
     EXCESS_START_TIME,
+    MOTOR_FLC,
+    PROFIBUS_ADDRESS,
     START_RAMP_TIME,
+    STOP_TIME,
     CommandSource,
 )
 from adapters.mcd600.trips import EXCESS_START_TIME as EXCESS_START_TRIP
 from adapters.mcd600.words import ControlWord, MotorSet, StatusWord
 from adapters.profibus.profile import RecordAccessError
 from gateway.errors import FrameDecodeError
+
+from .loop import drive_config
 
 START = ControlWord(start=True).encode()
 STOP = ControlWord().encode()
@@ -155,3 +163,41 @@ def test_injected_trip_needs_a_reset_edge() -> None:
         sim.trip(0)
     with pytest.raises(ValueError):
         sim.keypad_change(250, 1)
+
+
+def test_time_scale_runs_the_power_section_faster() -> None:
+    """``sim_time_scale``: the 2 s start ramp takes 0.5 s at 4x; the card's clock is not scaled."""
+    sim = Mcd600Sim(params={START_RAMP_TIME: 2}, time_scale=4.0)
+    sim.set_prm(b"\x01")  # communication timeout 1 s
+    t = 0.0
+    status(sim, START, t)
+    while status(sim, START, t).ramping:
+        t += 0.01
+        assert t < 1.0
+    assert t == pytest.approx(0.5, abs=0.06)
+    assert sim.starter.state is StarterState.RUNNING
+    sim.comm_lost(t)
+    sim.tick(t + 0.9)  # 0.9 s of the 1 s comm timeout: not scaled, not expired
+    states = [sim.starter.state]
+    sim.tick(t + 1.05)  # expired: 6-13 soft trip and log, a soft stop first
+    states.append(sim.starter.state)
+    assert states == [StarterState.RUNNING, StarterState.STOPPING]
+    with pytest.raises(ValueError, match="positive"):
+        Mcd600Sim(time_scale=0.0)
+
+
+def test_for_drive_programs_the_simulator_from_the_drive_table() -> None:
+    options = Mcd600Options(mode=Mode.PARAMETER, flc_a=52.4, current_x10=True, sim_time_scale=3)
+    sim = Mcd600Sim.for_drive(replace(drive_config(), options=options))
+    assert (sim.mode, sim.params[MOTOR_FLC], sim.params[PROFIBUS_ADDRESS]) == (
+        Mode.PARAMETER,
+        52,  # flc_a, rounded: parameter 2 is whole amperes
+        5,  # the drive's address (12-7)
+    )
+    assert sim.current_x10 and sim.time_scale == 3
+    assert sim.starter.motor.params.rated_current == 52.0
+    options = Mcd600Options(flc_a=52.0, sim_params=((MOTOR_FLC, 80), (STOP_TIME, 2)))
+    sim = Mcd600Sim.for_drive(replace(drive_config(), options=options))
+    assert (sim.params[MOTOR_FLC], sim.params[STOP_TIME]) == (80, 2)  # sim_params win
+    assert sim.starter.motor.params.rated_current == 80.0
+    assert Mcd600Sim.for_drive(drive_config(flc_a=5000.0)).params[MOTOR_FLC] == 2000
