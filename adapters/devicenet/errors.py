@@ -117,3 +117,7 @@ class FragmentAckError(FragmentationError):
 
 class FragmentAckTimeout(GatewayTimeout):
     """No acknowledge for a sent fragment in time (sender side)."""
+
+
+class AssemblyDecodeError(DeviceNetDecodeError):
+    """I/O assembly data of the wrong length for its instance (CFW-08 seed 3, table 11)."""

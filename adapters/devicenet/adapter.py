@@ -1,0 +1,829 @@
+"""The DeviceNet adapter: python-can link + scanner engine + CFW-08 profile, as a DriveAdapter.
+
+Per drive, once the scanner has it online (allocated, identity and sizes checked, EPR
+set), the adapter configures it through explicit messages: P710 must select the
+configured assembly pair (seed 4.1.8), P313 is read (the drive's own reaction to a
+communication error, seed 4.1.3), the maximum speed is read if the config asks, and
+``startup_params`` are written and read back. Until that succeeds the scanner sends
+idle (zero-length) I/O and the drive stays ``connecting``: it never runs half-set.
+Then I/O carries the desired command and the readings make the drive ``online``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from adapters.devicenet.cfw08 import (
+    ASSEMBLY_SIZE,
+    P070_COMM_ERROR,
+    P070_TEXT,
+    P081_IDLE,
+    P081_TEXT,
+    P313_TEXT,
+    SPEED_REF_MAX_RPM,
+    AssemblyPair,
+    AttributePath,
+    ProfileSettings,
+    capabilities,
+    command_assembly,
+    decode_parameter,
+    encode_parameter,
+    fault_text,
+    parameter_path,
+    state_changes,
+    value_text,
+)
+from adapters.devicenet.cfw08_objects import (
+    P070,
+    P081,
+    P313,
+    P702,
+    P702_BAUD,
+    P710,
+    STANDARD_OBJECTS,
+    AttributeSpec,
+    Value,
+    decode_attribute,
+    encode_attribute,
+)
+from adapters.devicenet.cip import CipClass
+from adapters.devicenet.errors import DeviceNetDecodeError
+from adapters.devicenet.explicit import (
+    ErrorResponse,
+    GetAttributeSingle,
+    Request,
+    Response,
+    SetAttributeSingle,
+)
+from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.link import CanLink, LinkConfig, LinkEvent, RxBad, RxError, RxFrame
+from adapters.devicenet.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.devicenet.scanner import (
+    Action,
+    BadFrame,
+    BusErrorIn,
+    Event,
+    ExplicitResult,
+    FrameIn,
+    IdentityCheck,
+    InputData,
+    LineFault,
+    LineOnline,
+    NodeConfig,
+    NodeDown,
+    NodeUnavailable,
+    NodeUp,
+    Phase,
+    Report,
+    ReportKind,
+    Scanner,
+    ScannerConfig,
+    Send,
+    TxFailed,
+)
+from adapters.devicenet.sim import SimNodeConfig, SimRunner
+from gateway.adapter import EventKind, HubPort, ParamValue
+from gateway.config import BusConfig, DriveConfig
+from gateway.errors import (
+    AdapterError,
+    DriveOffline,
+    FrameEncodeError,
+    GatewayTimeout,
+    ParameterError,
+)
+from gateway.model import CommState, Device
+from gateway.schema import Table
+
+log = logging.getLogger(__name__)
+
+EXPLICIT_EPR = 2.5  # s, fact sheet 2.9: the usual explicit connection EPR
+LEAVE_BOUND = 1.0  # s: the longest wait for Release answers on shutdown
+LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
+SIM_START_BOUND = 2.0  # s
+SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
+SIM_DEFAULT_MAX_RPM = 1800.0
+IDLE = "idle"
+
+REPORT_EVENTS: dict[ReportKind, EventKind] = {
+    ReportKind.ALLOCATION: EventKind.COMM,
+    ReportKind.IDENTITY: EventKind.CONFIG,
+    ReportKind.SIZE: EventKind.CONFIG,
+    ReportKind.TIMEOUT: EventKind.COMM,
+    ReportKind.DUPLICATE_MAC: EventKind.BUS,
+    ReportKind.BUS: EventKind.BUS,
+    ReportKind.PROTOCOL: EventKind.COMM,
+}
+
+
+class NotConfigured(AdapterError):
+    """A drive's configuration at connect failed; the text says why."""
+
+
+@dataclass(slots=True)
+class _Drive:
+    cfg: DriveConfig
+    opts: DriveOptions
+    settings: ProfileSettings | None
+    configured: bool = False
+    setup: asyncio.Task[None] | None = None
+    status: asyncio.Task[None] | None = None
+    reset_seen: int = 0
+    reset_until: float = 0.0
+    reset_sent_at: float | None = None
+    p313: int | None = None
+    problem: str | None = None
+    io_values: dict[str, int] = field(default_factory=dict)
+    params: dict[str, int] = field(default_factory=dict)
+    bad_inputs: int = 0
+    output_key: object = None  # what the current output was computed from
+    input_key: object = None  # the last input data and desired command mapped
+
+    @property
+    def id(self) -> str:
+        return self.cfg.id
+
+    @property
+    def mac(self) -> int:
+        return self.cfg.address
+
+    @property
+    def values(self) -> dict[str, int]:
+        return {**self.io_values, **self.params}
+
+
+class DeviceNetAdapter:
+    """One DeviceNet line scanned by the gateway, with WEG CFW-08 drives."""
+
+    devices: ClassVar[frozenset[Device]] = frozenset({Device.CFW08})
+    address_range: ClassVar[tuple[int, int]] = (0, 63)
+
+    @classmethod
+    def parse_bus_options(cls, table: Table) -> BusOptions:
+        return parse_bus(table)
+
+    @classmethod
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+        return parse_drive(table, drive)
+
+    def __init__(self, bus: BusConfig, *, clock: Callable[[], float] = time.monotonic) -> None:
+        self.bus = bus
+        self.name = bus.name
+        self.options: BusOptions = bus.options
+        self.clock = clock
+        self.drives: dict[int, _Drive] = {}
+        self._by_id: dict[str, _Drive] = {}
+        for d in bus.drives:
+            if d.address == self.options.mac:
+                raise AdapterError(
+                    f"drive {d.id} has the scanner's MAC ID {d.address} (bus key 'mac')"
+                )
+            opts: DriveOptions = d.options
+            settings = None
+            if opts.max_rpm is not None:
+                settings = _settings(opts, opts.max_rpm)
+            drive = _Drive(d, opts, settings)
+            self.drives[d.address] = drive
+            self._by_id[d.id] = drive
+        self.engine: Scanner | None = None
+        self.link: CanLink | None = None
+        self.sim: SimRunner | None = None
+        self._hub: HubPort | None = None
+        self._outbox: list[CanFrame] = []
+        self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self._handlers: dict[type, Callable[[float, Any], None]] = {
+            LineOnline: self._on_line_online,
+            LineFault: self._on_line_fault,
+            NodeUp: self._on_node_up,
+            NodeDown: self._on_node_down,
+            InputData: self._on_input,
+            ExplicitResult: self._on_result,
+            Report: self._on_report,
+        }
+
+    # ------------------------------------------------------------ configuration
+
+    def scanner_config(self) -> ScannerConfig:
+        o = self.options
+        return ScannerConfig(
+            mac=o.mac,
+            vendor_id=0,
+            serial_number=SCANNER_SERIAL_BASE + o.mac,
+            poll_interval=o.poll_interval,
+            response_timeout=o.response_timeout,
+            explicit_timeout=o.explicit_timeout,
+            explicit_epr=EXPLICIT_EPR,
+            dupmac_timeout=o.dupmac_timeout,
+            allocate_timeout=o.explicit_timeout,
+            retry_min=min(0.5, o.retry_max),
+            retry_max=o.retry_max,
+        )
+
+    def node_configs(self) -> list[NodeConfig]:
+        out = []
+        for d in self.drives.values():
+            o = d.opts
+            identity = IdentityCheck()
+            if o.check_identity:
+                identity = IdentityCheck(o.vendor_id, o.product_code, o.product_name or None)
+            out.append(
+                NodeConfig(
+                    mac=d.mac,
+                    io=o.connection,
+                    ack=o.ack,
+                    produced_size=ASSEMBLY_SIZE,  # every CFW-08 assembly (seed 4.1.8, table 11)
+                    consumed_size=ASSEMBLY_SIZE,
+                    epr=self.options.expected_packet_rate,
+                    identity=identity,
+                )
+            )
+        return out
+
+    def sim_configs(self) -> list[SimNodeConfig]:
+        out = []
+        for d in self.drives.values():
+            o, s = d.opts, d.opts.sim
+            out.append(
+                SimNodeConfig(
+                    mac=d.mac,
+                    p710=s.p710 if s.p710 is not None else o.assembly.p710,
+                    p313=s.p313,
+                    max_rpm=s.max_rpm or o.max_rpm or SIM_DEFAULT_MAX_RPM,
+                    ramp_time=s.ramp_time,
+                    weg_speed_scale=o.weg_speed_scale,
+                    product_code=o.product_code if o.product_code is not None else 8,
+                    dupmac_timeout=self.options.dupmac_timeout,
+                )
+            )
+        return out
+
+    # ------------------------------------------------------------ run
+
+    async def run(self, hub: HubPort) -> None:
+        self._hub = hub
+        for d in self.drives.values():
+            hub.update(d.id, comm=CommState.OFFLINE)
+            if d.settings is not None:
+                hub.set_capabilities(d.id, capabilities(d.settings))
+        o = self.options
+        link = CanLink(LinkConfig(o.interface, o.channel, o.bitrate))
+        engine = Scanner(self.scanner_config(), self.node_configs())
+        sim_task: asyncio.Task[None] | None = None
+        async with link:
+            self.link, self.engine = link, engine
+            try:
+                if o.simulate:
+                    sim_task = await self._start_sim()
+                await self._loop(link, engine)
+            finally:
+                await self._leave(link, engine)
+                await self._stop_tasks(sim_task)
+                for d in self.drives.values():
+                    hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
+                self.link = self.engine = None
+
+    async def _start_sim(self) -> asyncio.Task[None]:
+        runner = SimRunner(LinkConfig("virtual", self.options.channel), self.sim_configs())
+        self.sim = runner
+        task = asyncio.create_task(runner.run(), name=f"devicenet-sim-{self.name}")
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(SIM_START_BOUND):
+                await runner.started.wait()
+        if task.done():
+            task.result()  # raises what broke the simulator
+        return task
+
+    async def _stop_tasks(self, sim_task: asyncio.Task[None] | None) -> None:
+        tasks = [t for d in self.drives.values() for t in (d.setup, d.status) if t is not None]
+        if sim_task is not None:
+            tasks.append(sim_task)
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        for fut in self._pending.values():
+            fut.cancel()
+        self._pending.clear()
+
+    async def _loop(self, link: CanLink, engine: Scanner) -> None:
+        poll = self.options.poll_interval
+        next_refresh = 0.0
+        while True:
+            now = self.clock()
+            if now >= next_refresh:  # desired commands reach the outputs once per poll
+                self._refresh_outputs(now)
+                next_refresh = now + poll
+            deadline = engine.next_deadline()
+            if deadline is None or now >= deadline:
+                self._act(now, engine.step(now))
+            self._flush(now)
+            deadline = engine.next_deadline()
+            wake = next_refresh if deadline is None else min(deadline, next_refresh)
+            events = await link.receive(max(wake - self.clock(), 0.0))
+            now = self.clock()
+            for event in events:
+                self._act(now, engine.step(now, _event(event)))
+            self._flush(now)
+
+    async def _leave(self, link: CanLink, engine: Scanner) -> None:
+        """Release every node (fact sheet 2.10 step 8), bounded."""
+        if not link.is_open or not engine.online:
+            return
+        now = self.clock()
+        self._outbox.clear()
+        self._act_quietly(now, engine.leave(now))
+        self._flush(now)
+        bound = now + LEAVE_BOUND
+        while not engine.left and self.clock() < bound:
+            deadline = engine.next_deadline()
+            wait = LEAVE_WAIT if deadline is None else deadline - self.clock()
+            events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
+            now = self.clock()
+            for event in events:
+                self._act_quietly(now, engine.step(now, _event(event)))
+            self._act_quietly(now, engine.step(now))
+            self._flush(now)
+
+    def _act_quietly(self, now: float, actions: list[Action]) -> None:
+        with contextlib.suppress(AdapterError):
+            self._act(now, actions)
+
+    # ------------------------------------------------------------ actions
+
+    def _act(self, now: float, actions: list[Action]) -> None:
+        for action in actions:
+            if isinstance(action, Send):
+                self._outbox.append(action.frame)
+            else:
+                self._handlers[type(action)](now, action)
+
+    def _flush(self, now: float) -> None:
+        """Send what the engine asked for; a failure goes back to it (it backs off)."""
+        frames, self._outbox = self._outbox, []
+        if not frames or self.link is None or self.engine is None:
+            return
+        result = self.link.send(frames)
+        if result.error is not None:
+            self._act(now, self.engine.step(now, TxFailed(result.error, result.dropped)))
+
+    def _hub_port(self) -> HubPort:
+        if self._hub is None:
+            raise AdapterError("the adapter is not running")
+        return self._hub
+
+    def _on_line_online(self, now: float, action: LineOnline) -> None:
+        log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
+        for d in self.drives.values():
+            self._hub_port().update(d.id, comm=CommState.CONNECTING)
+
+    def _on_line_fault(self, now: float, action: LineFault) -> None:
+        hub = self._hub_port()
+        for d in self.drives.values():
+            hub.event(d.id, EventKind.BUS, action.text)
+        raise AdapterError(action.text)
+
+    def _on_node_up(self, now: float, action: NodeUp) -> None:
+        d = self.drives[action.mac]
+        self._hub_port().update(d.id, comm=CommState.CONNECTING)
+        if d.setup is not None:
+            d.setup.cancel()
+        d.setup = asyncio.get_running_loop().create_task(
+            self._configure(d), name=f"devicenet-setup-{d.id}"
+        )
+
+    def _on_node_down(self, now: float, action: NodeDown) -> None:
+        d = self.drives[action.mac]
+        for task in (d.setup, d.status):
+            if task is not None:
+                task.cancel()
+        d.setup = d.status = None
+        d.configured = False
+        d.input_key = d.output_key = None
+        text = f"drive offline: {action.reason}"
+        if d.reset_sent_at is not None and now - d.reset_sent_at < 10.0:
+            text += " after a fault reset (the drive goes offline during a reset, seed 3.4)"
+            d.reset_sent_at = None
+        elif d.p313 is not None:
+            text += (
+                f"; on its I/O timeout (E37) the drive applies P313 = "
+                f"{value_text(P313_TEXT, d.p313)}"
+            )
+        hub = self._hub_port()
+        hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
+        hub.event(d.id, EventKind.COMM, text, mac=d.mac)
+
+    def _on_input(self, now: float, action: InputData) -> None:
+        d = self.drives[action.mac]
+        if not d.configured or d.settings is None:
+            return
+        hub = self._hub_port()
+        desired = hub.desired(d.id)
+        key = (action.data, desired)
+        if key == d.input_key:
+            return  # the same reading for the same command: nothing new to publish
+        d.input_key = key
+        try:
+            changes = state_changes(d.settings, action.data, desired)
+        except DeviceNetDecodeError:
+            d.bad_inputs += 1
+            return
+        d.io_values = dict(changes.pop("values"))
+        hub.update(d.id, comm=CommState.ONLINE, values=d.values, **changes)
+
+    def _on_result(self, now: float, action: ExplicitResult) -> None:
+        fut = self._pending.pop(action.token, None)
+        if fut is not None and not fut.done():
+            fut.set_result(action)
+
+    def _on_report(self, now: float, action: Report) -> None:
+        kind = REPORT_EVENTS[action.kind]
+        hub = self._hub_port()
+        targets = [self.drives[action.mac]] if action.mac in self.drives else self.drives.values()
+        for d in targets:
+            hub.event(d.id, kind, action.text, **action.data)
+
+    # ------------------------------------------------------------ outputs
+
+    def _refresh_outputs(self, now: float) -> None:
+        engine, hub = self.engine, self._hub
+        if engine is None or hub is None:
+            return
+        for d in self.drives.values():
+            if engine.nodes[d.mac].phase is not Phase.ONLINE:
+                continue
+            if not d.configured or d.settings is None:
+                if d.output_key != IDLE:
+                    engine.set_output(d.mac, None)  # idle: the master is not driving it
+                    d.output_key = IDLE
+                continue
+            desired = hub.desired(d.id)
+            if desired.fault_reset_seq != d.reset_seen:
+                d.reset_seen = desired.fault_reset_seq
+                d.reset_until = now + self._reset_pulse()
+                d.reset_sent_at = now
+                hub.event(
+                    d.id,
+                    EventKind.FAULT,
+                    "fault reset sent (the drive goes offline during a reset, seed 3.4)",
+                )
+            key = (desired, now < d.reset_until, d.settings)
+            if key != d.output_key:
+                d.output_key = key
+                engine.set_output(d.mac, command_assembly(d.settings, desired, key[1]).encode())
+
+    def _reset_pulse(self) -> float:
+        """Long enough for at least one production with the bit set (edge, seed 3.1.2)."""
+        return max(2 * self.options.poll_interval, 1.5 * self.options.expected_packet_rate)
+
+    # ------------------------------------------------------------ configure at connect
+
+    async def _configure(self, d: _Drive) -> None:
+        pause = min(1.0, self.options.retry_max)
+        while True:
+            try:
+                await self._try_configure(d)
+                return
+            except NotConfigured as exc:
+                problem = str(exc)
+            except (GatewayTimeout, DriveOffline) as exc:
+                problem = f"no answer while configuring: {exc}"
+            if problem != d.problem:
+                self._hub_port().event(
+                    d.id,
+                    EventKind.CONFIG,
+                    f"not configured: {problem}; the drive gets no commands (idle I/O)",
+                )
+            d.problem = problem
+            await asyncio.sleep(pause)
+            pause = min(2 * pause, self.options.retry_max)
+
+    async def _try_configure(self, d: _Drive) -> None:
+        p710 = await self._checked_read(d, P710)
+        pair = AssemblyPair.from_p710(p710)
+        if pair is not d.opts.assembly:
+            shown = pair.label if pair is not None else "none"
+            raise NotConfigured(
+                f"P710 = {p710} selects assembly {shown}, the config says {d.opts.assembly.label}"
+            )
+        d.p313 = await self._checked_read(d, P313)
+        d.params["P313"] = d.p313
+        if d.opts.max_rpm_param is not None:
+            await self._read_max_rpm(d, d.opts.max_rpm_param)
+        for number, value in d.opts.startup_params:
+            try:
+                await self.write_param(d.id, number, 0, value)
+            except ParameterError as exc:
+                raise NotConfigured(
+                    f"startup parameter P{number} = {value} refused: {exc.text}"
+                ) from None
+            back = await self._checked_read(d, number)
+            if back != value & 0xFFFF:
+                raise NotConfigured(
+                    f"startup parameter P{number} reads back {back} after writing {value}"
+                )
+        await self._check_baud_rate(d)
+        await self._read_status(d, (P070,))  # P081 is idle until I/O starts: read later
+        hub = self._hub_port()
+        d.reset_seen = hub.desired(d.id).fault_reset_seq
+        d.configured, d.problem = True, None
+        d.input_key = d.output_key = None
+        hub.event(
+            d.id,
+            EventKind.CONFIG,
+            f"configured: assembly {d.opts.assembly.label}, "
+            f"{d.opts.connection.value} I/O; P313 = {value_text(P313_TEXT, d.p313)}",
+        )
+        d.status = asyncio.get_running_loop().create_task(
+            self._watch_status(d), name=f"devicenet-status-{d.id}"
+        )
+
+    async def _check_baud_rate(self, d: _Drive) -> None:
+        """P702 against the line's expected rate (seed 4.1.6; effective after a reset).
+
+        The drive talks now, so the rates match today; a P702 fixed to another rate
+        means it will not come back after its next reset. Reported, not refused.
+        """
+        p702 = await self._checked_read(d, P702)
+        d.params["P702"] = p702
+        rate = P702_BAUD.get(p702)
+        expected = self.options.bitrate
+        if rate is not None and rate != expected:
+            self._hub_port().event(
+                d.id,
+                EventKind.CONFIG,
+                f"P702 = {p702} sets {rate // 1000} kbit/s, the line is configured for "
+                f"{expected // 1000} kbit/s (bus key 'bitrate'): the drive will not "
+                "communicate after its next reset",
+                P702=p702,
+            )
+
+    async def _checked_read(self, d: _Drive, number: int) -> int:
+        try:
+            value = await self.read_param(d.id, number, 0)
+        except ParameterError as exc:
+            raise NotConfigured(f"reading P{number} refused: {exc.text}") from None
+        return int(value)
+
+    async def _read_max_rpm(self, d: _Drive, number: int) -> None:
+        rpm = await self._checked_read(d, number)
+        if not 1 <= rpm <= SPEED_REF_MAX_RPM:
+            raise NotConfigured(f"P{number} = {rpm} is not a usable maximum speed (rpm)")
+        d.settings = _settings(d.opts, float(rpm))
+        self._hub_port().set_capabilities(d.id, capabilities(d.settings))
+
+    async def _read_status(self, d: _Drive, numbers: tuple[int, ...] = (P070, P081)) -> None:
+        """P070 and P081 (seed 4.1.1, 4.1.2) into the values, with an event on change."""
+        hub = self._hub_port()
+        for number in numbers:
+            name = f"P{number:03d}"
+            value = int(await self.read_param(d.id, number, 0))
+            old = d.params.get(name)
+            d.params[name] = value
+            if old is not None and old != value:
+                hub.event(d.id, EventKind.BUS, _status_text(number, value), **{name: value})
+        hub.update(d.id, values=d.values)
+
+    async def _watch_status(self, d: _Drive) -> None:
+        while True:
+            await asyncio.sleep(self.options.status_interval)
+            with contextlib.suppress(GatewayTimeout, DriveOffline, ParameterError):
+                await self._read_status(d)
+
+    # ------------------------------------------------------------ parameters
+
+    def _drive(self, drive_id: str) -> _Drive:
+        d = self._by_id.get(drive_id)
+        if d is None:
+            raise DriveOffline(f"drive {drive_id} is not on bus {self.name}")
+        return d
+
+    async def _request(self, d: _Drive, body: Request) -> Response:
+        engine, link = self.engine, self.link
+        if engine is None or link is None:
+            raise DriveOffline(f"drive {d.id}: bus {self.name} is not running")
+        try:
+            token = engine.submit(d.mac, body)
+        except NodeUnavailable as exc:
+            raise DriveOffline(f"drive {d.id} is not online ({exc})") from None
+        fut: asyncio.Future[ExplicitResult] = asyncio.get_running_loop().create_future()
+        self._pending[token] = fut
+        link.wake()
+        bound = 4 * self.options.explicit_timeout + 1.0
+        try:
+            async with asyncio.timeout(bound):  # not wait_for: it can swallow a cancellation
+                result = await fut
+        except TimeoutError:
+            raise GatewayTimeout(f"drive {d.id}: no answer within {bound:g} s") from None
+        finally:
+            self._pending.pop(token, None)
+        if result.response is not None:
+            return result.response
+        if result.timed_out:
+            raise GatewayTimeout(f"drive {d.id}: {result.error}")
+        raise DriveOffline(f"drive {d.id}: {result.error}")
+
+    async def explicit(self, drive_id: str, body: Request) -> Response:
+        """Any explicit request to a drive (tools, tests); the reply as it came."""
+        return await self._request(self._drive(drive_id), body)
+
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
+        d = self._drive(drive_id)
+        path = _path(number, subindex)
+        response = await self._request(
+            d, GetAttributeSingle(path.class_id, path.instance_id, path.attribute_id)
+        )
+        data = _success(response)
+        try:
+            return decode_parameter(data)
+        except DeviceNetDecodeError as exc:
+            raise ParameterError(f"bad reply: {exc.message}") from None
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: ParamValue
+    ) -> None:
+        d = self._drive(drive_id)
+        path = _path(number, subindex)
+        if isinstance(value, float):
+            if not value.is_integer():
+                raise ParameterError(f"P{number}: CFW-08 parameters are integers, not {value}")
+            value = int(value)
+        try:
+            data = encode_parameter(value)
+        except FrameEncodeError:
+            raise ParameterError(f"P{number}: {value} does not fit a 16-bit parameter") from None
+        body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
+        _success(await self._request(d, body))
+
+    # ------------------------------------------------------------ standard objects
+
+    async def read_object(
+        self, drive_id: str, class_id: int, instance_id: int, attribute_id: int
+    ) -> Value:
+        """Get_Attribute_Single on a standard object of seed tables 8-18, decoded with the
+        table's type; an attribute the table marks Set only is refused here."""
+        d = self._drive(drive_id)
+        spec = _object_attribute(class_id, instance_id, attribute_id)
+        if not spec.gettable:
+            raise ParameterError(_rights_text(class_id, spec, "Set"))
+        response = await self._request(d, GetAttributeSingle(class_id, instance_id, attribute_id))
+        try:
+            return decode_attribute(spec.kind, _success(response))
+        except DeviceNetDecodeError as exc:
+            raise ParameterError(f"bad reply: {exc.message}") from None
+
+    async def write_object(
+        self, drive_id: str, class_id: int, instance_id: int, attribute_id: int, value: Value
+    ) -> None:
+        """Set_Attribute_Single on a standard object of seed tables 8-18, encoded with the
+        table's type; Get-only attributes are refused here, and so are the command
+        attributes (run, direction, reference, network control, fault reset, assembly
+        data): the drive takes its commands from the hub, never as a write (rule 1).
+        The drive checks the value and answers with its CIP status."""
+        d = self._drive(drive_id)
+        spec = _object_attribute(class_id, instance_id, attribute_id)
+        if not spec.settable:
+            raise ParameterError(_rights_text(class_id, spec, "Get"))
+        if (class_id, attribute_id) in COMMAND_ATTRIBUTES or class_id == CipClass.ASSEMBLY:
+            raise ParameterError(
+                f"{_object_name(class_id)} attribute {attribute_id} ({spec.name}) commands "
+                "the drive: use the command service"
+            )
+        try:
+            data = encode_attribute(spec.kind, value)
+        except FrameEncodeError as exc:
+            raise ParameterError(f"{spec.name}: {exc}") from None
+        body = SetAttributeSingle(class_id, instance_id, attribute_id, data)
+        _success(await self._request(d, body))
+
+    # ------------------------------------------------------------ diagnostics
+
+    def diagnostics(self) -> dict[str, Any]:
+        o = self.options
+        line: dict[str, Any] = {
+            "interface": o.interface,
+            "channel": o.channel,
+            "bitrate_expected": o.bitrate,
+            "mac": o.mac,
+            "simulated": o.simulate,
+            "running": self.engine is not None,
+        }
+        engine, link = self.engine, self.link
+        if engine is not None:
+            line.update(engine.line_diagnostics())
+        if link is not None:
+            line.update(link.diagnostics())
+        drives: dict[str, Any] = {}
+        for d in self.drives.values():
+            entry: dict[str, Any] = {
+                "mac": d.mac,
+                "assembly": d.opts.assembly.label,
+                "connection": d.opts.connection.value,
+                "configured": d.configured,
+                "problem": d.problem,
+                "p313": None if d.p313 is None else value_text(P313_TEXT, d.p313),
+                "bad_inputs": d.bad_inputs,
+                **d.params,
+            }
+            if engine is not None:
+                entry.update(engine.node_diagnostics(d.mac))
+            drives[d.id] = entry
+        line["drives"] = drives
+        return line
+
+
+# ---------------------------------------------------------------- helpers
+
+
+def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
+    return ProfileSettings(
+        pair=opts.assembly,
+        max_rpm=max_rpm,
+        weg_speed_scale=opts.weg_speed_scale,
+        at_reference_rpm=opts.at_reference_rpm,
+    )
+
+
+def _event(event: LinkEvent) -> Event:
+    if isinstance(event, RxFrame):
+        return FrameIn(event.frame)
+    if isinstance(event, RxError):
+        return BusErrorIn(event.conditions)
+    if isinstance(event, RxBad):
+        return BadFrame(event.reason)
+    raise TypeError(event)
+
+
+def _path(number: int, subindex: int) -> AttributePath:
+    if subindex:
+        raise ParameterError("the CFW-08 has no parameter subindexes (use subindex 0)")
+    try:
+        return parameter_path(number)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
+
+
+def _success(response: Response) -> bytes:
+    """The data of a success reply; an error reply is a ParameterError with its CIP text."""
+    if isinstance(response, ErrorResponse):
+        raise ParameterError(response.text, code=response.general_status)
+    return response.encode_data()
+
+
+# Attributes of seed tables 16 and 17 that command the drive (Run1, Run2, NetCtrl,
+# Fault Reset; NetRef, Speed Ref): only through the command path, never written as data.
+COMMAND_ATTRIBUTES: frozenset[tuple[int, int]] = frozenset(
+    {
+        (CipClass.CONTROL_SUPERVISOR, 3),
+        (CipClass.CONTROL_SUPERVISOR, 4),
+        (CipClass.CONTROL_SUPERVISOR, 5),
+        (CipClass.CONTROL_SUPERVISOR, 12),
+        (CipClass.AC_DC_DRIVE, 4),
+        (CipClass.AC_DC_DRIVE, 8),
+    }
+)
+
+
+def _object_name(class_id: int) -> str:
+    spec = STANDARD_OBJECTS[class_id]
+    return f"{spec.name} ({class_id:02X}h)"
+
+
+def _object_attribute(class_id: int, instance_id: int, attribute_id: int) -> AttributeSpec:
+    """The attribute as seed tables 8-18 define it; ParameterError when they do not."""
+    spec = STANDARD_OBJECTS.get(class_id)
+    if spec is None:
+        known = ", ".join(f"{c:02X}h" for c in STANDARD_OBJECTS)
+        raise ParameterError(f"class {class_id:#04x} is not a CFW-08 object ({known})")
+    if instance_id not in spec.instances:
+        raise ParameterError(
+            f"{_object_name(class_id)} has no instance {instance_id} ({spec.source})"
+        )
+    attr = spec.attributes.get(attribute_id)
+    if attr is None:
+        raise ParameterError(
+            f"{_object_name(class_id)} has no attribute {attribute_id} ({spec.source})"
+        )
+    return attr
+
+
+def _rights_text(class_id: int, attr: AttributeSpec, only: str) -> str:
+    source = STANDARD_OBJECTS[class_id].source
+    return (
+        f"{_object_name(class_id)} attribute {attr.attribute} ({attr.name}) is {only} only "
+        f"({source})"
+    )
+
+
+def _status_text(number: int, value: int) -> str:
+    if number == P070:
+        text = f"P070 CAN controller: {value_text(P070_TEXT, value)}"
+        code = P070_COMM_ERROR.get(value)
+        return f"{text} (E{code}: {fault_text(code)})" if code else text
+    text = f"P081 network master: {value_text(P081_TEXT, value)}"
+    return f"{text} (E36: {fault_text(36)})" if value == P081_IDLE else text

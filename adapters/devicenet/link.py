@@ -1,0 +1,243 @@
+"""The python-can link: one bus, its Notifier on the event loop, an async reader.
+
+Fact sheet Part 3: python-can only through ``can.Notifier(bus, [reader], loop=loop)``
+with a ``can.AsyncBufferedReader`` (no blocking receive in a coroutine). Any python-can
+interface works (``socketcan``, ``virtual``, vendor interfaces); ``udp_multicast`` is
+refused (it sends multicast out of the network interface and is lossy). Frames go out
+with ``is_extended_id=False`` (11-bit DeviceNet identifiers). Send failures
+(``CanOperationError``: transmit buffer full, interface down) are reported, never
+raised, so the engine can back off. :meth:`CanLink.close` always stops the Notifier and
+shuts the bus down: no thread is left behind.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Iterable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import can
+
+from adapters.devicenet.canerror import LineCondition, decode_error_frame
+from adapters.devicenet.errors import InvalidCanFrame
+from adapters.devicenet.frame import CanFrame
+from gateway.errors import AdapterError
+
+log = logging.getLogger(__name__)
+
+NOTIFIER_TIMEOUT = 0.05  # s: the reader thread of fd-less buses (virtual) wakes this often
+BITRATE_SET_BY_SYSTEM = frozenset({"socketcan", "virtual"})  # `ip link ... bitrate`, or none
+REFUSED_INTERFACES = {
+    "udp_multicast": "udp_multicast is not supported: it sends multicast out of the network "
+    "interface and loses frames; use virtual (in-process) or socketcan (vcan0)",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: int | None = None  # passed on only to interfaces that set it themselves
+
+
+@dataclass(frozen=True, slots=True)
+class RxFrame:
+    frame: CanFrame
+
+
+@dataclass(frozen=True, slots=True)
+class RxError:
+    """A SocketCAN error frame."""
+
+    conditions: frozenset[LineCondition]
+
+
+@dataclass(frozen=True, slots=True)
+class RxBad:
+    """A frame DeviceNet cannot carry (extended id, remote, FD, too long)."""
+
+    reason: str
+
+
+LinkEvent = RxFrame | RxError | RxBad
+
+
+@dataclass(frozen=True, slots=True)
+class SendResult:
+    sent: int
+    dropped: int = 0
+    error: str | None = None
+
+
+@dataclass(slots=True)
+class LinkFigures:
+    frames_tx: int = 0
+    frames_rx: int = 0
+    error_frames: int = 0
+    bad_frames: int = 0
+    send_failures: int = 0
+    last_send_error: str | None = None
+
+
+_WAKE = can.Message(arbitration_id=0, is_extended_id=False)  # marker put in our own queue
+
+
+def convert(msg: can.Message) -> LinkEvent:
+    """A python-can message as the codec sees it; never raises."""
+    data = bytes(msg.data or b"")
+    if msg.is_error_frame:
+        return RxError(decode_error_frame(msg.arbitration_id, data))
+    if msg.is_remote_frame:
+        return RxBad("remote frame")
+    if getattr(msg, "is_fd", False):
+        return RxBad("CAN FD frame")
+    try:
+        frame = CanFrame.from_bus(msg.arbitration_id, data, is_extended_id=msg.is_extended_id)
+    except InvalidCanFrame as exc:
+        return RxBad(exc.message)
+    return RxFrame(frame)
+
+
+class CanLink:
+    """One python-can bus used from asyncio. Use ``async with CanLink(cfg) as link``."""
+
+    def __init__(self, config: LinkConfig) -> None:
+        reason = REFUSED_INTERFACES.get(config.interface)
+        if reason is not None:
+            raise AdapterError(reason)
+        self.config = config
+        self.figures = LinkFigures()
+        self._bus: can.BusABC | None = None
+        self._reader: can.AsyncBufferedReader | None = None
+        self._notifier: can.Notifier | None = None
+
+    async def __aenter__(self) -> CanLink:
+        self.open(asyncio.get_running_loop())
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def open(self, loop: asyncio.AbstractEventLoop) -> None:
+        kwargs: dict[str, Any] = {
+            "interface": self.config.interface,
+            "channel": self.config.channel,
+            "receive_own_messages": False,
+        }
+        if self.config.bitrate and self.config.interface not in BITRATE_SET_BY_SYSTEM:
+            kwargs["bitrate"] = self.config.bitrate
+        try:
+            self._bus = can.Bus(**kwargs)
+        except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+            raise AdapterError(
+                f"cannot open CAN interface {self.config.interface!r} "
+                f"channel {self.config.channel!r}: {exc}"
+            ) from exc
+        self._reader = can.AsyncBufferedReader()
+        try:
+            self._notifier = can.Notifier(
+                self._bus, [self._reader], timeout=NOTIFIER_TIMEOUT, loop=loop
+            )
+        except Exception:
+            self._bus.shutdown()
+            self._bus = None
+            raise
+        log.debug("CAN %s %s open", self.config.interface, self.config.channel)
+
+    def close(self) -> None:
+        """Stop the Notifier (joins its thread) and shut the bus down; idempotent."""
+        notifier, self._notifier = self._notifier, None
+        bus, self._bus = self._bus, None
+        self._reader = None
+        if notifier is not None:
+            notifier.stop(timeout=1.0)
+        if bus is not None:
+            with contextlib.suppress(can.CanError, OSError):
+                bus.shutdown()
+
+    @property
+    def is_open(self) -> bool:
+        return self._bus is not None
+
+    def wake(self) -> None:
+        """Make a pending :meth:`receive` return now (for work queued from elsewhere)."""
+        if self._reader is not None:
+            self._reader.buffer.put_nowait(_WAKE)
+
+    async def receive(self, wait: float) -> list[LinkEvent]:
+        """Everything waiting, or what arrives within ``wait`` seconds (possibly nothing)."""
+        reader = self._reader
+        if reader is None:
+            raise AdapterError("CAN link is closed")
+        buffer = reader.buffer
+        messages: list[can.Message] = []
+        if buffer.empty():
+            if wait <= 0:
+                await asyncio.sleep(0)  # never a coroutine that returns without yielding
+                return []
+            try:
+                # asyncio.timeout, not wait_for: wait_for can swallow a cancellation that
+                # arrives as the message does (Python 3.11), leaving a task that never ends.
+                async with asyncio.timeout(wait):
+                    messages.append(await buffer.get())
+            except TimeoutError:
+                return []
+        while not buffer.empty():
+            messages.append(buffer.get_nowait())
+        events: list[LinkEvent] = []
+        for msg in messages:
+            if msg is _WAKE:
+                continue
+            event = convert(msg)
+            self._count(event)
+            events.append(event)
+        return events
+
+    def _count(self, event: LinkEvent) -> None:
+        if isinstance(event, RxFrame):
+            self.figures.frames_rx += 1
+        elif isinstance(event, RxError):
+            self.figures.error_frames += 1
+        else:
+            self.figures.bad_frames += 1
+
+    def send(self, frames: Iterable[CanFrame]) -> SendResult:
+        """Send frames in order; stop at the first failure and say how many were dropped."""
+        batch = list(frames)
+        bus = self._bus
+        if bus is None:
+            return SendResult(0, len(batch), "CAN link is closed")
+        for i, frame in enumerate(batch):
+            msg = can.Message(
+                arbitration_id=frame.arbitration_id, data=frame.data, is_extended_id=False
+            )
+            try:
+                bus.send(msg, timeout=0)
+            except (can.CanError, OSError) as exc:
+                self.figures.send_failures += 1
+                self.figures.last_send_error = str(exc)
+                return SendResult(i, len(batch) - i, str(exc))
+            self.figures.frames_tx += 1
+        return SendResult(len(batch))
+
+    def diagnostics(self) -> dict[str, Any]:
+        f = self.figures
+        return {
+            "interface": self.config.interface,
+            "channel": self.config.channel,
+            "link_frames_tx": f.frames_tx,
+            "link_frames_rx": f.frames_rx,
+            "error_frames": f.error_frames,
+            "link_bad_frames": f.bad_frames,
+            "send_failures": f.send_failures,
+            "last_send_error": f.last_send_error,
+        }

@@ -1,0 +1,165 @@
+"""The DeviceNet bus table and its drives' keys (read with gateway.schema.Table).
+
+Bus keys: interface, channel, bitrate, mac, poll_interval, expected_packet_rate,
+response_timeout, explicit_timeout, dupmac_timeout, retry_max, status_interval,
+simulate. Drive keys: assembly, connection, ack, check_identity, vendor_id,
+product_code, product_name, max_rpm, max_rpm_param, weg_speed_scale,
+at_reference_rpm, startup_params, and the simulator's sim_p313, sim_p710,
+sim_ramp_time, sim_max_rpm. See docs/devices.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from adapters.devicenet.cfw08 import (
+    DEFAULT_AT_REFERENCE_RPM,
+    DEFAULT_WEG_SPEED_SCALE,
+    MAX_PARAMETER,
+    SPEED_REF_MAX_RPM,
+    AssemblyPair,
+)
+from adapters.devicenet.link import REFUSED_INTERFACES
+from adapters.devicenet.scanner import IoKind
+from gateway.config import DriveConfig
+from gateway.schema import Table
+
+BITRATES = (125_000, 250_000, 500_000)  # DeviceNet rates (seed table 4, P702)
+WEG_VENDOR_ID = 0x355  # seed table 8
+
+
+@dataclass(frozen=True, slots=True)
+class BusOptions:
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: int = 125_000
+    mac: int = 0
+    poll_interval: float = 0.05
+    expected_packet_rate: float = 0.2
+    response_timeout: float = 0.1
+    explicit_timeout: float = 1.0
+    dupmac_timeout: float = 1.0
+    retry_max: float = 30.0
+    status_interval: float = 2.0
+    simulate: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class SimOptions:
+    p313: int = 2
+    p710: int | None = None  # default: the one matching ``assembly``
+    ramp_time: float = 2.0
+    max_rpm: float | None = None  # default: the drive's max_rpm, else 1800
+
+
+@dataclass(frozen=True, slots=True)
+class DriveOptions:
+    assembly: AssemblyPair = AssemblyPair.EXTENDED
+    connection: IoKind = IoKind.POLLED
+    ack: bool = True
+    check_identity: bool = True
+    vendor_id: int = WEG_VENDOR_ID
+    product_code: int | None = None
+    product_name: str | None = "CFW-08"
+    max_rpm: float | None = None
+    max_rpm_param: int | None = None
+    weg_speed_scale: int = DEFAULT_WEG_SPEED_SCALE
+    at_reference_rpm: float = DEFAULT_AT_REFERENCE_RPM
+    startup_params: tuple[tuple[int, int], ...] = ()
+    sim: SimOptions = SimOptions()
+
+
+def parse_bus(t: Table) -> BusOptions:
+    d = BusOptions()
+    interface = t.string("interface", d.interface)
+    if not interface:
+        raise t.error("interface", "must name a python-can interface")
+    refused = REFUSED_INTERFACES.get(interface)
+    if refused is not None:
+        raise t.error("interface", refused)
+    poll = t.number("poll_interval", d.poll_interval, minimum=0.001, maximum=10.0)
+    epr = t.number("expected_packet_rate", d.expected_packet_rate, minimum=0.01, maximum=60.0)
+    if epr < poll:
+        raise t.error(
+            "expected_packet_rate", f"{epr:g} s is shorter than poll_interval ({poll:g} s)"
+        )
+    simulate = t.boolean("simulate", d.simulate)
+    if simulate and interface != "virtual":
+        raise t.error(
+            "simulate",
+            f"needs interface = 'virtual' (simulated drives run in-process), not {interface!r}",
+        )
+    return BusOptions(
+        interface=interface,
+        channel=t.string("channel", d.channel),
+        bitrate=t.integer("bitrate", d.bitrate, allowed=BITRATES, what="a DeviceNet rate"),
+        mac=t.integer("mac", d.mac, minimum=0, maximum=63),
+        poll_interval=poll,
+        expected_packet_rate=epr,
+        response_timeout=t.number(
+            "response_timeout", d.response_timeout, minimum=0.001, maximum=10.0
+        ),
+        explicit_timeout=t.number(
+            "explicit_timeout", d.explicit_timeout, minimum=0.01, maximum=30.0
+        ),
+        dupmac_timeout=t.number("dupmac_timeout", d.dupmac_timeout, minimum=0.01, maximum=10.0),
+        retry_max=t.number("retry_max", d.retry_max, minimum=0.1, maximum=3600.0),
+        status_interval=t.number("status_interval", d.status_interval, minimum=0.1, maximum=3600.0),
+        simulate=simulate,
+    )
+
+
+def _startup_params(t: Table) -> tuple[tuple[int, int], ...]:
+    sub = t.table("startup_params")
+    out: list[tuple[int, int]] = []
+    for key in sub.data:
+        text = key[1:] if key[:1] in ("P", "p") else key
+        if not text.isdigit() or not 0 <= int(text) <= MAX_PARAMETER:
+            raise sub.error(key, "is not a CFW-08 parameter number (P000-P799)")
+        out.append((int(text), sub.integer(key, minimum=-32768, maximum=65535)))
+    return tuple(out)
+
+
+def _sim(t: Table) -> SimOptions:
+    d = SimOptions()
+    return SimOptions(
+        p313=t.integer("sim_p313", d.p313, minimum=0, maximum=3),
+        p710=t.integer("sim_p710", d.p710, minimum=0, maximum=2),
+        ramp_time=t.number("sim_ramp_time", d.ramp_time, minimum=0.1, maximum=999.0),
+        max_rpm=t.number("sim_max_rpm", d.max_rpm, minimum=1.0, maximum=SPEED_REF_MAX_RPM),
+    )
+
+
+def parse_drive(t: Table, drive: DriveConfig) -> DriveOptions:
+    d = DriveOptions()
+    assembly = t.integer(
+        "assembly", int(d.assembly), allowed=[int(p) for p in AssemblyPair], what="an assembly"
+    )
+    max_rpm = t.number("max_rpm", None, minimum=1.0, maximum=SPEED_REF_MAX_RPM)
+    max_rpm_param = t.integer("max_rpm_param", None, minimum=0, maximum=MAX_PARAMETER)
+    if max_rpm is None and max_rpm_param is None:
+        raise t.error("max_rpm", "is required (or max_rpm_param to read it at connect)")
+    if max_rpm is not None and max_rpm_param is not None:
+        raise t.error("max_rpm_param", "give max_rpm or max_rpm_param, not both")
+    connection = t.enum("connection", IoKind, d.connection)
+    ack = t.boolean("ack", d.ack)
+    if not ack and connection is IoKind.POLLED:
+        raise t.error("ack", "false needs connection = 'cos' or 'cyclic'")
+    product_code = t.integer("product_code", None, minimum=0, maximum=0xFFFF)
+    return DriveOptions(
+        assembly=AssemblyPair(assembly),
+        connection=connection,
+        ack=ack,
+        check_identity=t.boolean("check_identity", d.check_identity),
+        vendor_id=t.integer("vendor_id", d.vendor_id, minimum=0, maximum=0xFFFF),
+        product_code=product_code,
+        product_name=t.string("product_name", d.product_name),
+        max_rpm=max_rpm,
+        max_rpm_param=max_rpm_param,
+        weg_speed_scale=t.integer("weg_speed_scale", d.weg_speed_scale, minimum=1, maximum=0xFFFF),
+        at_reference_rpm=t.number(
+            "at_reference_rpm", d.at_reference_rpm, minimum=0.0, maximum=SPEED_REF_MAX_RPM
+        ),
+        startup_params=_startup_params(t),
+        sim=_sim(t),
+    )

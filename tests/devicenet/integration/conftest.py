@@ -1,0 +1,147 @@
+"""The DeviceNet integration rig: the adapter (scanner + link) and simulated CFW-08s on a
+python-can bus, with the real hub. Every test runs on ``virtual`` (a channel of its own)
+and again on SocketCAN ``vcan0`` under the ``vcan`` marker where the kernel has one."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import uuid
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from adapters.devicenet.adapter import DeviceNetAdapter
+from adapters.devicenet.link import LinkConfig
+from adapters.devicenet.sim import SimNodeConfig, SimPhase, SimRunner
+from gateway.adapter import Event
+from gateway.config import parse
+from gateway.daemon import build_hub
+from gateway.hub import EventSubscription, Hub
+from gateway.model import DriveState
+
+VCAN = "vcan0"
+FAST_BUS: dict[str, Any] = {
+    "poll_interval": 0.01,
+    "expected_packet_rate": 0.05,
+    "response_timeout": 0.05,
+    "explicit_timeout": 0.2,
+    "dupmac_timeout": 0.05,
+    "retry_max": 0.3,
+    "status_interval": 0.2,
+}
+
+
+def vcan_problem() -> str | None:
+    """Why the vcan tests cannot run here, or None when they can."""
+    if not hasattr(socket, "AF_CAN"):
+        return "this Python has no socket.AF_CAN"
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except OSError as exc:
+        return f"the kernel has no AF_CAN ({exc.strerror})"
+    if not Path(f"/sys/class/net/{VCAN}").exists():
+        return f"no {VCAN} interface (sudo ip link add dev {VCAN} type vcan)"
+    return None
+
+
+@pytest.fixture(params=["virtual", pytest.param("vcan", marks=pytest.mark.vcan)])
+def can_line(request: pytest.FixtureRequest) -> LinkConfig:
+    if request.param == "vcan":
+        problem = vcan_problem()
+        if problem is not None:
+            pytest.skip(problem)
+        return LinkConfig("socketcan", VCAN)
+    return LinkConfig("virtual", f"dn-{uuid.uuid4().hex[:10]}")
+
+
+def drive(mac: int, **keys: Any) -> dict[str, Any]:
+    return {
+        "id": f"d{mac}",
+        "device": "CFW-08",
+        "address": mac,
+        "max_rpm": 1800.0,
+        "sim_ramp_time": 0.2,
+        **keys,
+    }
+
+
+@dataclass
+class Rig:
+    hub: Hub
+    adapter: DeviceNetAdapter
+    sim: SimRunner
+    events: EventSubscription
+    task: asyncio.Task[None]
+    seen: list[Event] = field(default_factory=list)
+
+    async def wait(
+        self, drive_id: str, predicate: Callable[[DriveState], bool], within: float = 5.0
+    ) -> DriveState:
+        return await asyncio.wait_for(self.hub.wait_for(drive_id, predicate), within)
+
+    async def until(
+        self, predicate: Callable[[], bool], within: float = 5.0, runner: SimRunner | None = None
+    ) -> None:
+        """Wait for a condition on the simulated line (checked as the simulator works)."""
+        await asyncio.wait_for((runner or self.sim).until(predicate), within)
+
+    async def event(self, predicate: Callable[[Event], bool], within: float = 5.0) -> Event:
+        async def find() -> Event:
+            while True:
+                ev = await self.events.get()
+                self.seen.append(ev)
+                if predicate(ev):
+                    return ev
+
+        for ev in self.seen:
+            if predicate(ev):
+                return ev
+        return await asyncio.wait_for(find(), within)
+
+
+@contextlib.asynccontextmanager
+async def rig(
+    line: LinkConfig,
+    drives: list[dict[str, Any]],
+    *,
+    bus: dict[str, Any] | None = None,
+    sims: list[SimNodeConfig] | None = None,
+    prepare: Callable[[SimRunner], None] | None = None,
+    settle: bool = False,
+) -> AsyncIterator[Rig]:
+    table = {
+        "adapter": "devicenet",
+        "interface": line.interface,
+        "channel": line.channel,
+        **FAST_BUS,
+        **(bus or {}),
+        "drives": drives,
+    }
+    config = parse(
+        {"zenoh": {"enabled": False}, "modbus": {"enabled": False}, "buses": {"dn": table}},
+        "test.toml",
+    )
+    hub = build_hub(config)
+    adapter = DeviceNetAdapter(config.buses[0])
+    hub.attach_params([d["id"] for d in drives], adapter)
+    runner = SimRunner(line, adapter.sim_configs() if sims is None else sims)
+    sim_task = asyncio.create_task(runner.run(), name="sim")
+    await asyncio.wait_for(runner.started.wait(), 5)
+    if settle:  # the simulated nodes finish their Duplicate MAC ID check first
+        checking = SimPhase.CHECKING
+        await runner.until(lambda: all(n.phase is not checking for n in runner.nodes.values()))
+    if prepare is not None:
+        prepare(runner)
+    with hub.subscribe_events() as events:
+        task = asyncio.create_task(adapter.run(hub), name="adapter")
+        try:
+            yield Rig(hub, adapter, runner, events, task)
+        finally:
+            for t in (task, sim_task):
+                t.cancel()
+            await asyncio.gather(task, sim_task, return_exceptions=True)

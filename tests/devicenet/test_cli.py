@@ -1,0 +1,48 @@
+"""``drive-gateway sim devicenet``."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from adapters.devicenet.cli import node_configs, parse_nodes
+from gateway.cli import build_parser, main
+
+
+def test_parse_nodes() -> None:
+    assert parse_nodes("1,2,5-8") == [1, 2, 5, 6, 7, 8]
+    assert parse_nodes("63") == [63]
+    assert parse_nodes("1-63") == list(range(1, 64))
+    for bad, why in [("64", "0-63"), ("a", "not a MAC ID"), ("3-1", "0-63"), ("1,1", "twice")]:
+        with pytest.raises(argparse.ArgumentTypeError, match=why):
+            parse_nodes(bad)
+
+
+def test_arguments_become_node_configs() -> None:
+    args = build_parser().parse_args(
+        ["sim", "devicenet", "--interface", "virtual", "--channel", "c", "--nodes", "3-4",
+         "--assembly", "100", "--p313", "1", "--max-rpm", "3600", "--weg-speed-scale", "16384"]
+    )  # fmt: skip
+    configs = node_configs(args)
+    assert [c.mac for c in configs] == [3, 4]
+    assert {(c.p710, c.p313, c.max_rpm, c.weg_speed_scale) for c in configs} == {
+        (2, 1, 3600.0, 16384)
+    }
+
+
+def test_runs_for_a_while_on_virtual() -> None:
+    argv = ["sim", "devicenet", "--interface", "virtual", "--channel", "cli-test", "--nodes", "1-3"]
+    assert main([*argv, "--duration", "0.2", "--log-level", "WARNING"]) == 0
+
+
+def test_udp_multicast_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sim", "devicenet", "--interface", "udp_multicast", "--nodes", "1"])
+    assert exit_info.value.code == 2
+    assert "udp_multicast is not supported" in capsys.readouterr().err
+
+
+def test_an_interface_that_cannot_open_is_an_error() -> None:
+    argv = ["sim", "devicenet", "--interface", "no-such-interface", "--nodes", "1"]
+    assert main([*argv, "--duration", "0.2", "--log-level", "ERROR"]) == 2

@@ -1,0 +1,145 @@
+"""The python-can link on the virtual interface: conversion, send/receive, failures, close."""
+
+from __future__ import annotations
+
+import asyncio
+import uuid
+
+import can
+import pytest
+
+from adapters.devicenet.canerror import LineCondition
+from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.link import CanLink, LinkConfig, RxBad, RxError, RxFrame, convert
+from gateway.errors import AdapterError
+
+
+def channel() -> str:
+    return f"link-{uuid.uuid4().hex[:10]}"
+
+
+def test_convert() -> None:
+    ok = can.Message(arbitration_id=0x3CA, data=b"\x10\x03\x00\x00", is_extended_id=False)
+    assert convert(ok) == RxFrame(CanFrame(0x3CA, b"\x10\x03\x00\x00"))
+    error = can.Message(arbitration_id=0x040, is_error_frame=True, data=bytes(8))
+    assert convert(error) == RxError(frozenset({LineCondition.BUS_OFF}))
+    ext = can.Message(arbitration_id=0x3CA, is_extended_id=True)
+    assert isinstance(convert(ext), RxBad)
+    remote = can.Message(arbitration_id=0x3CA, is_extended_id=False, is_remote_frame=True)
+    assert convert(remote) == RxBad("remote frame")
+    fd = can.Message(arbitration_id=0x3CA, is_extended_id=False, is_fd=True, data=bytes(12))
+    assert convert(fd) == RxBad("CAN FD frame")
+
+
+def test_frames_as_socketcan_delivers_them_on_vcan() -> None:
+    """On vcan every frame comes from a socket of this host, and python-can marks such
+    frames ``is_rx=False`` (MSG_DONTROUTE); they come with a channel name and a timestamp.
+    None of that may make a frame be dropped (virtual never sets them so)."""
+    looped = can.Message(
+        arbitration_id=0x3CA,
+        data=b"\x10\x03\x00\x00",
+        is_extended_id=False,
+        is_rx=False,
+        channel="vcan0",
+        timestamp=1234.5,
+    )
+    assert convert(looped) == RxFrame(CanFrame(0x3CA, b"\x10\x03\x00\x00"))
+
+
+async def test_receive_without_waiting_still_yields() -> None:
+    """A loop that polls the link with no wait must still let the event loop run."""
+    async with CanLink(LinkConfig("virtual", channel())) as link:
+        ran = asyncio.Event()
+
+        async def other() -> None:
+            ran.set()
+
+        task = asyncio.create_task(other())
+        assert await link.receive(0.0) == []
+        assert ran.is_set()
+        await task
+
+
+def test_udp_multicast_is_refused() -> None:
+    with pytest.raises(AdapterError, match="udp_multicast is not supported"):
+        CanLink(LinkConfig("udp_multicast", "x"))
+
+
+async def test_open_failure_is_an_adapter_error() -> None:
+    link = CanLink(LinkConfig("no-such-interface", "x"))
+    with pytest.raises(AdapterError, match="cannot open CAN interface 'no-such-interface'"):
+        async with link:
+            pass
+    assert not link.is_open
+
+
+async def test_frames_go_both_ways_with_11_bit_ids() -> None:
+    ch = channel()
+    async with CanLink(LinkConfig("virtual", ch)) as a, CanLink(LinkConfig("virtual", ch)) as b:
+        raw = can.Bus(interface="virtual", channel=ch)
+        try:
+            result = a.send([CanFrame(0x455, b"\x61\x00\x08\x07"), CanFrame(0x7EF, b"")])
+            assert (result.sent, result.dropped, result.error) == (2, 0, None)
+            got: list[object] = []
+            while len(got) < 2:
+                got.extend(await b.receive(1.0))
+            assert got == [
+                RxFrame(CanFrame(0x455, b"\x61\x00\x08\x07")),
+                RxFrame(CanFrame(0x7EF, b"")),
+            ]
+            seen = raw.recv(1.0)
+            assert (
+                seen is not None and seen.is_extended_id is False and seen.arbitration_id == 0x455
+            )
+            assert await a.receive(0.01) == []  # our own frames do not come back
+            assert a.figures.frames_tx == 2 and b.figures.frames_rx == 2
+        finally:
+            raw.shutdown()
+
+
+async def test_bad_frames_are_counted_not_raised() -> None:
+    ch = channel()
+    async with CanLink(LinkConfig("virtual", ch)) as link:
+        raw = can.Bus(interface="virtual", channel=ch)
+        try:
+            raw.send(can.Message(arbitration_id=0x1ABCDEF, is_extended_id=True, data=b"\x01"))
+            events = await link.receive(1.0)
+            assert len(events) == 1 and isinstance(events[0], RxBad)
+            assert link.figures.bad_frames == 1
+        finally:
+            raw.shutdown()
+
+
+async def test_wake_ends_a_wait() -> None:
+    async with CanLink(LinkConfig("virtual", channel())) as link:
+        loop = asyncio.get_running_loop()
+        loop.call_later(0.02, link.wake)
+        started = loop.time()
+        assert await link.receive(5.0) == []
+        assert loop.time() - started < 1.0
+
+
+async def test_send_failure_is_reported(monkeypatch: pytest.MonkeyPatch) -> None:
+    async with CanLink(LinkConfig("virtual", channel())) as link:
+        calls = []
+
+        def full(msg: can.Message, timeout: float | None = None) -> None:
+            calls.append(msg)
+            if len(calls) > 1:
+                raise can.CanOperationError("Transmit buffer full")
+
+        monkeypatch.setattr(link._bus, "send", full)
+        frames = [CanFrame(0x455, b""), CanFrame(0x45D, b""), CanFrame(0x465, b"")]
+        result = link.send(frames)
+        assert (result.sent, result.dropped, result.error) == (1, 2, "Transmit buffer full")
+        assert link.diagnostics()["send_failures"] == 1
+
+
+async def test_close_is_idempotent_and_sending_after_close_fails() -> None:
+    link = CanLink(LinkConfig("virtual", channel()))
+    async with link:
+        assert link.is_open
+    link.close()
+    assert link.send([CanFrame(0x455, b"")]).error == "CAN link is closed"
+    with pytest.raises(AdapterError, match="closed"):
+        await link.receive(0.0)
