@@ -11,6 +11,7 @@ import sys
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+from gateway.config import ModbusSection
 from gateway.modbus.command import COMMAND_BITS, DEFINED_MASK
 from gateway.modbus.health import GATEWAY_INPUTS
 from gateway.modbus.map import (
@@ -26,6 +27,7 @@ from gateway.modbus.map import (
     UNKNOWN_DEVICE_CODE,
 )
 from gateway.modbus.regs import EXCEPTION_USES, Field, RegType, block_size
+from gateway.modbus.server import KEEPALIVE_COUNT, KEEPALIVE_IDLE, KEEPALIVE_INTERVAL
 from gateway.model import DriveStatus
 
 _NULLS = {
@@ -241,6 +243,8 @@ _EXCEPTIONS_INTRO = [
     "",
 ]
 
+_MODBUS = ModbusSection()  # the defaults
+
 _CONNECTIONS = [
     "## Connections",
     "",
@@ -249,9 +253,21 @@ _CONNECTIONS = [
     "  at accept, before it can send anything, and counted in `connections_refused`.",
     "  An empty list accepts any client.",
     "- `modbus.read_only`: reads only; every write to a writable register gets exception 1.",
+    f"- `modbus.max_connections` (default {_MODBUS.max_connections}, 1-1000): connections"
+    " open at once. One more",
+    "  is disconnected at accept, before it can send anything, and counted in",
+    "  `connections_over_limit`; once a connection closes, a new one is accepted again.",
+    f"  Every connection has TCP keepalive ({KEEPALIVE_IDLE} s idle, then {KEEPALIVE_COUNT}"
+    f" probes {KEEPALIVE_INTERVAL} s apart):",
+    "  a client gone without closing its connection (power cut) frees its place.",
     "- A frame whose MBAP header is invalid (protocol id not 0, length outside 2-254) closes",
-    "  the connection and counts in `bad_frames`; a half frame waits for its rest. Neither",
-    "  affects other clients.",
+    "  the connection and counts in `bad_frames`.",
+    f"- `modbus.frame_timeout` (s, default {_MODBUS.frame_timeout}): once part of a frame"
+    " has arrived, its rest",
+    "  must arrive within it (a request may come in several TCP segments), else the",
+    "  connection is closed and counts in `bad_frames` and `frame_timeouts`. A connection",
+    "  with no frame begun may stay idle for any time.",
+    "- None of these affects other clients.",
 ]
 
 

@@ -30,6 +30,7 @@ from gateway.modbus.health import (
     encode_gateway_inputs,
     parse_version,
 )
+from gateway.modbus.limits import ConnectionLimits
 from gateway.modbus.map import (
     BIT_FUNCTIONS,
     DRIVE_HOLDINGS,
@@ -269,6 +270,8 @@ class ModbusFrontEnd:
             commands_refused=c.commands_refused,
             bad_frames=c.bad_frames,
             adapter_restarts=restarts,
+            frame_timeouts=c.frame_timeouts,
+            connections_over_limit=c.connections_over_limit,
         )
 
     async def run(self) -> None:
@@ -282,6 +285,10 @@ class ModbusFrontEnd:
             port=self.section.port,
             policy=policy,
             counters=self.counters,
+            limits=ConnectionLimits(
+                frame_timeout=self.section.frame_timeout,
+                max_connections=self.section.max_connections,
+            ),
         )
         self.address = await server.start()
         self._server = server

@@ -30,6 +30,8 @@ class GatewayView:
     commands_refused: int
     bad_frames: int
     adapter_restarts: int
+    frame_timeouts: int
+    connections_over_limit: int
 
 
 def parse_version(text: str) -> tuple[int, int, int]:
@@ -121,7 +123,8 @@ GATEWAY_INPUTS: tuple[Field[GatewayView], ...] = (
         "bad_frames",
         COUNTER32,
         "count",
-        "frames with a bad MBAP header (the connection is closed)",
+        "frames with a bad MBAP header or not finished within `modbus.frame_timeout`"
+        " (the connection is closed)",
         lambda g: g.bad_frames,
     ),
     Field(
@@ -131,6 +134,22 @@ GATEWAY_INPUTS: tuple[Field[GatewayView], ...] = (
         "count",
         "fieldbus adapter restarts after a crash, all buses",
         lambda g: g.adapter_restarts,
+    ),
+    Field(
+        25,
+        "frame_timeouts",
+        COUNTER32,
+        "count",
+        "of `bad_frames`: a frame begun and not finished within `modbus.frame_timeout`",
+        lambda g: g.frame_timeouts,
+    ),
+    Field(
+        27,
+        "connections_over_limit",
+        COUNTER32,
+        "count",
+        "connections closed at accept because `modbus.max_connections` were open",
+        lambda g: g.connections_over_limit,
     ),
 )
 """Input registers of the gateway unit, mirrored at holding ``MIRROR_OFFSET + n``."""

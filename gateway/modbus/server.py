@@ -7,24 +7,40 @@ connection or per request, outside any ``SimDevice``, so they live in a
 subclass of pymodbus's per-connection ``ServerRequestHandler``, returned by the
 documented ``callback_new_connection`` of the server:
 
-- the allow-list, at accept (``connection_made``): other peers are aborted
-  before a byte is read;
+- the allow-list and ``modbus.max_connections``, at accept
+  (``connection_made``): other peers, and a connection beyond the limit, are
+  aborted before a byte is read; an admitted one gets TCP keepalive, so that a
+  client gone without closing (power cut) frees its place;
 - framing (``callback_data``, which replaces pymodbus's): a bad MBAP header
   closes the connection; an unknown unit gets exception 0x0B and an unserved
   function exception 1 before pymodbus decodes anything (pymodbus would answer
   an unknown unit from the unit-0 device, serve diagnostics, and answer an
   undecodable PDU with function code 0x80); a served function whose PDU does
-  not decode gets exception 3;
+  not decode gets exception 3; once part of a frame has arrived, the rest
+  must follow within ``modbus.frame_timeout`` (a ``loop.call_later`` timer, no
+  polling), else the connection is closed and counted as a bad frame;
 - who is asking: the peer address is put in a context variable for the
-  duration of the request, so the ``action`` can keep per-client edges.
+  duration of the request, so the ``action`` can keep per-client edges;
+- pipelining: a client may send requests without waiting for the replies (the
+  Modbus TCP transaction id is there for it), so several may arrive in one read.
+  pymodbus frames one request per read and drops a read longer than one frame;
+  here every complete request is framed, queued and answered one at a time, in
+  order, and reading pauses while :data:`PIPELINE_LIMIT` requests of the
+  connection wait (a flood is served at the gateway's pace, never dropped).
+  The handler keeps its own receive buffer: pymodbus empties ``recv_buffer``
+  whenever it sends, which would throw away the start of a pipelined request
+  that arrived before the reply to the one before it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
+import contextlib
 import contextvars
 import ipaddress
 import logging
+import socket
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -39,6 +55,7 @@ from pymodbus.simulator import SimDevice
 from pymodbus.transaction import TransactionManager
 
 from gateway.errors import GatewayError
+from gateway.modbus.limits import OVER_LIMIT_LOG_INTERVAL, ConnectionLimits, WarningRateLimit
 from gateway.modbus.mbap import HEADER_SIZE, MbapError, parse_header
 from gateway.modbus.regs import ExceptionCode
 
@@ -50,6 +67,29 @@ CURRENT_CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("modbus_cli
 """The peer address of the request being served (set around each request)."""
 
 REFUSED_LOG_LIMIT = 256  # distinct refused addresses logged at WARNING; later ones at DEBUG
+PIPELINE_LIMIT = 64  # requests of one connection waiting to be served; more pause its reading
+# TCP keepalive on every connection: a client gone without a FIN (power cut, cable pulled)
+# frees its place under modbus.max_connections after about IDLE + INTERVAL * COUNT seconds
+KEEPALIVE_IDLE = 60
+KEEPALIVE_INTERVAL = 10
+KEEPALIVE_COUNT = 3
+_KEEPALIVE_OPTIONS = (
+    ("TCP_KEEPIDLE", KEEPALIVE_IDLE),
+    ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL),
+    ("TCP_KEEPCNT", KEEPALIVE_COUNT),
+)
+
+
+def keep_alive(sock: Any) -> None:
+    """Turn TCP keepalive on for an accepted socket (the timings where the OS has them)."""
+    if sock is None:
+        return
+    with contextlib.suppress(OSError):
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        for name, value in _KEEPALIVE_OPTIONS:
+            option = getattr(socket, name, None)  # Linux has all three
+            if option is not None:
+                sock.setsockopt(socket.IPPROTO_TCP, option, value)
 
 
 class ModbusBindError(GatewayError, OSError):
@@ -66,7 +106,9 @@ class Counters:
     exceptions: int = 0
     commands_accepted: int = 0
     commands_refused: int = 0
-    bad_frames: int = 0
+    bad_frames: int = 0  # a bad MBAP header, or a frame not finished in time
+    frame_timeouts: int = 0  # frames not finished within modbus.frame_timeout
+    connections_over_limit: int = 0  # closed at accept: modbus.max_connections were open
 
 
 class AccessPolicy:
@@ -120,20 +162,97 @@ class GatewayRequestHandler(ServerRequestHandler):
         super().__init__(owner, *args)  # type: ignore[no-untyped-call]
         self.gateway = owner
         self.client = ""
+        # requests (PDUs) and ready exception replies, in the order they came
+        self._queue: collections.deque[tuple[ModbusPDU, tuple[Any, ...] | None]] = (
+            collections.deque()
+        )
+        self._worker: asyncio.Task[None] | None = None
+        self._paused = False
+        self._rx = b""  # bytes of a request not complete yet (see the module docstring)
+        self._frame_timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         peer = transport.get_extra_info("peername")
         host = str(peer[0]) if peer else ""
-        if not self.gateway.policy.admits(host):
-            self.gateway.refused(host)
+        if not self.gateway.admit(host):
             self.close()  # forget this handler (the transport is not ours yet)
             transport.abort()  # type: ignore[attr-defined]
             return
         self.client = host
         self.gateway.counters.connections_accepted += 1
+        keep_alive(transport.get_extra_info("socket"))
         super().connection_made(transport)
 
+    def data_received(self, data: bytes) -> None:
+        """Frame the complete requests of the stream, up to :data:`PIPELINE_LIMIT` waiting
+        (pymodbus's own reader frames one per read and throws away a read longer than one
+        frame); the rest stays buffered, reading paused, until the queue drains."""
+        self._rx += data
+        used = self.callback_data(self._rx)
+        self._rx = self._rx[used:]
+        self._time_frame(restart=used > 0)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        super().connection_lost(exc)
+        self._stop_frame_timer()
+        self._queue.clear()  # nobody is left to read the replies
+        if self._worker is not None:
+            self._worker.cancel()
+
+    def close(self, reconnect: bool = False) -> None:
+        self._stop_frame_timer()
+        self._rx = b""
+        super().close(reconnect)
+
+    def _time_frame(self, *, restart: bool) -> None:
+        """Time the frame begun in ``_rx`` from its first byte (``restart``: the bytes
+        before it completed a frame). No timer while nothing is pending, or while
+        reading is paused (the rest may be waiting unread in the socket)."""
+        if not self._rx or self._paused or self.transport is None:
+            self._stop_frame_timer()
+        elif restart or self._frame_timer is None:
+            self._stop_frame_timer()
+            timeout = self.gateway.limits.frame_timeout
+            self._frame_timer = self.loop.call_later(timeout, self._frame_timed_out)
+
+    def _stop_frame_timer(self) -> None:
+        if self._frame_timer is not None:
+            self._frame_timer.cancel()
+            self._frame_timer = None
+
+    def _frame_timed_out(self) -> None:
+        self._frame_timer = None
+        if self.transport is None:
+            return
+        self.gateway.counters.bad_frames += 1
+        self.gateway.counters.frame_timeouts += 1
+        log.warning(
+            "Modbus client %s: %d byte(s) of a frame, not the rest within"
+            " modbus.frame_timeout (%g s); closing its connection",
+            self.client,
+            len(self._rx),
+            self.gateway.limits.frame_timeout,
+        )
+        self.close()
+
     def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
+        """Frame every complete request in ``data``, in order; returns the bytes used."""
+        used = 0
+        # bounded: a read holding thousands of requests must not hold the event loop (and
+        # the fieldbus cycles) while they are all decoded
+        while used < len(data) and self.transport is not None:
+            if len(self._queue) >= PIPELINE_LIMIT:
+                break
+            size = self._frame(data[used:], addr)
+            if size == 0:
+                break  # the rest of a frame is still to come
+            used += size
+        if len(self._queue) >= PIPELINE_LIMIT and self.transport is not None:
+            self._paused = True
+            self.transport.pause_reading()  # type: ignore[attr-defined]
+        return used
+
+    def _frame(self, data: bytes, addr: tuple[Any, ...] | None) -> int:
         """Frame one request (replaces pymodbus's, whose error replies lose the function code)."""
         try:
             header = parse_header(data)
@@ -154,21 +273,57 @@ class GatewayRequestHandler(ServerRequestHandler):
                 refusal = ExceptionCode.ILLEGAL_DATA_VALUE  # a served function, malformed PDU
             else:
                 pdu = self.last_pdu
+                self.last_pdu = None
                 if pdu is None:
                     return used
                 refusal = self._pdu_refusal(pdu)
                 if refusal is None:
-                    self.loop.call_soon(self.handle_later)
+                    self._serve(pdu, addr)
                     return used
-                self.last_pdu = None
         response = ExceptionResponse(
             function_code & 0x7F,
             ExcCodes(int(refusal)),
             device_id=header.unit,
             transaction=header.transaction,
         )
-        self.server_send(response, addr)
+        self._serve(response, addr)
         return header.frame_size
+
+    def _serve(self, pdu: ModbusPDU, addr: tuple[Any, ...] | None) -> None:
+        """Answer a request (or send a ready exception reply) after those before it."""
+        if isinstance(pdu, ExceptionResponse) and self._worker is None:
+            self.server_send(pdu, addr)  # nothing before it: at once
+            return
+        self._queue.append((pdu, addr))
+        if self._worker is None:
+            self._worker = self.loop.create_task(self._answer_queued(), name="modbus-requests")
+
+    async def _answer_queued(self) -> None:
+        try:
+            while self._queue:
+                pdu, addr = self._queue.popleft()
+                if isinstance(pdu, ExceptionResponse):
+                    self.server_send(pdu, addr)
+                else:
+                    self.last_pdu, self.last_addr = pdu, addr
+                    await self.handle_request()
+                # a request need not suspend: let the buses and the other clients run
+                # between two of a flood
+                await asyncio.sleep(0)
+                if self._paused and len(self._queue) < PIPELINE_LIMIT // 2:
+                    self._resume()
+        finally:
+            self._worker = None
+
+    def _resume(self) -> None:
+        """Frame what was left buffered, then read again unless that filled the queue."""
+        self._paused = False
+        if self.transport is None:
+            return
+        self.data_received(b"")  # may pause again
+        if not self._paused and self.transport is not None:
+            self.transport.resume_reading()  # type: ignore[attr-defined]
+            self._time_frame(restart=True)  # a frame left half read: from now
 
     def _pdu_refusal(self, pdu: ModbusPDU) -> ExceptionCode | None:
         if not isinstance(pdu, ReadWriteMultipleRegistersRequest):
@@ -201,11 +356,14 @@ class GatewayServer(ModbusTcpServer):
         port: int,
         policy: AccessPolicy,
         counters: Counters,
+        limits: ConnectionLimits,
     ) -> None:
         super().__init__(devices, address=(host, port))
         self.policy = policy
         self.counters = counters
+        self.limits = limits
         self._refused_logged: set[str] = set()
+        self._over_limit_log = WarningRateLimit(OVER_LIMIT_LOG_INTERVAL)
 
     def callback_new_connection(self) -> GatewayRequestHandler:
         return GatewayRequestHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
@@ -214,6 +372,17 @@ class GatewayServer(ModbusTcpServer):
     def connections_open(self) -> int:
         return len(self.active_connections)
 
+    def admit(self, host: str) -> bool:
+        """Whether a new connection from ``host`` may stay (it is already among
+        ``active_connections``); a refusal is counted and logged."""
+        if not self.policy.admits(host):
+            self.refused(host)
+            return False
+        if len(self.active_connections) > self.limits.max_connections:
+            self.over_limit(host)
+            return False
+        return True
+
     def refused(self, host: str) -> None:
         self.counters.connections_refused += 1
         if host in self._refused_logged or len(self._refused_logged) >= REFUSED_LOG_LIMIT:
@@ -221,6 +390,20 @@ class GatewayServer(ModbusTcpServer):
             return
         self._refused_logged.add(host)
         log.warning("refused Modbus client %s (not in modbus.allow)", host)
+
+    def over_limit(self, host: str) -> None:
+        self.counters.connections_over_limit += 1
+        limit = self.limits.max_connections
+        held = self._over_limit_log.admit(self.loop.time())
+        if held is None:
+            log.debug("refused Modbus client %s (modbus.max_connections %d open)", host, limit)
+            return
+        log.warning(
+            "refused Modbus client %s: modbus.max_connections (%d) connections are open%s",
+            host,
+            limit,
+            f"; {held} more refused since the last warning" if held else "",
+        )
 
     async def start(self) -> tuple[str, int]:
         """Listen; returns the bound address. Raises :class:`ModbusBindError`."""

@@ -36,8 +36,15 @@ def config_text(
     command_timeout: float = 0.0,
     gateway_unit: int = 0,
     modbus_enabled: bool = False,
+    frame_timeout: float | None = None,
+    max_connections: int | None = None,
 ) -> str:
     allow_list = ", ".join(f'"{a}"' for a in allow)
+    limits = "".join(
+        f"{key} = {value}\n"
+        for key, value in (("frame_timeout", frame_timeout), ("max_connections", max_connections))
+        if value is not None
+    )
     return f"""
 [gateway]
 shutdown_timeout = 2.0
@@ -50,7 +57,7 @@ bind = "127.0.0.1:{port}"
 allow = [{allow_list}]
 read_only = {"true" if read_only else "false"}
 gateway_unit = {gateway_unit}
-[buses.line1]
+{limits}[buses.line1]
 adapter = "{FAKE}"
 cycle = 0.01
 [[buses.line1.drives]]
