@@ -47,6 +47,7 @@ from gateway.zenoh.session import zenoh_config
 ROOT = Path(__file__).resolve().parents[1]
 PREFIX = "bench"
 DRIVES = 10
+DRIVE_IDS = tuple(f"d{i}" for i in range(DRIVES))  # as an adapter holds them
 FANOUT_SECONDS = 2.0
 COMMANDS = 1000
 COMMAND_PERIOD = 0.002
@@ -193,7 +194,7 @@ async def _gateway_phase(hub: Hub) -> int:
     end = loop.time() + FANOUT_SECONDS
     n = 0
     while loop.time() < end:
-        hub.update(f"d{n % DRIVES}", speed_rpm=float(n % 1800))
+        hub.update(DRIVE_IDS[n % DRIVES], speed_rpm=float(n % 1800))
         n += 1
         if n % DRIVES == 0:
             await asyncio.sleep(0)  # one line cycle: every drive updated, then the loop turns
@@ -217,7 +218,7 @@ async def _hub_alone() -> float:
         end = start + FANOUT_SECONDS
         n = 0
         while loop.time() < end:
-            hub.update(f"d{n % DRIVES}", speed_rpm=float(n % 1800))
+            hub.update(DRIVE_IDS[n % DRIVES], speed_rpm=float(n % 1800))
             n += 1
             if n % DRIVES == 0:
                 await asyncio.sleep(0)

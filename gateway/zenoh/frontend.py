@@ -17,6 +17,14 @@ Threading model and delivery:
   over without waiting, through a latest-per-drive slot for states and
   diagnostics and an ordered queue for the rest. Handing each change to a thread
   instead would starve it of the GIL whenever the loop is busy.
+- A drive's states never go backwards on the wire (``seq`` never decreases for a
+  subscriber). Every put of a drive's state happens under that drive's lock and
+  puts the newest payload known at that moment: the I/O thread takes the lock for
+  its BLOCK put; the loop only tries it. A change the loop could not put because
+  the thread held the lock is put by the thread right after its own put (it looks
+  again once it has let the lock go). A state older than one already handed over
+  (the hub's subscription can lag the hub's newest state, which a heartbeat
+  reads) is never put.
 - Zenoh runs the callbacks (command puts, queries) on its own threads; they copy
   key and payload and hand over with ``loop.call_soon_threadsafe``. A query is
   answered exactly once, from the I/O thread, and then dropped.
@@ -28,6 +36,7 @@ import asyncio
 import contextlib
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -39,7 +48,7 @@ import zenoh
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import EventSubscription, StateSubscription
-from gateway.model import DriveState, Source
+from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
 from gateway.zenoh.link import Incoming, ZenohLink
 from gateway.zenoh.requests import (
@@ -77,6 +86,21 @@ class _Pending:
     answered: bool = False
 
 
+def _endpoints_of(config: Any) -> tuple[str, str, str]:
+    """Mode, listen and connect endpoints as the session really uses them."""
+
+    def text(key: str) -> str:
+        try:
+            value = config.get_json(key)
+        except Exception:  # a key the config does not have
+            return "?"
+        if isinstance(value, dict):  # per-mode endpoints
+            value = sorted({e for v in value.values() for e in v})
+        return ", ".join(value) if isinstance(value, list) and value else str(value or "none")
+
+    return text("mode"), text("listen/endpoints"), text("connect/endpoints")
+
+
 class ZenohFrontEnd:
     """Serves the hub on Zenoh until cancelled; cancellation closes the session cleanly."""
 
@@ -95,6 +119,9 @@ class ZenohFrontEnd:
         self._changes: dict[str, Any] = {}  # drive id -> DROP publisher, used on the loop
         self._changed_at: dict[str, float] = {}  # drives with a change not yet put with BLOCK
         self._confirmed_at: dict[str, float] = {}  # when each drive's state was put with BLOCK
+        # newest (seq, payload) of each drive handed to Zenoh: written on the loop only
+        self._newest: dict[str, tuple[int, bytes]] = {}
+        self._put_locks = {drive_id: threading.Lock() for drive_id in self._drive_ids}
         self._wake = asyncio.Event()
         self._pending: set[_Pending] = set()
         self._requests: set[asyncio.Task[None]] = set()
@@ -125,15 +152,13 @@ class ZenohFrontEnd:
                 )
                 self._serving = True
                 for state in self.hub.states():
-                    self._send_state(state)
+                    self._send_state(state, self._now())
                 await asyncio.wrap_future(self._worker.call(self._io_gateway_token))
                 self.ready.set()
                 log.info(
                     "zenoh front end serving %s/** (mode %s, listen %s, connect %s)",
                     self.keys.prefix,
-                    self.section.mode,
-                    ", ".join(self.section.listen) or "none",
-                    ", ".join(self.section.connect) or "none",
+                    *_endpoints_of(config),
                 )
                 tasks = [
                     asyncio.create_task(self._forward_states(states), name="zenoh-states"),
@@ -189,9 +214,19 @@ class ZenohFrontEnd:
         if self._link is not None:
             self._link.set_live(drive_id, live)
 
-    def _io_publish_state(self, drive_id: str, payload: bytes) -> None:
-        if self._link is not None:
-            self._link.publish_state(drive_id, payload)
+    def _io_publish_state(self, drive_id: str) -> None:
+        """The drive's newest state, with BLOCK, under its lock (see the module notes);
+        again while the loop hands over newer ones it could not put meanwhile."""
+        link = self._link
+        lock = self._put_locks[drive_id]
+        put_seq: int | None = None
+        while link is not None:
+            newest = self._newest.get(drive_id)
+            if newest is None or newest[0] == put_seq:
+                return
+            with lock:
+                put_seq, payload = self._newest[drive_id]
+                link.publish_state(drive_id, payload)
 
     def _io_publish_diag(self, drive_id: str, payload: bytes) -> None:
         if self._link is not None:
@@ -222,30 +257,45 @@ class ZenohFrontEnd:
 
     # ------------------------------------------------------------ publishing (loop)
 
-    def _send_state(self, state: DriveState) -> None:
+    def _send_state(self, state: DriveState, now: float) -> None:
         """A change: put it now with DROP; the newest state follows with BLOCK (settle)."""
-        live = state.online
-        if live != (state.id in self._live):
-            if live:
-                self._live.add(state.id)
-            else:
-                self._live.discard(state.id)
-            self._worker.post(partial(self._io_set_live, state.id, live))
-        publisher = self._changes.get(state.id)
-        if publisher is not None:
+        drive_id = state.id
+        live = state.comm is CommState.ONLINE
+        if live is not (drive_id in self._live):
+            self._set_live(drive_id, live)
+        newest = self._newest.get(drive_id)
+        if newest is not None and state.seq <= newest[0]:
+            return  # a newer state (or this one) was handed over already
+        payload = encode_state(state)
+        self._newest[drive_id] = (state.seq, payload)
+        publisher = self._changes.get(drive_id)
+        lock = self._put_locks.get(drive_id)
+        if publisher is not None and lock is not None and lock.acquire(blocking=False):
             try:
-                publisher.put(encode_state(state))
+                publisher.put(payload)
             except zenoh.ZError as exc:
-                log.debug("state put of %s failed: %s", state.id, exc)
-        if state.id not in self._changed_at:
+                log.debug("state put of %s failed: %s", drive_id, exc)
+            finally:
+                lock.release()
+        changed_at = self._changed_at
+        if drive_id not in changed_at:
             self._wake.set()
-        self._changed_at[state.id] = self._now()
+        changed_at[drive_id] = now
+
+    def _set_live(self, drive_id: str, live: bool) -> None:
+        if live:
+            self._live.add(drive_id)
+        else:
+            self._live.discard(drive_id)
+        self._worker.post(partial(self._io_set_live, drive_id, live))
 
     def _confirm(self, drive_id: str, now: float) -> None:
         """Hand the drive's newest state to the I/O thread, to be put with BLOCK."""
-        payload = encode_state(self.hub.state(drive_id))
-        job = partial(self._io_publish_state, drive_id, payload)
-        self._worker.offer((KeyKind.STATE, drive_id), job)
+        state = self.hub.state(drive_id)
+        newest = self._newest.get(drive_id)
+        if newest is None or state.seq > newest[0]:
+            self._newest[drive_id] = (state.seq, encode_state(state))
+        self._worker.offer((KeyKind.STATE, drive_id), partial(self._io_publish_state, drive_id))
         self._confirmed_at[drive_id] = now
         self._changed_at.pop(drive_id, None)
 
@@ -262,11 +312,13 @@ class ZenohFrontEnd:
         return loop.time() if loop is not None else time.monotonic()
 
     async def _forward_states(self, states: StateSubscription) -> None:
+        send = self._send_state
         while True:
             first = await states.get()
-            self._send_state(first)
+            now = self._now()
+            send(first, now)
             for state in states.drain():
-                self._send_state(state)
+                send(state, now)
 
     async def _forward_events(self, events: EventSubscription) -> None:
         while True:
@@ -308,8 +360,11 @@ class ZenohFrontEnd:
                     *(t + period for t in self._confirmed_at.values()),
                 ]
             )
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a cancellation
+            # that arrives as the wake-up fires, and the shutdown then waits on this task
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), max(0.0, due - self._now()))
+                async with asyncio.timeout(max(0.0, due - self._now())):
+                    await self._wake.wait()
 
     # ------------------------------------------------------------ commands (loop)
 

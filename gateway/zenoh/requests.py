@@ -93,35 +93,51 @@ def _sanitise(obj: Any) -> Any:
 def encode_state(state: DriveState) -> bytes:
     """The published form of a state: ``DriveState.to_json()`` as compact JSON.
 
-    Hot path of the fan-out: each value is turned into its JSON text by a table
-    keyed on its type (the same text ``json.dumps`` writes for it); a value the
-    table does not know falls back to ``to_json`` with every non-finite number
-    made null.
+    Hot path of the fan-out. Each value is turned into its JSON text by a table
+    keyed on its type (the same text ``json.dumps`` writes for it). The texts of
+    the last state encoded for each drive are kept: a state derived from that
+    one (``DriveState.delta``) redoes only the fields given to the hub; any other
+    state reuses the texts of the values that are the very same objects. A value
+    the table does not know falls back to ``to_json`` with every non-finite
+    number made null.
     """
-    values = _STATE_VALUES(state)
     cached = _LAST_TEXT.get(state.id)
     try:
         if cached is None:
-            parts = [key + _TEXT[type(v)](v) for key, v in zip(_STATE_KEYS, values, strict=True)]
-        else:
-            old_values, old_parts = cached
             parts = [
-                old_part if v is old_v else key + _TEXT[type(v)](v)
-                for key, v, old_v, old_part in zip(
-                    _STATE_KEYS, values, old_values, old_parts, strict=True
-                )
+                key + _TEXT[type(v)](v)
+                for key, v in zip(_STATE_KEYS, _STATE_VALUES(state), strict=True)
             ]
+        else:
+            last, parts = cached
+            delta = state.delta()
+            if delta is not None and delta[0] is last:
+                parts = parts.copy()
+                for name, value in delta[1].items():
+                    i = _STATE_INDEX[name]
+                    parts[i] = _STATE_KEYS[i] + _TEXT[type(value)](value)
+            else:
+                parts = _by_identity(state, last, parts)
     except (KeyError, TypeError, ValueError):
         return encode_json(_sanitise(state.to_json()))
     if len(_LAST_TEXT) > _LAST_TEXT_LIMIT:
         _LAST_TEXT.clear()
-    _LAST_TEXT[state.id] = (values, parts)
+    _LAST_TEXT[state.id] = (state, parts)
     return ("{" + ",".join(parts) + "}").encode()
 
 
-_LAST_TEXT: dict[str, tuple[tuple[Any, ...], list[str]]] = {}
-"""Per drive id, the values last encoded and their JSON texts: a field whose value is
-the very same object as last time (states share their unchanged fields) is reused."""
+def _by_identity(state: DriveState, last: DriveState, last_parts: list[str]) -> list[str]:
+    """The texts of ``state``'s fields, reusing those of ``last`` for the very same values."""
+    return [
+        old_part if v is old_v else key + _TEXT[type(v)](v)
+        for key, v, old_v, old_part in zip(
+            _STATE_KEYS, _STATE_VALUES(state), _STATE_VALUES(last), last_parts, strict=True
+        )
+    ]
+
+
+_LAST_TEXT: dict[str, tuple[DriveState, list[str]]] = {}
+"""Per drive id, the state last encoded and the JSON texts of its fields."""
 _LAST_TEXT_LIMIT = 4096
 
 
@@ -134,6 +150,7 @@ def _mapping_text(value: Mapping[str, Any]) -> str:
 
 
 _STATE_KEYS = tuple(_encode_str(name) + ":" for name in _STATE_FIELDS)
+_STATE_INDEX = {name: i for i, name in enumerate(_STATE_FIELDS)}
 _TEXT: dict[type, Callable[[Any], str]] = {
     bool: lambda v: "true" if v else "false",
     int: int.__repr__,

@@ -22,13 +22,15 @@ import threading
 from collections.abc import Callable, Hashable
 from typing import Any, TypeVar
 
+from gateway.errors import GatewayError
+
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 Job = Callable[[], Any]
 
 
-class WorkerStopped(RuntimeError):
+class WorkerStopped(GatewayError, RuntimeError):
     """Work handed to a worker that is stopping or stopped."""
 
 

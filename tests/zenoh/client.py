@@ -111,6 +111,15 @@ class Inbox(Generic[T]):
     async def aget(self, within: float = 5.0) -> T:
         return await asyncio.wait_for(self._async.get(), within)
 
+    async def abatch(self, within: float = 5.0) -> list[T]:
+        """Everything waiting (at least one item, waited for up to ``within``): a reader
+        that keeps up with a fast publisher without one wake-up per item."""
+        items = [await self.aget(within)]
+        queue_ = self._async
+        while not queue_.empty():
+            items.append(queue_.get_nowait())
+        return items
+
     def until(self, predicate: Callable[[T], bool], timeout: float = 5.0) -> T:
         deadline = time.monotonic() + timeout
         while True:

@@ -246,3 +246,68 @@ def test_the_published_state_is_the_model_json() -> None:
     assert json.loads(encode_state(state)) == state.to_json()
     assert json.loads(encode_state(state))["speed_rpm"] is None
     assert encode_json({"x": {1, 2} and object}).startswith(b'{"x":"<class')
+
+
+CHANGES = st.fixed_dictionaries(
+    {},
+    optional={
+        "comm": st.sampled_from(CommState),
+        "status": st.sampled_from(DriveStatus),
+        "running": st.booleans(),
+        "speed_rpm": FLOATS | st.just(math.nan),
+        "current_a": FLOATS,
+        "fault_code": st.none() | st.integers(0, 65535),
+        "fault_text": st.none() | st.text(max_size=8),
+        "seq": st.integers(0, 2**40),
+        "ts": st.floats(0, 2e9),
+        "values": st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+    },
+)
+
+
+def model_json(state: DriveState) -> bytes:
+    doc = {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for k, v in state.to_json().items()
+    }
+    return json.dumps(doc, separators=(",", ":")).encode()
+
+
+@settings(max_examples=100, deadline=None)
+@given(STATES, st.lists(st.tuples(CHANGES, st.booleans()), max_size=8))
+def test_derived_states_encode_exactly_like_the_model_json(
+    first: DriveState, steps: list[tuple[dict[str, Any], bool]]
+) -> None:
+    """The incremental path (a state derived from the one encoded last) and the
+    identity path (encodes skipped in between) give the model's JSON every time."""
+    state = first
+    assert encode_state(state) == model_json(state)
+    for changes, encode in steps:
+        state = state.evolve(changes)
+        if encode:
+            assert encode_state(state) == model_json(state)
+    assert encode_state(state) == model_json(state)
+
+
+def test_a_derived_state_knows_its_parent_only_while_it_lives() -> None:
+    import gc
+
+    base = DriveState(id="d", device=Device.TEST, bus="b", address=1)
+    child = base.evolve({"speed_rpm": 1.0})
+    delta = child.delta()
+    assert delta is not None and delta[0] is base and dict(delta[1]) == {"speed_rpm": 1.0}
+    grandchild = child.evolve({"speed_rpm": 2.0})
+    del delta, child
+    gc.collect()
+    assert grandchild.delta() is None  # a weak reference: states never chain up in memory
+    assert base.delta() is None  # built by its constructor
+
+
+def test_states_still_pickle_and_compare_by_their_fields() -> None:
+    import pickle
+
+    base = DriveState(id="d", device=Device.TEST, bus="b", address=1)
+    child = base.evolve({"speed_rpm": 1.0})
+    again = pickle.loads(pickle.dumps(child))
+    assert again == child == base.changed(speed_rpm=1.0)
+    assert again.delta() is None
