@@ -72,10 +72,13 @@ class Capabilities:
 
     ``speed_scale`` None: the device has no speed (a soft starter).
     ``unsupported``: command field -> the reason it is refused for this drive.
+    ``alarm_texts``: alarm code -> the device's own text, for the alarm events (a code
+    missing here is shown as its number only).
     """
 
     speed_scale: SpeedScale | None = None
     unsupported: Mapping[str, str] = field(default_factory=dict)
+    alarm_texts: Mapping[int, str] = field(default_factory=dict)
 
 
 class HubPort(Protocol):

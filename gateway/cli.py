@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from gateway import __version__
 from gateway.config import DEFAULT_CONFIG, Config, load
@@ -79,9 +79,29 @@ def cmd_run(args: argparse.Namespace) -> int:
         _print_config_errors(exc)
         return 2
     setup_logging(args.log_level or config.gateway.log_level)
+    if args.zenoh_endpoint and config.zenoh.config_file is not None:
+        logging.getLogger("gateway.cli").warning(
+            "--zenoh-endpoint %s is ignored: zenoh.config_file %s sets the endpoints",
+            args.zenoh_endpoint,
+            config.zenoh.config_file,
+        )
     from gateway.daemon import run
 
-    return run(config)
+    _leave_process(run(config))
+
+
+def _leave_process(status: int) -> NoReturn:
+    """End the daemon's process once it has shut down cleanly.
+
+    The Zenoh runtime keeps native threads after its sessions are closed; if the
+    interpreter then finalises while one of them calls back into Python, the process
+    aborts ("FATAL: exception not rethrown", SIGABRT) although the gateway stopped
+    cleanly. Everything the daemon owns is closed by now: flush and leave directly.
+    """
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 # ---------------------------------------------------------------- check-config

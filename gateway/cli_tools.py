@@ -39,7 +39,17 @@ ACTIONS: dict[str, dict[str, Any]] = {
 """``drive-gateway cmd ID ACTION`` -> the JSON command it sends."""
 
 
-def client_config(endpoint: str) -> zenoh.Config:
+def client_config(endpoint: str, config_file: str | None = None) -> zenoh.Config:
+    """A client session: only ``endpoint``, no listening, no scouting.
+
+    With ``config_file`` (JSON5, e.g. with TLS certificates for a secured
+    gateway) that file is the base and ``endpoint`` is added to connect to.
+    """
+    if config_file is not None:
+        conf = zenoh.Config.from_file(config_file)
+        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        return conf
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps("peer"))
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -49,9 +59,12 @@ def client_config(endpoint: str) -> zenoh.Config:
     return conf
 
 
+_CONFIG_FILE: list[str | None] = [None]
+
+
 @contextmanager
 def session(endpoint: str) -> Iterator[zenoh.Session]:
-    s = zenoh.open(client_config(endpoint))
+    s = zenoh.open(client_config(endpoint, _CONFIG_FILE[0]))
     try:
         yield s
     finally:
@@ -61,6 +74,16 @@ def session(endpoint: str) -> Iterator[zenoh.Session]:
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect", default=DEFAULT_CONNECT, help="gateway endpoint")
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="the gateway's zenoh.prefix")
+    p.add_argument(
+        "--zenoh-config",
+        type=_use_config_file,
+        help="a Zenoh JSON5 client config (TLS certificates for a secured gateway)",
+    )
+
+
+def _use_config_file(path: str) -> str:
+    _CONFIG_FILE[0] = path
+    return path
 
 
 def query(endpoint: str, key: str, payload: Any | None = None) -> Any:

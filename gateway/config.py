@@ -4,7 +4,7 @@ Layout (see config/site.example.toml for every key)::
 
     [gateway]            name, log_level, shutdown_timeout, tick
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
-    [modbus]             bind, allow, read_only, gateway_unit
+    [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections
     [buses.<name>]       adapter = "profibus" | "devicenet" | "module:Class",
                          plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -61,6 +61,8 @@ class ModbusSection:
     allow: tuple[IpNetwork, ...] = ()
     read_only: bool = False
     gateway_unit: int = 0
+    frame_timeout: float = 5.0  # s for the rest of a begun frame to arrive
+    max_connections: int = 100  # clients connected at once
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,9 +198,18 @@ def _modbus_section(t: Table) -> ModbusSection:
         allow=tuple(allow),
         read_only=t.boolean("read_only", d.read_only),
         gateway_unit=t.integer("gateway_unit", d.gateway_unit, minimum=0, maximum=255),
+        frame_timeout=_frame_timeout(t, d.frame_timeout),
+        max_connections=t.integer("max_connections", d.max_connections, minimum=1, maximum=1000),
     )
     t.finish()
     return section
+
+
+def _frame_timeout(t: Table, default: float) -> float:
+    value: float = t.number("frame_timeout", default, maximum=3600.0)
+    if value <= 0:
+        raise t.error("frame_timeout", f"must be above 0, not {value:g}")
+    return value
 
 
 # ---------------------------------------------------------------- buses

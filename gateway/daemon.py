@@ -4,7 +4,8 @@ Adapters are found through the name -> "module:Class" table of
 :mod:`gateway.adapter` and front ends through :data:`FRONT_ENDS`, both imported
 lazily. An adapter that crashes is logged with its traceback and restarted with
 back-off while its drives are offline; the rest of the gateway keeps running.
-SIGTERM/SIGINT shut down in order (safety rule 4).
+SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
+restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from typing import Any, Protocol
 
 from gateway import __version__
 from gateway.adapter import DriveAdapter, load_adapter
-from gateway.config import BusConfig, Config
+from gateway.config import BusConfig, Config, load
+from gateway.errors import ConfigError, ConfigErrors
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -35,6 +37,28 @@ FRONT_ENDS: dict[str, str] = {
 """Front-end name (its config section) -> "module:Class"."""
 
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
+DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
+READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
+
+
+class Backoff:
+    """The pause before restarting a crashed task: ``first``, doubling up to ``longest``,
+    and back to ``first`` once a run lasted longer than ``longest`` (it was healthy)."""
+
+    def __init__(
+        self, first: float = RESTART_BACKOFF[0], longest: float = RESTART_BACKOFF[1]
+    ) -> None:
+        self.first = first
+        self.longest = longest
+        self._next = first
+
+    def after_crash(self, ran_for: float) -> float:
+        """The pause to take now, for a run that lasted ``ran_for`` seconds."""
+        if ran_for > self.longest:
+            self._next = self.first
+        pause = self._next
+        self._next = min(pause * 2, self.longest)
+        return pause
 
 
 class FrontEnd(Protocol):
@@ -53,15 +77,26 @@ class Runtime:
     started: float = field(default_factory=time.monotonic)
     version: str = __version__
     restarts: dict[str, int] = field(default_factory=dict)
+    _diag: dict[str, tuple[float, DriveAdapter, dict[str, Any]]] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
     def bus_of(self, drive_id: str) -> str:
         return self.hub.state(drive_id).bus
 
     def drive_diagnostics(self, drive_id: str) -> dict[str, Any]:
-        adapter = self.adapters.get(self.bus_of(drive_id))
+        """One drive's figures. The bus's diagnostics are made once for all its drives
+        (reused for :data:`DIAG_REUSE` s): a heartbeat pass over a line of 64 slaves would
+        otherwise make the whole line's diagnostics 64 times."""
+        bus = self.bus_of(drive_id)
+        adapter = self.adapters.get(bus)
         if adapter is None:
             return {}
-        drives = adapter.diagnostics().get("drives", {})
+        now = time.monotonic()
+        cached = self._diag.get(bus)
+        if cached is None or cached[1] is not adapter or now - cached[0] > DIAG_REUSE:
+            cached = self._diag[bus] = (now, adapter, adapter.diagnostics())
+        drives = cached[2].get("drives", {})
         result: dict[str, Any] = drives.get(drive_id, {})
         return result
 
@@ -127,9 +162,40 @@ class Daemon:
         self._stop = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._adapter_tasks: list[asyncio.Task[None]] = []
+        self.front_ends: dict[str, FrontEnd] = {}
+        """The running instance of each front end (a new one after a restart)."""
+        self._started_front_ends: list[str] = []
+        self.ready = asyncio.Event()
+        """Set when the daemon has reported READY (its front ends serve)."""
 
     def request_stop(self) -> None:
         self._stop.set()
+
+    def check_reload(self) -> None:
+        """SIGHUP: no reload. The running config stays as it is; the file on disk is
+        validated so the operator learns, before a restart, whether it would start."""
+        file = self.config.file
+        try:
+            new = load(file)
+        except (ConfigErrors, ConfigError) as exc:
+            errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
+            log.error(
+                "SIGHUP: configuration is not reloaded; %s has %d error(s), a restart would "
+                "fail; the running configuration stays: %s",
+                file,
+                len(errors),
+                "; ".join(str(e) for e in errors),
+            )
+            return
+        except Exception:
+            log.exception("SIGHUP: configuration is not reloaded; checking %s failed", file)
+            return
+        log.warning(
+            "SIGHUP: configuration is not reloaded; the running configuration stays "
+            "(%s checks ok: %d drive(s); restart the gateway to apply it)",
+            file,
+            len(new.drives),
+        )
 
     # ------------------------------------------------------------ adapters
 
@@ -147,22 +213,24 @@ class Daemon:
         self, what: str, start: Callable[[], Awaitable[None]], on_crash: Callable[[], None]
     ) -> None:
         """Run ``start()`` again and again, with back-off, until cancelled."""
-        pause, longest = RESTART_BACKOFF
+        backoff = Backoff()
         while True:
             started = time.monotonic()
+            error: Exception | None = None
             try:
                 await start()
-                log.error("%s returned; restarting it", what)
             except asyncio.CancelledError:
                 raise
-            except Exception:
-                log.exception("%s crashed; restarting in %.1f s", what, pause)
+            except Exception as exc:
+                error = exc
+            pause = backoff.after_crash(time.monotonic() - started)
+            if error is not None:  # logged with its traceback
+                log.error("%s crashed; restarting in %.1f s", what, pause, exc_info=error)
+            else:
+                log.error("%s returned; restarting in %.1f s", what, pause)
             self.runtime.restarts[what] = self.runtime.restarts.get(what, 0) + 1
             on_crash()
-            if time.monotonic() - started > longest:
-                pause = RESTART_BACKOFF[0]
             await asyncio.sleep(pause)
-            pause = min(pause * 2, longest)
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
         async def start() -> None:
@@ -207,10 +275,14 @@ class Daemon:
             if factory is None:
                 continue
 
-            def start(factory: Callable[[Runtime], FrontEnd] = factory) -> Awaitable[None]:
-                return factory(self.runtime).run()
+            def start(
+                factory: Callable[[Runtime], FrontEnd] = factory, name: str = name
+            ) -> Awaitable[None]:
+                front_end = self.front_ends[name] = factory(self.runtime)
+                return front_end.run()
 
             self._spawn(self._supervise(f"{name} front end", start, lambda: None), name)
+            self._started_front_ends.append(name)
 
     # ------------------------------------------------------------ life cycle
 
@@ -218,10 +290,11 @@ class Daemon:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.request_stop)
+        loop.add_signal_handler(signal.SIGHUP, self.check_reload)
         try:
             return await self._run()
         finally:
-            for sig in (signal.SIGTERM, signal.SIGINT):
+            for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                 loop.remove_signal_handler(sig)
             self.notifier.close()
 
@@ -237,12 +310,45 @@ class Daemon:
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
             self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
+        not_serving = await self._front_ends_serving()
         status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
-        self.notifier.ready(status)
-        log.info("drive-gateway %s running: %s", __version__, status)
+        if not_serving:
+            status += f"; not serving yet: {', '.join(not_serving)}"
+            log.error("front end(s) %s not serving after %g s", ", ".join(not_serving), READY_BOUND)
+        if not self._stop.is_set():
+            self.notifier.ready(status)
+            self.ready.set()
+            log.info("drive-gateway %s running: %s", __version__, status)
         await self._stop.wait()
         await self._shutdown()
         return 0
+
+    async def _front_ends_serving(self) -> list[str]:
+        """Wait until every front end serves (its ``ready`` event), bounded by READY_BOUND;
+        returns the names of those that do not. A front end restarted meanwhile is a
+        new instance: its own event is the one waited for."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + READY_BOUND
+        pending: list[str] = []
+        for name in self._started_front_ends:
+            while not self._stop.is_set():
+                front_end = self.front_ends.get(name)
+                ready = getattr(front_end, "ready", None)
+                if front_end is not None and not isinstance(ready, asyncio.Event):
+                    break  # a front end without a readiness event serves once started
+                if ready is not None and ready.is_set():
+                    break
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    pending.append(name)
+                    break
+                if ready is None:
+                    await asyncio.sleep(0.01)  # its task has not created it yet
+                    continue
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(min(remaining, 0.25)):
+                        await ready.wait()
+        return pending
 
     async def _shutdown(self) -> None:
         """Rule 4: on_shutdown, bounded wait for stopped, then leave the buses."""

@@ -32,6 +32,7 @@ from gateway.errors import (
     UnknownDrive,
 )
 from gateway.model import (
+    STATE_FIELDS,
     CommState,
     ControlMode,
     DesiredCommand,
@@ -60,13 +61,10 @@ class DrivePolicy:
     modbus_unit: int | None = None
 
 
-def _transition_fields_differ(old: DriveState, new: DriveState) -> bool:
-    return (
-        old.comm is not new.comm
-        or old.status is not new.status
-        or old.alarm != new.alarm
-        or old.alarm_code != new.alarm_code
-    )
+_TRANSITION_FIELDS = frozenset({"comm", "status", "alarm", "alarm_code", "fault_code"})
+"""Fields whose change may raise an event or clear run (rule 1)."""
+_HUB_FIELDS = frozenset({"seq", "ts", "control_source"})
+"""Fields the hub sets itself; an adapter's values for them are ignored."""
 
 
 class ParamService(Protocol):
@@ -222,24 +220,35 @@ class Hub:
     def update(self, drive_id: str, **changes: Any) -> DriveState:
         """An adapter reports readings; returns the (possibly new) state.
 
-        Hot path: the changes are compared field by field and the new state is
-        built once; seq grows only when a reading changed.
+        Hot path: one pass keeps the readings that differ (``seq``, ``ts`` and
+        ``control_source`` are the hub's own and ignored), the new state is built
+        once, and seq grows only when a reading changed.
         """
-        drv = self._drive(drive_id)
+        drv = self._drives.get(drive_id)
+        if drv is None:
+            raise UnknownDrive(f"no drive {drive_id!r}")
         old = drv.state
-        if not old.differs(changes):
-            return old
-        changes.pop("seq", None)
-        changes.pop("ts", None)
-        changes.pop("control_source", None)
-        if not old.differs(changes):
+        current = old.__dict__
+        try:
+            delta = {name: value for name, value in changes.items() if current[name] != value}
+        except KeyError:
+            delta = changes  # a name that is no attribute at all: reported just below
+        if not delta.keys() <= STATE_FIELDS:  # also catches the state's private attributes
+            unknown = sorted(changes.keys() - STATE_FIELDS)
+            raise TypeError(f"DriveState has no field(s) {unknown}")
+        if not _HUB_FIELDS.isdisjoint(delta):
+            for name in _HUB_FIELDS:
+                delta.pop(name, None)
+        if not delta:
             return old
         self._seq += 1
-        changes["seq"] = self._seq
-        changes["ts"] = self._wallclock()
-        changes["control_source"] = drv.desired.source
-        new = drv.state = old.evolve(changes)
-        if _transition_fields_differ(old, new):
+        delta["seq"] = self._seq
+        delta["ts"] = self._wallclock()
+        source = drv.desired.source
+        if source is not old.control_source:
+            delta["control_source"] = source
+        new = drv.state = old._derive(delta)
+        if not _TRANSITION_FIELDS.isdisjoint(delta):
             self._on_transitions(drive_id, drv, old, new)
         for sub in tuple(self._state_subs):
             sub._offer(drv.state)
@@ -261,15 +270,24 @@ class Hub:
             if new.comm is CommState.ONLINE:
                 self._clear_run(drive_id, drv, "drive came online")
         if new.faulted and not old.faulted:
-            kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
-            code = "" if new.fault_code is None else f" {new.fault_code}"
-            text = f": {new.fault_text}" if new.fault_text else ""
-            self.event(drive_id, kind, f"{kind.value}{code}{text}", code=new.fault_code)
+            kind = self._fault_event(drive_id, new)
             self._clear_run(drive_id, drv, f"drive {kind.value}")
+        elif new.faulted and new.fault_code is not None and new.fault_code != old.fault_code:
+            # the code came after the fault (read over the bus later): the event with its text
+            self._fault_event(drive_id, new)
         if old.faulted and not new.faulted:
             self.event(drive_id, EventKind.FAULT, "fault cleared")
         if new.alarm and (not old.alarm or new.alarm_code != old.alarm_code):
-            self.event(drive_id, EventKind.ALARM, f"alarm {new.alarm_code}", code=new.alarm_code)
+            known = drv.caps.alarm_texts.get(new.alarm_code) if new.alarm_code else None
+            text = f"alarm {new.alarm_code}" + (f": {known}" if known else "")
+            self.event(drive_id, EventKind.ALARM, text, code=new.alarm_code)
+
+    def _fault_event(self, drive_id: str, new: DriveState) -> EventKind:
+        kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
+        code = "" if new.fault_code is None else f" {new.fault_code}"
+        text = f": {new.fault_text}" if new.fault_text else ""
+        self.event(drive_id, kind, f"{kind.value}{code}{text}", code=new.fault_code)
+        return kind
 
     def _clear_run(self, drive_id: str, drv: _Drive, why: str) -> None:
         if drv.desired.run or drv.desired.jog:

@@ -12,6 +12,8 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
+pytest_plugins = ["pytester"]  # tests/gateway/test_leak_guard.py runs the guard on itself
+
 THREAD_GRACE = 2.0  # seconds a thread the test started may take to finish after it
 
 

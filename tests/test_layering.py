@@ -168,6 +168,41 @@ def test_adapters_import_only_their_package_and_the_adapter_contract() -> None:
     assert violations(rule) == []
 
 
+IO_MODULES: tuple[str, ...] = (*FIELDBUS_LIBS, "asyncio", "socket", "select", "selectors")
+IO_MODULES += ("threading", "time", "subprocess", "zenoh", "pymodbus")
+
+
+def reachable(roots: list[str]) -> set[str]:
+    """The project modules ``roots`` import, directly or through other project modules."""
+    seen: set[str] = set()
+    todo = list(roots)
+    while todo:
+        mod = todo.pop()
+        if mod in seen:
+            continue
+        seen.add(mod)
+        todo.extend(imp for imp in MODULES[mod] if imp in MODULES)
+    return seen
+
+
+def test_engines_are_sans_io_all_the_way_down() -> None:
+    """An engine is stepped with an injected clock: nothing it reaches does I/O or reads
+    the time, and it reaches no link, adapter, simulator or profile."""
+    upper = [f"{pkg}.{n}" for pkg in CODEC_NAMES for n in NON_CODEC_NAMES]
+    bad = []
+    for engine in ENGINE_NAMES:
+        closure = reachable([m for m in MODULES if under(m, engine)])
+        for mod in sorted(closure):
+            for imp in sorted(MODULES[mod]):
+                if under(imp, *IO_MODULES):
+                    bad.append(f"{engine} reaches {mod}, which imports {imp} (I/O or clock)")
+                elif under(imp, "gateway") and not under(imp, "gateway.errors"):
+                    bad.append(f"{engine} reaches {mod}, which imports {imp} (core)")
+            if under(mod, *upper) and not under(mod, engine):
+                bad.append(f"{engine} reaches {mod} (not a codec)")
+    assert bad == []
+
+
 def test_simulators_never_import_engines() -> None:
     def rule(mod: str, imp: str) -> str | None:
         if ".sim" in mod and under(imp, *ENGINE_NAMES):

@@ -101,6 +101,13 @@ BROKEN = [
      "site.toml: buses.l.drives[0].modbus_unit: 0 is below the minimum 1"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nramp = 2\n",
      "site.toml: buses.l.drives[0].ramp: unknown key"),
+    ("[extra]\nx = 1\n", "site.toml: extra: unknown key"),
+    ("buses = 3\n", "site.toml: buses: must be a table, not an integer"),
+    (f"[buses.l]\nadapter = '{FAKE}'\ncylce = 1\n", "site.toml: buses.l.cylce: unknown key"),
+    (f"[buses.l]\nadapter = '{FAKE}'\ndrives = {{ id = 'a' }}\n",
+     "site.toml: buses.l.drives: must be an array of tables ([[buses.l.drives]])"),
+    (f"[modbus]\ngateway_unit = 5\n[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nmodbus_unit = 5\n",
+     "site.toml: modbus.gateway_unit: 5 is also the modbus_unit of drive 'a'"),
 ]  # fmt: skip
 
 

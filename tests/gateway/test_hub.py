@@ -304,3 +304,43 @@ async def test_parameter_writes_only_where_allowed() -> None:
     with pytest.raises(ParameterNotWritable, match="not in writable_params"):
         await hub.write_param("d", 101, 1)
     assert 101 not in params.values
+
+
+def test_update_refuses_unknown_fields_and_ignores_the_hubs_own() -> None:
+    hub, clock = make_hub()
+    before = hub.state("d")
+    with pytest.raises(TypeError, match=r"no field\(s\) \['sped_rpm'\]"):
+        hub.update("d", sped_rpm=1.0)
+    with pytest.raises(TypeError, match="_delta"):
+        hub.update("d", _delta=None)  # the state's private record is no field either
+    assert hub.state("d") is before
+    # seq, ts and control_source are the hub's: an adapter cannot set them
+    assert hub.update("d", seq=999, ts=5.0, control_source=Source.MODBUS) is before
+    clock.t += 1.0
+    after = hub.update("d", seq=999, speed_rpm=12.0)
+    assert after.seq == before.seq + 1 and after.ts == clock.t
+    assert after.control_source is Source.NONE
+    # the new state records what it came from and what changed (for the Zenoh encoder)
+    delta = after.delta()
+    assert delta is not None and delta[0] is before
+    assert set(delta[1]) == {"speed_rpm", "seq", "ts"}
+
+
+def test_watchdog_hold_keeps_the_drive_running_until_the_client_speaks_again() -> None:
+    """hold: the command in force stays (the drive keeps running), control passes to the
+    gateway; the client that comes back takes control anew, so it must say run again."""
+    hub, clock = make_hub(command_timeout=1.0, on_command_timeout=StopAction.HOLD)
+    hub.submit("d", Source.ZENOH, RUN)
+    clock.t += 1.0
+    hub.tick()
+    held = hub.desired("d")
+    assert held.run and held.speed_rpm == 900 and held.source is Source.GATEWAY
+    assert hub.state("d").control_source is Source.GATEWAY  # the state says who holds it
+    hub.refresh("d", Source.ZENOH)  # a keep-alive does not take control back
+    assert hub.desired("d").source is Source.GATEWAY
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=600, run=True))
+    assert hub.desired("d").run and hub.desired("d").source is Source.ZENOH
+    clock.t += 1.0
+    hub.tick()
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=300))  # no run: rule 1
+    assert not hub.desired("d").run

@@ -35,6 +35,7 @@ class FakeDriveOptions:
     rated_rpm: float = 1800.0
     ramp_time: float = 0.5
     start_running: bool = False  # the drive is already turning (local control) at start
+    stuck: bool = False  # the drive ignores every command (a drive that will not stop)
 
 
 PARAM_LIMITS: dict[int, tuple[int, int]] = {100: (0, 9999), 101: (0, 9999), 134: (0, 3600)}
@@ -59,6 +60,7 @@ class FakeAdapter:
             rated_rpm=table.number("rated_rpm", 1800.0, minimum=1.0, maximum=100000.0),
             ramp_time=table.number("ramp_time", 0.5, minimum=0.0, maximum=100.0),
             start_running=table.boolean("start_running", False),
+            stuck=table.boolean("stuck", False),
         )
 
     def __init__(self, bus: BusConfig) -> None:
@@ -134,7 +136,9 @@ class FakeAdapter:
                 hub.event(d.id, EventKind.FAULT, "fault reset sent")
         fault = self.faults.get(d.id)
         was_running = motor.running
-        if fault is not None or want.coast_stop:
+        if d.options.stuck:
+            pass  # deaf to the network: keeps doing what it does
+        elif fault is not None or want.coast_stop:
             motor.coast()
         elif want.run:
             opts: FakeDriveOptions = d.options

@@ -1,0 +1,148 @@
+"""The daemon in-process with simulated devices, driven through a real Zenoh session and
+a real Modbus TCP client (the harness every end-to-end test shares).
+
+The test's Zenoh client listens and the daemon connects to it as it starts, so no retry
+wait slows the start; the daemon's own endpoint is a free loopback port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+from pymodbus.client import AsyncModbusTcpClient
+
+from gateway.config import load
+from gateway.daemon import Daemon
+from gateway.model import DriveState
+from gateway.systemd import Notifier
+from tests.support.net import free_port, zenoh_endpoint
+from tests.zenoh.client import Client
+
+T = TypeVar("T")
+
+PREFIX = "e2e"
+TIMEOUT = 8.0
+RUN, REVERSE, RESET, QUICK_STOP, COAST_STOP = 0x01, 0x02, 0x04, 0x08, 0x10  # docs/modbus-map.md
+
+
+def header(modbus_port: int, client_endpoint: str, tick: float = 0.01) -> str:
+    """The [gateway], [zenoh] and [modbus] tables of an end-to-end config."""
+    return f"""
+[gateway]
+shutdown_timeout = 3.0
+tick = {tick}
+[zenoh]
+prefix = "{PREFIX}"
+heartbeat = 0.2
+connect = ["{client_endpoint}"]
+multicast_scouting = false
+[modbus]
+bind = "127.0.0.1:{modbus_port}"
+allow = ["127.0.0.0/8"]
+"""
+
+
+def parsed(sample: Any) -> DriveState:
+    return DriveState.from_json(sample.json())
+
+
+@dataclass
+class Gateway:
+    daemon: Daemon
+    client: Client
+    modbus: AsyncModbusTcpClient
+
+    def adapter(self, bus: str) -> Any:
+        return self.daemon.runtime.adapters[bus]
+
+    def state_key(self, drive: str) -> str:
+        return f"{PREFIX}/drives/{drive}/state"
+
+    async def command(self, drive: str, payload: dict[str, Any]) -> None:
+        """A command query that the gateway must accept."""
+        reply = await self.client.aone(f"{PREFIX}/drives/{drive}/command", payload)
+        assert reply.json() == {"accepted": True}, reply.json()
+
+    async def refused(self, drive: str, payload: dict[str, Any]) -> str:
+        """A command query that the gateway must refuse: its reason."""
+        reply = await self.client.aone(f"{PREFIX}/drives/{drive}/command", payload)
+        answer = reply.json()
+        assert answer["accepted"] is False, answer
+        reason: str = answer["error"]
+        return reason
+
+    async def param(self, drive: str, number: int, payload: Any = None) -> Any:
+        """A params query: (ok, the JSON reply)."""
+        reply = await self.client.aone(f"{PREFIX}/drives/{drive}/params/{number}", payload)
+        return reply.ok, reply.json()
+
+    async def inputs(self, unit: int, count: int = 21) -> list[int]:
+        rr = await self.modbus.read_input_registers(0, count=count, device_id=unit)
+        assert not rr.isError(), rr
+        return list(rr.registers)
+
+    async def write(self, unit: int, address: int, value: int) -> None:
+        rr = await self.modbus.write_register(address, value, device_id=unit)
+        assert not rr.isError(), rr
+
+    async def wait_for(
+        self, drive: str, predicate: Callable[[DriveState], bool], within: float = TIMEOUT
+    ) -> DriveState:
+        """The hub's state of ``drive`` once ``predicate`` holds."""
+        return await asyncio.wait_for(self.daemon.hub.wait_for(drive, predicate), within)
+
+
+async def for_each(
+    items: Iterable[T], name: Callable[[T], str], check: Callable[[T], Awaitable[None]]
+) -> None:
+    """``check`` every item at once (several drives of one gateway); a failure names its
+    item (the first failure is raised, the others are cancelled)."""
+
+    async def one(item: T) -> None:
+        try:
+            await check(item)
+        except Exception as exc:
+            raise AssertionError(f"{name(item)}: {type(exc).__name__}: {exc}") from exc
+
+    async with asyncio.TaskGroup() as group:
+        for item in items:
+            group.create_task(one(item))
+
+
+@contextlib.asynccontextmanager
+async def running_gateway(
+    tmp_path: Path, buses: Callable[[], str], drives: list[str], tick: float = 0.01
+) -> AsyncIterator[Gateway]:
+    """Start the daemon on ``header + buses()``; yield once every drive in ``drives`` is online."""
+    cfg = tmp_path / "gateway.toml"
+    modbus_port = free_port()
+    client_endpoint = zenoh_endpoint()
+    client = Client(client_endpoint, asyncio.get_running_loop(), listen=True)
+    cfg.write_text(header(modbus_port, client_endpoint, tick) + buses())
+    config = load(cfg).with_overrides(zenoh_endpoint=zenoh_endpoint())
+    daemon = Daemon(config, notifier=Notifier({}))
+    task = asyncio.create_task(daemon.run())
+    modbus = AsyncModbusTcpClient(
+        "127.0.0.1", port=modbus_port, reconnect_delay=0, retries=0, timeout=TIMEOUT
+    )
+    try:
+        with client.liveliness(f"{PREFIX}/gateway") as live:
+            await live.auntil(lambda g: g.put, TIMEOUT)
+        for _ in range(100):
+            if await modbus.connect():
+                break
+            await asyncio.sleep(0.05)
+        for drive in drives:
+            await asyncio.wait_for(daemon.hub.wait_for(drive, lambda s: s.online), TIMEOUT)
+        yield Gateway(daemon, client, modbus)
+    finally:
+        modbus.close()
+        daemon.request_stop()
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(task, 10)
+        client.close()

@@ -1,0 +1,187 @@
+"""End to end: the daemon in-process with a simulated CFW-08 on a python-can ``virtual``
+DeviceNet line (``simulate = true``), commanded and read through Zenoh and Modbus TCP."""
+
+from __future__ import annotations
+
+import time
+import uuid
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest_asyncio
+
+from adapters.devicenet.adapter import DeviceNetAdapter
+from adapters.devicenet.cfw08 import AssemblyPair
+from adapters.devicenet.sim import SimRunner
+from gateway.config import DEFAULT_CONFIG, load
+from gateway.model import CommState, Device
+from tests.e2e.harness import PREFIX, RESET, REVERSE, RUN, TIMEOUT, Gateway, parsed, running_gateway
+
+UNIT = 5
+MAC = 5
+EPR = 0.05
+POLL = 0.01
+
+
+def buses(channel: str) -> str:
+    return f"""
+[buses.dn]
+adapter = "devicenet"
+interface = "virtual"
+channel = "{channel}"
+simulate = true
+poll_interval = {POLL}
+expected_packet_rate = {EPR}
+response_timeout = 0.05
+explicit_timeout = 0.3
+dupmac_timeout = 0.05
+retry_max = 0.3
+[[buses.dn.drives]]
+id = "cfw08"
+device = "CFW-08"
+address = {MAC}
+modbus_unit = {UNIT}
+assembly = 21
+max_rpm = 1800
+writable_params = [100, 313]
+sim_ramp_time = 0.3
+"""
+
+
+@pytest_asyncio.fixture
+async def gateway(tmp_path: Path) -> AsyncIterator[Gateway]:
+    channel = f"e2e-{uuid.uuid4().hex[:8]}"
+    async with running_gateway(tmp_path, lambda: buses(channel), ["cfw08"]) as gw:
+        yield gw
+
+
+def sim(gateway: Gateway) -> SimRunner:
+    adapter = gateway.adapter("dn")
+    assert isinstance(adapter, DeviceNetAdapter) and adapter.sim is not None
+    return adapter.sim
+
+
+def state_key() -> str:
+    return f"{PREFIX}/drives/cfw08/state"
+
+
+async def test_run_speed_reverse_stop_and_fault_reset_by_zenoh(gateway: Gateway) -> None:
+    with gateway.client.subscribe(state_key()) as states:
+        await gateway.client.settled(PREFIX)
+        await gateway.command("cfw08", {"run": True, "speed_rpm": 900})
+        s = parsed(await states.auntil(lambda g: parsed(g).speed_rpm == 900.0, TIMEOUT))
+        assert s.at_reference and (s.speed_rpm, s.speed_ref_rpm, s.status.label) == (
+            900.0,
+            900.0,
+            "running",
+        )
+        assert sim(gateway).node(MAC).drive.motor.speed == 900.0
+        await gateway.command("cfw08", {"direction": "reverse"})
+        s = parsed(await states.auntil(lambda g: parsed(g).speed_rpm == -900.0, TIMEOUT))
+        assert s.direction.value == "reverse" and s.at_reference
+        await gateway.command("cfw08", {"run": False})
+        s = parsed(await states.auntil(lambda g: not parsed(g).running, TIMEOUT))
+        assert s.status.label == "ready"
+        with gateway.client.subscribe(f"{PREFIX}/drives/cfw08/events") as events:
+            await gateway.client.settled(PREFIX)
+            sim(gateway).node(MAC).inject_fault(6)
+            await states.auntil(lambda g: parsed(g).status.label == "faulted", TIMEOUT)
+            await gateway.command("cfw08", {"fault_reset": True})
+            await events.auntil(lambda e: "fault reset sent" in e.json()["text"], TIMEOUT)
+            await events.auntil(lambda e: "after a fault reset" in e.json()["text"], TIMEOUT)
+        s = parsed(
+            await states.auntil(lambda g: parsed(g).online and not parsed(g).faulted, TIMEOUT)
+        )
+        assert not s.running and s.status.label == "ready"
+
+
+async def test_run_speed_reverse_stop_and_fault_reset_by_modbus(gateway: Gateway) -> None:
+    await gateway.write(UNIT, 1, 600)  # speed_ref_rpm
+    await gateway.write(UNIT, 0, 0)  # a new client's first word never starts a drive: 0, then run
+    await gateway.write(UNIT, 0, RUN)
+    s = await gateway.wait_for("cfw08", lambda s: s.speed_rpm == 600.0)
+    assert s.at_reference
+    regs = await gateway.inputs(UNIT)
+    assert regs[0] & 0b10111 == 0b10111  # online, ready, running, at reference
+    assert (regs[2], regs[19], regs[20]) == (600, 4, MAC)  # speed, CFW-08, MAC
+    await gateway.write(UNIT, 0, RUN | REVERSE)
+    await gateway.wait_for("cfw08", lambda s: s.speed_rpm == -600.0)
+    regs = await gateway.inputs(UNIT)
+    assert regs[0] & 0b1000 and regs[2] == (-600) & 0xFFFF
+    await gateway.write(UNIT, 0, 0)
+    await gateway.wait_for("cfw08", lambda s: s.speed_rpm == 0.0)
+    sim(gateway).node(MAC).inject_fault(6)
+    await gateway.wait_for("cfw08", lambda s: s.faulted)
+    assert (await gateway.inputs(UNIT))[0] & 0b100000  # faulted bit
+    await gateway.write(UNIT, 0, RESET)
+    await gateway.wait_for("cfw08", lambda s: not s.online)
+    s = await gateway.wait_for("cfw08", lambda s: s.online)
+    assert not s.faulted and not s.running
+
+
+async def test_parameters_through_zenoh(gateway: Gateway) -> None:
+    c = gateway.client
+    key = f"{PREFIX}/drives/cfw08/params"
+    read = await c.aone(f"{key}/100")
+    assert read.ok and read.json()["value"] == 3  # sim_ramp_time 0.3 s -> P100 = 3 (0.1 s)
+    written = await c.aone(f"{key}/100", {"value": 12})
+    assert written.ok, written.json()
+    assert (await c.aone(f"{key}/100")).json()["value"] == 12
+    assert sim(gateway).node(MAC).drive.params[100] == 12
+    refused = await c.aone(f"{key}/313", {"value": 9})  # P313 is 0-3
+    assert not refused.ok
+    assert refused.json() == {"error": "Invalid attribute value", "code": 9}
+    not_allowed = await c.aone(f"{key}/710", {"value": 0})
+    assert not not_allowed.ok and "writable_params" in not_allowed.json()["error"]
+    missing = await c.aone(f"{key}/99")
+    assert missing.json() == {"error": "Attribute not supported", "code": 0x14}
+
+
+async def test_a_stopped_node_goes_offline_and_comes_back_stopped(gateway: Gateway) -> None:
+    with gateway.client.subscribe(state_key()) as states:
+        await gateway.client.settled(PREFIX)
+        await gateway.command("cfw08", {"run": True, "speed_rpm": 300})
+        await states.auntil(lambda g: parsed(g).running, TIMEOUT)
+        stopped_at = time.monotonic()
+        sim(gateway).power_off(MAC)
+        offline = await states.auntil(lambda g: parsed(g).comm is CommState.OFFLINE, TIMEOUT)
+        # within 4 x EPR plus one poll (and the Zenoh hop)
+        assert offline.at - stopped_at < 4 * EPR + POLL + 0.15
+        sim(gateway).power_on(MAC)
+        back = parsed(await states.auntil(lambda g: parsed(g).online, TIMEOUT))
+        assert not back.running and back.status.label == "ready"
+        assert not gateway.daemon.hub.desired("cfw08").run  # a new run command is needed
+
+
+def demo_devicenet(channel: str) -> str:
+    """The demo's DeviceNet line verbatim (config/demo.toml), on a channel of its own."""
+    text = DEFAULT_CONFIG.read_text()
+    section = text[text.index("[buses.devicenet]") :]
+    assert section.count('channel = "demo-devicenet"') == 1
+    return section.replace('channel = "demo-devicenet"', f'channel = "{channel}"')
+
+
+def test_the_demo_has_the_cfw08_next_to_the_profibus_drives() -> None:
+    config = load(DEFAULT_CONFIG)
+    (line,) = [b for b in config.buses if b.adapter == "devicenet"]
+    (cfw08,) = line.drives
+    assert (cfw08.id, cfw08.device, cfw08.modbus_unit) == ("cfw08", Device.CFW08, 5)
+    assert cfw08.options.assembly is AssemblyPair.EXTENDED  # 21/71
+    assert (line.options.interface, line.options.simulate) == ("virtual", True)
+    profibus = [d.modbus_unit for b in config.buses if b.adapter == "profibus" for d in b.drives]
+    assert profibus and 5 not in profibus
+
+
+async def test_the_demo_line_comes_online(tmp_path: Path) -> None:
+    """What `make run` shows for the CFW-08: online on Zenoh and on Modbus unit 5."""
+    channel = f"demo-{uuid.uuid4().hex[:8]}"
+    async with running_gateway(tmp_path, lambda: demo_devicenet(channel), ["cfw08"]) as gw:
+        with gw.client.subscribe(state_key()) as states:
+            await gw.client.settled(PREFIX)
+            await gw.command("cfw08", {"run": True, "speed_rpm": 300})
+            s = parsed(await states.auntil(lambda g: parsed(g).running, TIMEOUT))
+            assert s.online and s.device is Device.CFW08
+        regs = await gw.inputs(5)
+        assert (regs[19], regs[20]) == (4, 5)  # CFW-08 at MAC 5
+        diag = gw.adapter("devicenet").diagnostics()["drives"]["cfw08"]
+        assert diag["assembly"] == "21/71" and diag["state"] == "online"

@@ -1,0 +1,83 @@
+"""The adapter table: name -> "module:Class", imported only when a config names it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gateway.adapter import ADAPTERS, DriveAdapter, load_adapter
+from gateway.config import BusConfig
+from gateway.errors import AdapterError
+from tests.support.fake_adapter import FakeAdapter, FakeBusOptions
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_table_names_classes_as_strings() -> None:
+    assert set(ADAPTERS) == {"profibus", "devicenet"}
+    for target in ADAPTERS.values():
+        module, _, cls = target.partition(":")
+        assert module.startswith("adapters.") and cls.isidentifier()
+
+
+def test_the_core_imports_no_adapter_until_one_is_loaded() -> None:
+    probe = (
+        "import json, sys\n"
+        "import gateway.cli, gateway.config, gateway.daemon, gateway.hub\n"
+        "import gateway.zenoh.frontend, gateway.modbus.frontend\n"
+        # pyserial is imported by pymodbus itself (its serial transports), not by the core
+        "before = sorted(m for m in sys.modules if m.split('.')[0] in ('adapters', 'can', 'canopen'))\n"
+        "from gateway.adapter import load_adapter\n"
+        "cls = load_adapter('profibus')\n"
+        "after = 'adapters.profibus.adapter' in sys.modules\n"
+        "print(json.dumps([before, after, cls.__module__]))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    )
+    before, after, module = json.loads(out.stdout)
+    assert before == []
+    assert after and module == "adapters.profibus.adapter"
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_every_registered_adapter_has_the_class_side(name: str) -> None:
+    cls = load_adapter(name)
+    assert cls.devices and len(cls.address_range) == 2
+    assert callable(cls.parse_bus_options) and callable(cls.parse_drive_options)
+
+
+def test_a_module_class_path_loads_a_plugin_and_it_is_a_drive_adapter() -> None:
+    cls = load_adapter("tests.support.fake_adapter:FakeAdapter")
+    assert cls is FakeAdapter
+    adapter = FakeAdapter(BusConfig(name="x", adapter="fake", options=FakeBusOptions()))
+    assert isinstance(adapter, DriveAdapter)
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("canbus", "unknown adapter 'canbus' (known: devicenet, profibus, or 'module:Class')"),
+        (
+            "tests.not_there:X",
+            "adapter 'tests.not_there:X' is not available: No module named 'tests.not_there'",
+        ),
+        (
+            "tests.support.fake_adapter:Nope",
+            "adapter 'tests.support.fake_adapter:Nope': tests.support.fake_adapter has no Nope",
+        ),
+    ],
+)
+def test_load_errors_say_what_is_wrong(name: str, message: str) -> None:
+    with pytest.raises(AdapterError) as err:
+        load_adapter(name)
+    assert str(err.value) == message

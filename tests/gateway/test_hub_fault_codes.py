@@ -1,0 +1,44 @@
+"""Fault and alarm events carry the device's meaning: a fault code the drive gives only
+later (read over the bus after the status word said "fault") gets its own event, and an
+alarm event names the alarm's text from the adapter's table."""
+
+from __future__ import annotations
+
+from gateway.adapter import Capabilities, EventKind
+from gateway.hub import DrivePolicy, Hub
+from gateway.model import CommState, Device, DriveState, DriveStatus
+
+
+def test_a_fault_code_that_comes_later_gets_its_own_event() -> None:
+    hub = Hub(clock=lambda: 0.0, wallclock=lambda: 0.0)
+    hub.add_drive(DriveState(id="d", device=Device.CFW320, bus="b", address=5), DrivePolicy())
+    hub.update("d", comm=CommState.ONLINE, status=DriveStatus.READY)
+    with hub.subscribe_events() as sub:
+        hub.update("d", status=DriveStatus.FAULTED)  # the status word's fault bit only
+        hub.update("d", fault_code=32, fault_text="Comm. plug-in module communication lost")
+        hub.update("d", current_a=0.0)  # other readings while faulted: no new fault event
+        hub.update("d", status=DriveStatus.READY, fault_code=None, fault_text=None)
+        faults = [(e.text, e.data) for e in sub.drain() if e.kind is EventKind.FAULT]
+    assert faults == [
+        ("fault", {"code": None}),
+        ("fault 32: Comm. plug-in module communication lost", {"code": 32}),
+        ("fault cleared", {}),
+    ]
+
+
+def test_an_alarm_event_has_the_devices_text_when_its_adapter_gives_one() -> None:
+    hub = Hub(clock=lambda: 0.0, wallclock=lambda: 0.0)
+    hub.add_drive(DriveState(id="d", device=Device.CFW700, bus="b", address=4), DrivePolicy())
+    hub.set_capabilities("d", Capabilities(alarm_texts={139: "Profibus DP interface offline"}))
+    hub.update("d", comm=CommState.ONLINE, status=DriveStatus.READY)
+    with hub.subscribe_events() as sub:
+        hub.update("d", alarm=True)  # the status word's alarm bit, the code read later
+        hub.update("d", alarm_code=139)
+        hub.update("d", alarm=False, alarm_code=None)
+        hub.update("d", alarm=True, alarm_code=140)  # not in the table: its number only
+        alarms = [(e.text, e.data) for e in sub.drain() if e.kind is EventKind.ALARM]
+    assert alarms == [
+        ("alarm None", {"code": None}),
+        ("alarm 139: Profibus DP interface offline", {"code": 139}),
+        ("alarm 140", {"code": 140}),
+    ]
