@@ -182,8 +182,10 @@ class Client:
         data = None
         if payload is not None:
             data = payload if isinstance(payload, bytes) else json.dumps(payload).encode()
+        # indirect=False: run on Zenoh's thread. The default starts a Python thread per
+        # get, which under the soak's query rate cost CPU and left native memory behind.
         handler: zenoh.handlers.Callback[zenoh.Reply] = zenoh.handlers.Callback(
-            lambda r: replies.append(_copy_reply(r)), lambda: on_done(replies)
+            lambda r: replies.append(_copy_reply(r)), lambda: on_done(replies), indirect=False
         )
         self.session.get(selector, handler, payload=data, timeout=10.0)
 
