@@ -16,6 +16,7 @@ from typing import Any, TypeVar
 
 from pymodbus.client import AsyncModbusTcpClient
 
+from adapters.profibus.sim.slave import SlaveCounters
 from gateway.config import load
 from gateway.daemon import Daemon
 from gateway.model import DriveState
@@ -45,6 +46,33 @@ multicast_scouting = false
 bind = "127.0.0.1:{modbus_port}"
 allow = ["127.0.0.0/8"]
 """
+
+
+# The simulated Profibus line of the end-to-end suites: 1.5 Mbit/s on a pty, timings short
+# enough for seconds-long tests, the live list off.
+_SIM_PROFIBUS = """adapter = "profibus"
+simulate = true
+baudrate = 1500000
+watchdog = 0.5
+latency = 0.02
+cycle_time = 0.002
+absent_retry = 0.1
+fault_retry = 0.2
+"""
+
+
+def simulated_profibus(bus: str, **extra: float) -> str:
+    """The ``[buses.<bus>]`` table of a simulated Profibus line (``extra``: more keys)."""
+    more = "".join(f"{key} = {value}\n" for key, value in extra.items())
+    return f"\n[buses.{bus}]\n{_SIM_PROFIBUS}{more}live_list_period = 0.0\n"
+
+
+async def exchanges(counters: SlaveCounters, n: int) -> None:
+    """Until a simulated slave has exchanged ``n`` more telegrams with the master."""
+    target = counters.exchanges + n
+    async with asyncio.timeout(TIMEOUT):
+        while counters.exchanges < target:  # noqa: ASYNC110 (a simulator counter: no event)
+            await asyncio.sleep(0.005)
 
 
 def parsed(sample: Any) -> DriveState:

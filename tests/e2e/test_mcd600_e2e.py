@@ -22,7 +22,17 @@ from adapters.mcd600.sim import Mcd600Sim
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.slave import DpSlave
 from gateway.model import DriveState, DriveStatus
-from tests.e2e.harness import PREFIX, RESET, RUN, TIMEOUT, Gateway, parsed, running_gateway
+from tests.e2e.harness import (
+    PREFIX,
+    RESET,
+    RUN,
+    TIMEOUT,
+    Gateway,
+    exchanges,
+    parsed,
+    running_gateway,
+    simulated_profibus,
+)
 from tests.zenoh.client import Got, Inbox
 
 BUS = "pb"
@@ -40,18 +50,9 @@ STOP_TIME = 9
 
 
 def buses() -> str:
-    return f"""
-[buses.{BUS}]
-adapter = "profibus"
-simulate = true
-baudrate = 1500000
-watchdog = 0.5
-latency = 0.02
-cycle_time = 0.002
-absent_retry = 0.1
-fault_retry = 0.2
-live_list_period = 0.0
-
+    return (
+        simulated_profibus(BUS)
+        + f"""
 [[buses.{BUS}.drives]]
 id = "{WEG_ID}"
 device = "CFW320"
@@ -82,6 +83,7 @@ modbus_unit = {OTHER_UNIT}
 mode = "extended"
 request_period = 0.005
 """
+    )
 
 
 @pytest_asyncio.fixture
@@ -110,11 +112,7 @@ def sim_pct(gw: Gateway) -> float:
 
 async def bus_cycles(gw: Gateway, n: int) -> None:
     """Until the starter has exchanged ``n`` more telegrams with the master."""
-    counters = slave(gw).counters
-    target = counters.exchanges + n
-    async with asyncio.timeout(TIMEOUT):
-        while counters.exchanges < target:  # noqa: ASYNC110 (a simulator counter, no event)
-            await asyncio.sleep(0.005)
+    await exchanges(slave(gw).counters, n)
 
 
 class Statuses:

@@ -34,9 +34,11 @@ from tests.e2e.harness import (
     RUN,
     TIMEOUT,
     Gateway,
+    exchanges,
     for_each,
     parsed,
     running_gateway,
+    simulated_profibus,
 )
 from tests.zenoh.client import Got, Inbox
 
@@ -117,19 +119,7 @@ startup_params = {{ P0100 = {RAMP_P0100}, P0101 = {RAMP_P0100}, {NETWORK}{extra.
 """
         for m in MODELS
     )
-    return f"""
-[buses.{BUS}]
-adapter = "profibus"
-simulate = true
-baudrate = 1500000
-watchdog = 0.5
-latency = 0.02
-cycle_time = 0.002
-absent_retry = 0.1
-fault_retry = 0.2
-acyclic_timeout = 0.5
-live_list_period = 0.0
-{drives}"""
+    return simulated_profibus(BUS, acyclic_timeout=0.5) + drives
 
 
 @pytest_asyncio.fixture
@@ -175,11 +165,7 @@ def cycle_max(gw: Gateway) -> float:
 
 async def bus_cycles(gw: Gateway, model: Model, n: int) -> None:
     """Until the drive has exchanged ``n`` more telegrams with the master."""
-    counters = slave(gw, model).counters
-    target = counters.exchanges + n
-    async with asyncio.timeout(TIMEOUT):
-        while counters.exchanges < target:  # noqa: ASYNC110 (a simulator counter: no event)
-            await asyncio.sleep(0.005)
+    await exchanges(slave(gw, model).counters, n)
 
 
 def follows(gw: Gateway, sent_at: float, got: Got, ramp_time: float) -> None:
