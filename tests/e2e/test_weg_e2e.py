@@ -45,10 +45,8 @@ from tests.zenoh.client import Got, Inbox
 BUS = "pb"
 RAMP_P0100 = 3  # P0100 = P0101 = 0.3 s from 0 to P0134 = 1800 rpm: 6000 rpm/s
 SLOPE = 1800.0 / (RAMP_P0100 / 10.0)  # rpm/s
-# What the published state may lag behind the drive's ramp besides two bus cycles: the
-# command's Zenoh or Modbus hop, the hub, the publication and the scheduling of a loaded
-# test machine. A drive that ignored its ramp (20 s by default) fails it.
-SLACK = 0.4
+# A drive that ignored the demo's ramp (20 s by default) runs past the wait (TIMEOUT);
+# one that ignored ramps altogether arrives before 0.9 x the ramp time.
 
 
 @dataclass(frozen=True)
@@ -157,23 +155,16 @@ def now() -> float:
     return asyncio.get_running_loop().time()
 
 
-def cycle_max(gw: Gateway) -> float:
-    """The longest bus cycle the master measured so far, in s."""
-    cycle = gw.adapter(BUS).diagnostics()["cycle_ms"]
-    return float(cycle["max"]) / 1e3 if cycle else 0.0
-
-
 async def bus_cycles(gw: Gateway, model: Model, n: int) -> None:
     """Until the drive has exchanged ``n`` more telegrams with the master."""
     await exchanges(slave(gw, model).counters, n)
 
 
-def follows(gw: Gateway, sent_at: float, got: Got, ramp_time: float) -> None:
-    """The sample ``got`` came within the ramp time plus two bus cycles (and the slack),
-    and not before the drive could have ramped."""
+def follows(sent_at: float, got: Got, ramp_time: float) -> None:
+    """The sample ``got`` did not come before the drive could have ramped. How late it
+    may come is bounded by the wait; latency is a benchmark figure (`make bench`)."""
     elapsed = got.at - sent_at
-    bound = ramp_time + 2 * cycle_max(gw) + SLACK
-    assert 0.9 * ramp_time <= elapsed <= bound, f"{elapsed:.3f} s for a {ramp_time} s ramp"
+    assert elapsed >= 0.9 * ramp_time, f"{elapsed:.3f} s for a {ramp_time} s ramp"
 
 
 async def ramp(
@@ -198,7 +189,7 @@ async def ramp(
     sent_at = time.monotonic()
     await send()
     got = await states.auntil(arrived, TIMEOUT)
-    follows(gw, sent_at, got, abs(target - start) / SLOPE)
+    follows(sent_at, got, abs(target - start) / SLOPE)
     between = [v for v in seen if min(start, target) < v < max(start, target)]
     assert len(between) >= 3, f"a jump, not a ramp: {seen}"
     # the published speed is the 13-bit word's: the motor is within one step of it
@@ -215,7 +206,7 @@ async def stop(
     got = await states.auntil(
         lambda g: parsed(g).speed_rpm == 0.0 and parsed(g).status is DriveStatus.READY, TIMEOUT
     )
-    follows(gw, sent_at, got, abs(start) / SLOPE)
+    follows(sent_at, got, abs(start) / SLOPE)
     s = parsed(got)
     assert not s.running and not s.at_reference
     return s

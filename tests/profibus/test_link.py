@@ -224,7 +224,7 @@ async def test_the_driver_keeps_the_idle_time_before_a_request() -> None:
             engine.queue.append(Transmit(b"\x01", soon))
             driver.poke()
             assert loop.time() >= soon
-            later = loop.time() + 0.02  # slept on a timer: the loop goes on meanwhile
+            later = loop.time() + 0.25  # slept on a timer: the loop goes on meanwhile
             engine.queue.append(Transmit(b"\x02", later))
             driver.poke()
             assert loop.time() < later

@@ -46,7 +46,13 @@ async def test_thirty_two_slaves_reach_data_exchange() -> None:
         diag = line.adapter.diagnostics()
         assert diag["live_list"] == addresses
         assert all(d["state"] == "data_exchange" for d in diag["drives"].values())
-        assert diag["cycle_ms"]["median"] < 100
+        # one cycle polls every slave once: while the first slave exchanges 5 more
+        # telegrams, every other one exchanges at least 3 (the cycle time itself is a
+        # benchmark figure, `make bench`, not a test)
+        before = {a: line.sim[a].counters.exchanges for a in addresses}
+        await until(lambda: line.sim[3].counters.exchanges >= before[3] + 5, limit=30.0)
+        more = {a: line.sim[a].counters.exchanges - before[a] for a in addresses}
+        assert min(more.values()) >= 3, more
         # outputs out and inputs back for every slave, each with its own values
         for a in addresses:
             line.hub.submit(f"d{a}", Source.ZENOH, DriveCommand(run=True, speed_rpm=10.0 * a))
