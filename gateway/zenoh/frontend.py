@@ -259,28 +259,36 @@ class ZenohFrontEnd:
 
     def _send_state(self, state: DriveState, now: float) -> None:
         """A change: put it now with DROP; the newest state follows with BLOCK (settle)."""
+        if self._prepare(state, now):
+            self._put_change(state.id)
+
+    def _prepare(self, state: DriveState, now: float) -> bool:
+        """Encode a change to be put (False: a newer state was handed over already)."""
         drive_id = state.id
         live = state.comm is CommState.ONLINE
         if live is not (drive_id in self._live):
             self._set_live(drive_id, live)
         newest = self._newest.get(drive_id)
         if newest is not None and state.seq <= newest[0]:
-            return  # a newer state (or this one) was handed over already
-        payload = encode_state(state)
-        self._newest[drive_id] = (state.seq, payload)
-        publisher = self._changes.get(drive_id)
-        lock = self._put_locks.get(drive_id)
-        if publisher is not None and lock is not None and lock.acquire(blocking=False):
-            try:
-                publisher.put(payload)
-            except zenoh.ZError as exc:
-                log.debug("state put of %s failed: %s", drive_id, exc)
-            finally:
-                lock.release()
+            return False
+        self._newest[drive_id] = (state.seq, encode_state(state))
         changed_at = self._changed_at
         if drive_id not in changed_at:
             self._wake.set()
         changed_at[drive_id] = now
+        return True
+
+    def _put_change(self, drive_id: str) -> None:
+        """The drive's newest payload with DROP, unless the I/O thread is putting it."""
+        publisher = self._changes.get(drive_id)
+        lock = self._put_locks.get(drive_id)
+        if publisher is not None and lock is not None and lock.acquire(blocking=False):
+            try:
+                publisher.put(self._newest[drive_id][1])
+            except zenoh.ZError as exc:
+                log.debug("state put of %s failed: %s", drive_id, exc)
+            finally:
+                lock.release()
 
     def _set_live(self, drive_id: str, live: bool) -> None:
         if live:
@@ -312,13 +320,15 @@ class ZenohFrontEnd:
         return loop.time() if loop is not None else time.monotonic()
 
     async def _forward_states(self, states: StateSubscription) -> None:
-        send = self._send_state
+        prepare, put = self._prepare, self._put_change
         while True:
             first = await states.get()
             now = self._now()
-            send(first, now)
-            for state in states.drain():
-                send(state, now)
+            batch = [first, *states.drain()]  # at most one state per drive (conflating)
+            # encode every change first, then put them back to back: Zenoh batches
+            # puts that follow each other closely into fewer transmissions
+            for drive_id in [state.id for state in batch if prepare(state, now)]:
+                put(drive_id)
 
     async def _forward_events(self, events: EventSubscription) -> None:
         while True:
