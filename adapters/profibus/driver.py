@@ -26,6 +26,7 @@ from .master import Event, LineNoise, Received, Receiving, Transmit
 log = logging.getLogger(__name__)
 
 SPIN_LIMIT: Final = 0.001  # s: shorter waits before a request are spun, longer ones slept
+_TELEGRAMS: Final = (DataTelegram, ShortAck, TokenTelegram)
 
 
 class Engine(Protocol):
@@ -145,7 +146,7 @@ class LineDriver:
                 return out
             if isinstance(item, Discarded):
                 out.append(LineNoise(item.error))
-            elif isinstance(item, DataTelegram | ShortAck | TokenTelegram):
+            elif isinstance(item, _TELEGRAMS):
                 out.append(Received(item))
 
     # ------------------------------------------------------------------ sending

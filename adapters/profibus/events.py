@@ -23,6 +23,8 @@ from .fdl import MAX_STATION, DataTelegram, ShortAck, TokenTelegram
 class SlaveState(Enum):
     """Where the master is with one slave (fact sheet 1.5 master steps)."""
 
+    __hash__ = object.__hash__  # members are their own identity: a C hash, not Enum's
+
     WAIT_DIAG = "wait_diag"  # step 2: Slave_Diag until a valid reply
     SET_PRM = "set_prm"  # step 3
     CHK_CFG = "chk_cfg"  # step 4
@@ -36,12 +38,16 @@ class SlaveState(Enum):
 class LineMode(Enum):
     """What Global_Control tells the slaves (fact sheet 1.9), and what outputs they get."""
 
+    __hash__ = object.__hash__  # members are their own identity: a C hash, not Enum's
+
     OPERATE = "operate"
     CLEAR = "clear"  # Clear_Data; outputs all zero (1.5 step 6)
 
 
 class Purpose(Enum):
     """What a request on the line is for."""
+
+    __hash__ = object.__hash__  # members are their own identity: a C hash, not Enum's
 
     DIAG = "diag"
     SET_PRM = "set_prm"

@@ -616,12 +616,18 @@ class FcbState:
 
     def fc(self, function: RequestFunction) -> RequestFc:
         """FC for the next request; FCB functions carry the state, others carry none."""
-        if function in FCB_FUNCTIONS:
-            return RequestFc(function, self.fcb, self.fcv)
-        return RequestFc(function)
+        key = (function, self.fcb, self.fcv)
+        fc = _FC_MEMO.get(key)
+        if fc is None:  # RequestFc is immutable: one instance per combination
+            if function in FCB_FUNCTIONS:
+                fc = RequestFc(function, self.fcb, self.fcv)
+            else:
+                fc = RequestFc(function)
+            fc = _FC_MEMO.setdefault(key, fc)
+        return fc
 
     def acknowledged(self) -> FcbState:
-        return FcbState(fcb=not self.fcb, fcv=True)
+        return _ACKNOWLEDGED[self.fcb]
 
     @staticmethod
     def reset() -> FcbState:
@@ -630,6 +636,11 @@ class FcbState:
     @staticmethod
     def unsequenced(function: RequestFunction) -> RequestFc:
         return RequestFc(function)
+
+
+_FC_MEMO: dict[tuple[RequestFunction, bool, bool], RequestFc] = {}
+_ACKNOWLEDGED: Final = {fcb: FcbState(fcb=not fcb, fcv=True) for fcb in (False, True)}
+"""The state after an acknowledged SRD (the state is immutable: two instances serve)."""
 
 
 @dataclass(frozen=True)

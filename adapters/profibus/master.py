@@ -441,7 +441,9 @@ class Master:
             self.stats.unexpected += 1  # e.g. a late reply to an earlier request
             return
         self._pending = None
-        self._idle_since = now
+        # never before the end of our own request: a stray reply seen while it was still
+        # going out (a late answer, noise) must not shorten the idle time before the next
+        self._idle_since = max(self._idle_since, now)
         if pending.purpose is Purpose.STATUS:
             self._on_status_reply(pending, telegram)
             return
@@ -453,7 +455,7 @@ class Master:
 
     def _on_timeout(self, pending: _Pending, now: float) -> None:
         self._pending = None
-        self._idle_since = now
+        self._idle_since = max(self._idle_since, now)
         if pending.purpose is Purpose.STATUS:  # a live-list probe: silence is an answer
             self._stations.pop(pending.address, None)
             return
@@ -869,7 +871,9 @@ class Master:
         if not fresh:
             pending.tries += 1
         pending.sent_at = not_before
-        pending.deadline = not_before + self.bus.tx_time(len(pending.data)) + self.bus.reply_wait
+        sent = not_before + self.bus.tx_time(len(pending.data))
+        self._idle_since = sent  # 1.1: the line is ours until the request's last bit
+        pending.deadline = sent + self.bus.reply_wait
         self._pending = pending
         self._cycle_sent += 1
         self.stats.telegrams += 1

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from adapters.profibus.errors import DecodeFailure, FdlDecodeError
@@ -86,12 +86,19 @@ def test_present_slaves_reach_data_exchange_whatever_is_lost(
 
 @FAST
 @given(noise=st.floats(0.0, 0.02), seed=st.integers(0, 99))
+# a garbled reply seen while the next request was still going out: that request's end,
+# not the reply, starts the idle time before the one after it (found by this test)
+@example(noise=0.02, seed=39)
+# a slave absent at start: up after a few probes, later than the first second
+@example(noise=0.019266597500388397, seed=64)
 def test_line_rules_hold_under_noise(noise: float, seed: int) -> None:
     master = Master(FAST_BUS, [echo_params(a) for a in (5, 6, 7)])
     line = echo_line([5, 6, 7])
     line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
     w = Wire(master, line)
-    w.run(1.0)
+    # Up to 2 % of the bytes garbled: a slave can go absent at start (every try lost) and
+    # is then probed every absent_retry (0.2 s), so it may take a few seconds of line time.
+    w.run_until(lambda: {a.address for a in w.of(SlaveUp)} == {5, 6, 7}, 10.0)
     check_line_rules(w)
     assert {a.address for a in w.of(SlaveUp)} == {5, 6, 7}
 
