@@ -23,8 +23,13 @@ Threading model and delivery:
   its BLOCK put; the loop only tries it. A change the loop could not put because
   the thread held the lock is put by the thread right after its own put (it looks
   again once it has let the lock go). A state older than one already handed over
-  (the hub's subscription can lag the hub's newest state, which a heartbeat
-  reads) is never put.
+  is never put.
+- Every state the hub's subscription yields gets its own put (on an uncongested
+  link every committed state arrives, unless the same drive changed twice in one
+  turn of the loop: the subscription keeps the newest). The settle and heartbeat
+  puts repeat the newest state already put, never one still waiting in the
+  subscription, which could otherwise be replaced in the I/O slot before the
+  thread ran and never reach the wire.
 - Zenoh runs the callbacks (command puts, queries) on its own threads; they copy
   key and payload and hand over with ``loop.call_soon_threadsafe``. A query is
   answered exactly once, from the I/O thread, and then dropped.
@@ -118,6 +123,8 @@ class ZenohFrontEnd:
         self._live: set[str] = set()
         self._changes: dict[str, Any] = {}  # drive id -> DROP publisher, used on the loop
         self._changed_at: dict[str, float] = {}  # drives with a change not yet put with BLOCK
+        # the hub's conflating view this front end reads (for tests that count what it took)
+        self.state_subscription: StateSubscription | None = None
         self._confirmed_at: dict[str, float] = {}  # when each drive's state was put with BLOCK
         # newest (seq, payload) of each drive handed to Zenoh: written on the loop only
         self._newest: dict[str, tuple[int, bytes]] = {}
@@ -147,6 +154,7 @@ class ZenohFrontEnd:
         tasks: list[asyncio.Task[None]] = []
         try:
             with self.hub.subscribe_states() as states, self.hub.subscribe_events() as events:
+                self.state_subscription = states
                 self._changes = await asyncio.wrap_future(
                     self._worker.call(partial(self._io_open, config))
                 )
@@ -179,8 +187,12 @@ class ZenohFrontEnd:
         for task in pending_tasks:
             task.cancel()
         await asyncio.gather(*pending_tasks, return_exceptions=True)
-        for drive_id in list(self._changed_at):
-            self._confirm(drive_id, 0.0)  # the last word goes out before the session closes
+        for drive_id in self._drive_ids:  # the last word goes out before the session closes
+            newest = self._newest.get(drive_id)
+            if drive_id in self._changed_at or (
+                newest is not None and self.hub.state(drive_id).seq > newest[0]
+            ):
+                self._confirm(drive_id, 0.0, from_hub=True)
         for pending in list(self._pending):
             self._answer(pending, [Answer.refusal("the gateway is shutting down")])
         done = self._worker.stop(final=self._io_close)
@@ -297,12 +309,20 @@ class ZenohFrontEnd:
             self._live.discard(drive_id)
         self._worker.post(partial(self._io_set_live, drive_id, live))
 
-    def _confirm(self, drive_id: str, now: float) -> None:
-        """Hand the drive's newest state to the I/O thread, to be put with BLOCK."""
-        state = self.hub.state(drive_id)
+    def _confirm(self, drive_id: str, now: float, *, from_hub: bool = False) -> None:
+        """Hand the drive's newest state put so far to the I/O thread, to be put with BLOCK.
+
+        Not a newer state still waiting in the hub's subscription: that one is put with
+        DROP when the subscription yields it (and confirmed once settled); taken here, it
+        would reach Zenoh only through the I/O slot, where a newer one can replace it
+        before the thread runs. ``from_hub`` (shutdown, the subscription is closed): the
+        hub's newest state.
+        """
         newest = self._newest.get(drive_id)
-        if newest is None or state.seq > newest[0]:
-            self._newest[drive_id] = (state.seq, encode_state(state))
+        if newest is None or from_hub:
+            state = self.hub.state(drive_id)
+            if newest is None or state.seq > newest[0]:
+                self._newest[drive_id] = (state.seq, encode_state(state))
         self._worker.offer((KeyKind.STATE, drive_id), partial(self._io_publish_state, drive_id))
         self._confirmed_at[drive_id] = now
         self._changed_at.pop(drive_id, None)
@@ -476,7 +496,9 @@ class ZenohFrontEnd:
         if parsed.drive_id not in self._drive_ids:
             self._refuse(pending, f"no drive {parsed.drive_id!r}")
             return
-        task = asyncio.create_task(self._serve_param(pending, parsed.drive_id, req))
+        task = asyncio.create_task(
+            self._serve_param(pending, parsed.drive_id, req), name=f"zenoh-param-{parsed.drive_id}"
+        )
         self._requests.add(task)
         task.add_done_callback(self._requests.discard)
 

@@ -109,8 +109,22 @@ def test_a_state_older_than_the_newest_handed_over_is_never_put() -> None:
     fe, wire = front_end()
     lagging = fe.hub.update(DRIVE, speed_rpm=100.0)  # still queued in the subscription
     newer = fe.hub.update(DRIVE, speed_rpm=200.0)
-    fe._confirm(DRIVE, 0.0)  # the heartbeat reads the hub's newest state
+    fe._confirm(DRIVE, 0.0)  # nothing put yet: the heartbeat takes the hub's newest state
     settle_job(fe)()
     fe._send_state(lagging, 0.0)  # the subscription catches up
     fe._send_state(newer, 0.0)
     assert seqs(wire) == [newer.seq]
+
+
+def test_a_heartbeat_repeats_what_was_put_not_what_waits_in_the_subscription() -> None:
+    fe, wire = front_end()
+    first = change(fe, 100.0)
+    waiting = fe.hub.update(DRIVE, speed_rpm=200.0)  # committed, not yet forwarded
+    fe._confirm(DRIVE, 0.0)  # the heartbeat runs first in this turn of the loop
+    job = settle_job(fe)
+    fe._send_state(waiting, 0.0)  # then the forwarder: the state gets its own put
+    newer = change(fe, 300.0)  # the next change comes before the I/O thread runs
+    job()
+    # every committed state reached the wire, in order (the slot's job put the newest)
+    assert seqs(wire) == [first.seq, waiting.seq, newer.seq, newer.seq]
+
