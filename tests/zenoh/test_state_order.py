@@ -127,4 +127,3 @@ def test_a_heartbeat_repeats_what_was_put_not_what_waits_in_the_subscription() -
     job()
     # every committed state reached the wire, in order (the slot's job put the newest)
     assert seqs(wire) == [first.seq, waiting.seq, newer.seq, newer.seq]
-
