@@ -369,15 +369,28 @@ def test_cfg_fault_carries_the_slaves_diagnosis_too() -> None:
     )
 
 
-def _in_data_exchange() -> Script:
-    """A scripted master with slave 5 just in data exchange (the operate broadcast sent)."""
-    s = Script(Master(FAST_BUS, [echo_params(5)]))
+def _asking_for_parameters(master: Master) -> Script:
+    """A scripted ``master``: slave 5 answered the first Slave_Diag with Prm_Req, the
+    Set_Prm telegram is the next one out."""
+    s = Script(master)
     s.sent()
     s.answer(_diag_reply(SlaveDiag(0xEC00, station_not_ready=True, prm_req=True)))
+    return s
+
+
+def _configured(master: Master) -> Script:
+    """A scripted ``master``: slave 5 acknowledged Set_Prm and Chk_Cfg."""
+    s = _asking_for_parameters(master)
     s.sent()
     s.answer(SHORT_ACK)
     s.sent()
     s.answer(SHORT_ACK)
+    return s
+
+
+def _in_data_exchange() -> Script:
+    """A scripted master with slave 5 just in data exchange (the operate broadcast sent)."""
+    s = _configured(Master(FAST_BUS, [echo_params(5)]))
     s.sent()
     s.answer(_diag_reply(SlaveDiag(0xEC00, master_address=2)))
     assert s.sent().dsap == 58  # operate broadcast
@@ -385,14 +398,7 @@ def _in_data_exchange() -> Script:
 
 
 def test_prm_req_during_data_exchange_sends_set_prm_again() -> None:
-    master = Master(FAST_BUS, [echo_params(5)])
-    s = Script(master)
-    s.sent()
-    s.answer(_diag_reply(SlaveDiag(0xEC00, station_not_ready=True, prm_req=True)))
-    s.sent()
-    s.answer(SHORT_ACK)
-    s.sent()
-    s.answer(SHORT_ACK)
+    s = _configured(Master(FAST_BUS, [echo_params(5)]))
     s.sent()
     s.answer(_diag_reply(SlaveDiag(0xEC00, master_address=2)))
     s.sent()  # operate broadcast
@@ -418,13 +424,7 @@ def test_a_slave_locked_by_another_master_is_left_alone() -> None:
 
 def test_a_slave_that_stays_not_ready_times_out() -> None:
     master = Master(FAST_BUS, [echo_params(5)])
-    s = Script(master)
-    s.sent()
-    s.answer(_diag_reply(SlaveDiag(0xEC00, station_not_ready=True, prm_req=True)))
-    s.sent()
-    s.answer(SHORT_ACK)
-    s.sent()
-    s.answer(SHORT_ACK)
+    s = _configured(master)
     for _ in range(5000):
         request = s.sent()
         if master.state_of(5) is SlaveState.FAULT:
@@ -437,10 +437,7 @@ def test_a_slave_that_stays_not_ready_times_out() -> None:
 
 
 def test_set_prm_refused_at_fdl_level() -> None:
-    master = Master(FAST_BUS, [echo_params(5)])
-    s = Script(master)
-    s.sent()
-    s.answer(_diag_reply(SlaveDiag(0xEC00, station_not_ready=True, prm_req=True)))
+    s = _asking_for_parameters(Master(FAST_BUS, [echo_params(5)]))
     s.sent()
     s.answer(_reply(ResponseStatus.RS, b"", dsap=62, ssap=61))
     assert s.of(SlaveFault)[0].text == "the slave refused Set_Prm (RS from SAP 61 with 0 bytes)"
