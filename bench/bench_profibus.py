@@ -21,6 +21,14 @@ the loop has to do, and what this one does); the ratio against a blocking reques
 event loop at all) is reported too. Rounds alternate reference / master and the best
 round of each counts (the machine's noise only ever slows a round down).
 
+CPU placement: on a machine with two or more CPUs, every requester (master or bare) runs
+on one CPU and every responder child on another, the same two for reference and master.
+Left to the scheduler, a round trip's cost depends on where the two ends happen to run:
+the same bare requester measured 1,700 to 9,300 round trips/s between runs on the 2-CPU
+test machine, and the ratio swung from 0.52 to 0.92 with the code unchanged. Pinned, both
+sides see the same placement in every round (docs/decisions.md, "Benchmarks: CPU
+placement").
+
 The master's own time per message cycle (engine, decoder, driver) is also timed without
 the pty and the event loop, replaying the simulated slaves' replies: the steadiest figure
 on a machine shared with other work.
@@ -70,8 +78,8 @@ SIZE: Final = 8  # bytes in and out per slave (4 words)
 OUTPUTS: Final = bytes(range(SIZE))  # what the master sends every slave
 FIRST: Final = 3  # the first slave address
 MASTER: Final = 2
-ROUNDS: Final = 5  # reference / master rounds per slave count
-MEASURE: Final = 0.7  # s measured per round
+ROUNDS: Final = 10  # reference / master rounds per slave count (the best of each counts)
+MEASURE: Final = 0.4  # s measured per round
 SETTLE: Final = 0.2  # s of exchange before a master round is measured
 REPLY_TIMEOUT: Final = 2.0  # s: a bare requester gives up (a benchmark never hangs)
 TARGET: Final = "ratio >= 0.66"
@@ -147,14 +155,52 @@ def _serve_raw(fd: int, request_len: int, reply: bytes) -> None:
             os.write(fd, reply)
 
 
+@dataclass(frozen=True)
+class Placement:
+    """The CPU of the requesters (this process) and the CPU of the responders (children)."""
+
+    requester: frozenset[int]
+    responder: frozenset[int]
+
+
+def placement() -> Placement | None:
+    """Two CPUs this process may use, or None (fewer than two: nothing to pin)."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    return Placement(frozenset(cpus[:1]), frozenset(cpus[1:2]))
+
+
 @contextlib.contextmanager
-def _child(target: Callable[..., None], *args: Any) -> Any:
-    """A pty pair: ``target(master_fd, *args)`` in a child process, the slave path for us."""
+def _pinned(where: Placement | None) -> Any:
+    """This process on the requester CPU while inside; its old affinity afterwards."""
+    if where is None:
+        yield
+        return
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, where.requester)
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def _responder(cpus: frozenset[int] | None, target: Callable[..., None], *args: Any) -> None:
+    if cpus is not None:
+        os.sched_setaffinity(0, cpus)
+    target(*args)
+
+
+@contextlib.contextmanager
+def _child(target: Callable[..., None], *args: Any, where: Placement | None = None) -> Any:
+    """A pty pair: ``target(master_fd, *args)`` in a child process (on the responder CPU
+    of ``where``), the slave path for us."""
     master_fd, slave_fd = os.openpty()
     tty.setraw(slave_fd)
     tty.setraw(master_fd)
     ctx = multiprocessing.get_context("fork")
-    proc = ctx.Process(target=target, args=(master_fd, *args), daemon=True)
+    cpus = where.responder if where is not None else None
+    proc = ctx.Process(target=_responder, args=(cpus, target, master_fd, *args), daemon=True)
     proc.start()
     try:
         yield os.ttyname(slave_fd)
@@ -334,16 +380,19 @@ class Case:
     peer_check: float  # blocking requester against the master's other end
 
 
-def measure(slaves: int) -> Case:
+def measure(slaves: int, where: Placement | None = None) -> Case:
+    """Alternating rounds; ``where``: the CPU placement of every round (see the module
+    docstring; None leaves it to the scheduler)."""
     frames = exchange_frames(slaves)
     runs: list[MasterRun] = []
     loop_raw: list[RawRun] = []
     blocking_raw: list[float] = []
     peer_check: list[float] = []
     with (
-        _child(_serve_raw, REQUEST_LEN, reply_frame()) as raw_path,
+        _pinned(where),
+        _child(_serve_raw, REQUEST_LEN, reply_frame(), where=where) as raw_path,
         _open_raw(raw_path) as raw,
-        _child(_serve_slaves, slaves) as path,
+        _child(_serve_slaves, slaves, where=where) as path,
     ):
         for _ in range(ROUNDS):
             loop_raw.append(asyncio.run(loop_round_trips(raw, frames, REPLY_LEN, MEASURE)))
@@ -450,8 +499,14 @@ def _engine_figure(slaves: int, cost: float) -> Figure:
     )
 
 
-def _case_figures(slaves: int, case: Case) -> list[Figure]:
-    sizes = f"{REQUEST_LEN} B request, {REPLY_LEN} B reply"
+def _placed(where: Placement | None) -> str:
+    if where is None:
+        return "one CPU: placement left to the scheduler"
+    return f"requesters on CPU {min(where.requester)}, responders on CPU {min(where.responder)}"
+
+
+def _case_figures(slaves: int, case: Case, where: Placement | None = None) -> list[Figure]:
+    sizes = f"{REQUEST_LEN} B request, {REPLY_LEN} B reply; {_placed(where)}"
     return [
         Figure(
             f"profibus_master_msg_cycles_{slaves}_slaves",
@@ -522,9 +577,10 @@ def _line_figures(turnaround: dict[int, float]) -> list[Figure]:
 def run() -> list[Figure]:
     figures: list[Figure] = []
     turnaround: dict[int, float] = {}
+    where = placement()
     for slaves in (1, 32):
-        case = measure(slaves)
+        case = measure(slaves, where)
         turnaround[slaves] = case.master.turnaround
-        figures += _case_figures(slaves, case)
+        figures += _case_figures(slaves, case, where)
         figures.append(_engine_figure(slaves, asyncio.run(engine_cost(slaves))))
     return figures + _line_figures(turnaround)

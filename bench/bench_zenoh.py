@@ -7,9 +7,13 @@
   zenoh-python puts of the same JSON payload (pre-encoded, one publisher per drive,
   CongestionControl.BLOCK). Two more references: a naive bridge (the same hub
   updates, each state taken off a hub subscription, ``json.dumps(state.to_json())``
-  and put at once on the loop: the least any front end must do), and the hub
+  and put at once on the loop: the least any front end must do), the hub
   alone (``hub.update`` with a conflating subscription drained, no Zenoh): the
-  ceiling the core sets before any front end.
+  ceiling the core sets before any front end, and the floor of the work per state
+  (``hub.update``, ``encode_state`` and a DROP put inline in a plain loop, no event
+  loop, no subscription): what one interpreter delivers when it does nothing but
+  the three calls every state needs. Against raw puts the floor shows how much of
+  the target the three calls alone leave.
 - Command latency: another process puts 1000 commands (one every 2 ms) on
   ``<prefix>/drives/d0/command``; the latency is from just before the put to the
   moment the hub's desired command changes (CLOCK_MONOTONIC is one clock for both
@@ -159,6 +163,31 @@ def _raw_phase(session: zenoh.Session, peer: Peer) -> None:
         pub.undeclare()
 
 
+def _floor_phase(session: zenoh.Session) -> int:
+    """hub.update, encode_state and a DROP put inline, for FANOUT_SECONDS; updates made."""
+    hub = _hub()
+    pubs = {
+        f"d{i}": session.declare_publisher(
+            f"{PREFIX}/floor/drives/d{i}/state",
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+            congestion_control=zenoh.CongestionControl.DROP,
+        )
+        for i in range(DRIVES)
+    }
+    end = time.monotonic() + FANOUT_SECONDS
+    n = 0
+    while time.monotonic() < end:
+        for _ in range(100):
+            drive_id = DRIVE_IDS[n % DRIVES]
+            pubs[drive_id].put(encode_state(hub.update(drive_id, speed_rpm=float(n % 1800))))
+            n += 1
+    last = hub.update("d0", speed_rpm=SENTINEL)
+    pubs["d0"].put(encode_state(last))
+    for pub in pubs.values():
+        pub.undeclare()
+    return n
+
+
 async def _naive_phase(session: zenoh.Session) -> int:
     """The least a front end must do: hub -> subscription -> to_json -> put, on the loop."""
     hub = _hub()
@@ -241,6 +270,7 @@ async def _fanout() -> list[Figure]:
     try:
         await asyncio.to_thread(_ask_ready, peer)
         _raw_phase(raw, peer)
+        _floor_phase(raw)
         await _naive_phase(raw)
         updates = await _gateway_phase(hub)
         await asyncio.to_thread(peer.write, "report")
@@ -251,10 +281,11 @@ async def _fanout() -> list[Figure]:
         raw.close()
         await _stop(task)
     ceiling = await _hub_alone()
-    gw, rw, nv = report["gateway"], report["raw"], report["naive"]
+    gw, rw, nv, fl = report["gateway"], report["raw"], report["naive"], report["floor"]
     gw_rate = gw["n"] / gw["seconds"]
     raw_rate = rw["n"] / rw["seconds"]
     naive_rate = nv["n"] / nv["seconds"]
+    floor_rate = fl["n"] / fl["seconds"]
     note = (
         f"{DRIVES} drives; {updates} hub updates in {FANOUT_SECONDS:g} s, {gw['n']} states "
         f"delivered ({fe.worker.replaced} replaced in the I/O slot); raw: {rw['n']} puts of "
@@ -276,6 +307,15 @@ async def _fanout() -> list[Figure]:
             reference=round(naive_rate),
             note="reference: hub subscription -> json.dumps(to_json()) -> DROP put on the loop, "
             "no liveliness, heartbeat, last-word or command handling",
+        ),
+        Figure(
+            "zenoh state fan-out (vs floor)",
+            round(gw_rate),
+            "states/s",
+            reference=round(floor_rate),
+            note="reference: hub.update + encode_state + DROP put inline in a plain loop (no "
+            f"event loop, no subscription); the floor against raw puts: "
+            f"{floor_rate / raw_rate:.3f}",
         ),
         Figure(
             "zenoh state fan-out (vs hub alone)",
@@ -356,7 +396,7 @@ def _settle(session: zenoh.Session, selector: str) -> None:
 def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
     session = _session(connect=(gw_endpoint, raw_endpoint))
     stats: dict[str, dict[str, Any]] = {
-        name: {"n": 0, "first": 0.0, "last": 0.0} for name in ("gateway", "raw", "naive")
+        name: {"n": 0, "first": 0.0, "last": 0.0} for name in ("gateway", "raw", "naive", "floor")
     }
     ended = {name: threading.Event() for name in stats}
     sentinel = f'"speed_rpm":{SENTINEL}'.encode()
@@ -365,7 +405,7 @@ def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
     def on_sample(sample: zenoh.Sample) -> None:
         now = time.monotonic()
         part = str(sample.key_expr).split("/")[1]
-        name = part if part in ("raw", "naive") else "gateway"
+        name = part if part in stats else "gateway"
         entry = stats[name]
         if entry["n"] == 0:
             entry["first"] = now

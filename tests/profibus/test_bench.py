@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from adapters.profibus.fdl import SD3, decode_telegram
@@ -38,3 +40,46 @@ def test_one_short_round_measures_everything(monkeypatch: pytest.MonkeyPatch) ->
     assert case.loop_raw.round_trips_per_s > 0
     assert case.blocking_raw > 0
     assert case.peer_check > 0
+
+
+def _two_cpus() -> bench.Placement:
+    where = bench.placement()
+    if where is None:
+        pytest.skip("one CPU: the bench leaves placement to the scheduler")
+    return where
+
+
+def _say_affinity(fd: int) -> None:
+    os.write(fd, repr(sorted(os.sched_getaffinity(0))).encode() + b"\n")
+
+
+def test_a_responder_runs_on_the_responder_cpu() -> None:
+    where = _two_cpus()
+    assert where.requester.isdisjoint(where.responder)
+    with bench._child(_say_affinity, where=where) as path, bench._open_raw(path) as fd:
+        os.set_blocking(fd, True)
+        said = b""
+        while not said.endswith(b"\n"):
+            said += os.read(fd, 64)
+    assert said.decode().strip() == repr(sorted(where.responder))
+
+
+def test_pinned_rounds_give_the_process_its_affinity_back(monkeypatch: pytest.MonkeyPatch) -> None:
+    where = _two_cpus()
+    monkeypatch.setattr(bench, "MEASURE", 0.05)
+    monkeypatch.setattr(bench, "SETTLE", 0.01)
+    monkeypatch.setattr(bench, "ROUNDS", 1)
+    before = os.sched_getaffinity(0)
+    seen: list[set[int]] = []
+    run_master = bench.run_master
+
+    async def spy(path: str, slaves: int, duration: float) -> bench.MasterRun:
+        seen.append(os.sched_getaffinity(0))
+        return await run_master(path, slaves, duration)
+
+    monkeypatch.setattr(bench, "run_master", spy)
+    case = bench.measure(2, where)
+    assert seen == [set(where.requester)]
+    assert os.sched_getaffinity(0) == before
+    assert case.master.cycles_per_s > 0
+    assert case.loop_raw.round_trips_per_s > 0
