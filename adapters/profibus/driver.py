@@ -3,8 +3,9 @@
 Everything happens in loop callbacks, never in a blocking call: bytes from the link go
 through the streaming decoder into ``engine.step(now, event)``; each resulting
 :class:`~adapters.profibus.master.Transmit` is written once its ``not_before`` (the TSYN idle
-time, fact sheet 1.1) has come; the other actions go to ``on_action``; a timer steps the
-engine at ``engine.next_deadline()``. Before each request the decoder is told the line was
+time, fact sheet 1.1) has come; the other actions go to ``on_action`` once the step's
+requests are on their way (a reply's handling is not part of the turnaround); a timer
+steps the engine at ``engine.next_deadline()``. Before each request the decoder is told the line was
 idle, so a reply cut short by noise cannot swallow the next one.
 
 A wait shorter than :data:`SPIN_LIMIT` (TSYN is 66 us at 500 kbit/s) is spun out on the
@@ -96,10 +97,19 @@ class LineDriver:
         self.on_stepped()
 
     def _run(self, actions: Sequence[Any]) -> None:
+        """Requests first, then the other actions in their order.
+
+        What a request carries was fixed by the engine when it built it, so nothing a
+        handler does can change it; the line must not wait while the adapter decodes a
+        reply's inputs and updates the hub (the master's turnaround).
+        """
+        others: list[Any] = []
         for action in actions:
             if isinstance(action, Transmit):
                 self._transmit(action)
-                continue
+            else:
+                others.append(action)
+        for action in others:
             try:
                 self.on_action(action)
             except Exception:  # a profile bug must not stop the line

@@ -199,7 +199,7 @@ class _Engine:
     """Sends what it is told, when told; counts its steps."""
 
     def __init__(self) -> None:
-        self.queue: list[Transmit] = []
+        self.queue: list[Any] = []  # Transmits and other actions
         self.steps = 0
         self.deadline: float | None = None
 
@@ -254,6 +254,26 @@ async def test_the_driver_steps_at_the_engines_deadline() -> None:
             steps = engine.steps
             engine.deadline = None
             await until(lambda: engine.steps > steps)
+        finally:
+            driver.stop()
+            link.close()
+
+
+async def test_the_driver_writes_the_next_request_before_handling_the_other_actions() -> None:
+    """The line never waits on the adapter: a reply's handling (decoding the inputs,
+    updating the hub) comes after the next request is on its way."""
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (_, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Engine()
+        written_when_handled: list[tuple[Any, int]] = []
+        driver = LineDriver(
+            engine, link, lambda action: written_when_handled.append((action, link.bytes_out))
+        )
+        try:
+            engine.queue += ["inputs", Transmit(b"\x01\x02", loop.time()), "state"]
+            driver.poke()
+            assert written_when_handled == [("inputs", 2), ("state", 2)]
         finally:
             driver.stop()
             link.close()
