@@ -18,12 +18,16 @@ Threading model and delivery:
   diagnostics and an ordered queue for the rest. Handing each change to a thread
   instead would starve it of the GIL whenever the loop is busy.
 - A drive's states never go backwards on the wire (``seq`` never decreases for a
-  subscriber). Every put of a drive's state happens under that drive's lock and
-  puts the newest payload known at that moment: the I/O thread takes the lock for
-  its BLOCK put; the loop only tries it. A change the loop could not put because
-  the thread held the lock is put by the thread right after its own put (it looks
-  again once it has let the lock go). A state older than one already handed over
-  is never put.
+  subscriber). Every put of a drive's state happens under that drive's lock, which
+  also keeps the highest ``seq`` put so far: the I/O thread takes the lock for its
+  BLOCK put; the loop only tries it. A change the loop could not put because the
+  thread held the lock waits in that drive's queue of deferred changes (at most
+  :data:`DEFER_LIMIT`, the oldest give way), and whoever holds the lock next puts
+  them first, in order: the thread right after its own put (it looks again once it
+  has let the lock go), or the loop before its next change. The thread may hold the
+  lock for milliseconds (it must win the GIL back from a busy loop to return from
+  ``put``); every change made meanwhile still gets its own put. A state older than
+  one already put is never put.
 - Every state the hub's subscription yields gets its own put (on an uncongested
   link every committed state arrives, unless the same drive changed twice in one
   turn of the loop: the subscription keeps the newest). The settle and heartbeat
@@ -38,6 +42,7 @@ Threading model and delivery:
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import logging
 import math
@@ -81,6 +86,7 @@ PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a clien
 CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
 HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
 SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
+DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
 
 @dataclass(eq=False)
@@ -89,6 +95,14 @@ class _Pending:
 
     incoming: Incoming
     answered: bool = False
+
+
+def _drop_put(publisher: Any, drive_id: str, payload: bytes) -> None:
+    """A state change with the loop's DROP publisher; a failure is only logged."""
+    try:
+        publisher.put(payload)
+    except zenoh.ZError as exc:
+        log.debug("state put of %s failed: %s", drive_id, exc)
 
 
 def _endpoints_of(config: Any) -> tuple[str, str, str]:
@@ -129,6 +143,12 @@ class ZenohFrontEnd:
         # newest (seq, payload) of each drive handed to Zenoh: written on the loop only
         self._newest: dict[str, tuple[int, bytes]] = {}
         self._put_locks = {drive_id: threading.Lock() for drive_id in self._drive_ids}
+        # under each drive's lock: the highest seq put on the wire
+        self._sent_seq: dict[str, int] = {}
+        # (seq, payload) of changes the loop could not put while the I/O thread held the lock
+        self._deferred: dict[str, collections.deque[tuple[int, bytes]]] = {
+            drive_id: collections.deque(maxlen=DEFER_LIMIT) for drive_id in self._drive_ids
+        }
         self._wake = asyncio.Event()
         self._pending: set[_Pending] = set()
         self._requests: set[asyncio.Task[None]] = set()
@@ -228,17 +248,40 @@ class ZenohFrontEnd:
 
     def _io_publish_state(self, drive_id: str) -> None:
         """The drive's newest state, with BLOCK, under its lock (see the module notes);
-        again while the loop hands over newer ones it could not put meanwhile."""
+        then, once the lock is let go, whatever the loop could not put meanwhile."""
         link = self._link
+        if link is None:
+            return
         lock = self._put_locks[drive_id]
-        put_seq: int | None = None
-        while link is not None:
-            newest = self._newest.get(drive_id)
-            if newest is None or newest[0] == put_seq:
-                return
+        with lock:
+            self._catch_up(drive_id, link.publish_state, repeat=True)
+        while self._behind(drive_id):  # the loop tried the lock while this thread held it
             with lock:
-                put_seq, payload = self._newest[drive_id]
-                link.publish_state(drive_id, payload)
+                self._catch_up(drive_id, link.publish_state)
+
+    def _behind(self, drive_id: str) -> bool:
+        """A change not yet put: deferred, or newer than the last put (its hand-over may
+        not have reached the queue yet)."""
+        newest = self._newest.get(drive_id)
+        sent = self._sent_seq.get(drive_id, -1)
+        return bool(self._deferred[drive_id]) or (newest is not None and newest[0] > sent)
+
+    def _catch_up(
+        self, drive_id: str, put: Callable[[str, bytes], None], *, repeat: bool = False
+    ) -> None:
+        """Under the drive's lock: the deferred changes newer than the last put, in order,
+        then the newest state if newer still (``repeat``: also if just as new)."""
+        deferred = self._deferred[drive_id]
+        sent = self._sent_seq.get(drive_id, -1)
+        while deferred:
+            seq, payload = deferred.popleft()
+            if seq > sent:
+                sent = self._sent_seq[drive_id] = seq
+                put(drive_id, payload)
+        newest = self._newest.get(drive_id)
+        if newest is not None and (newest[0] > sent or (repeat and newest[0] == sent)):
+            self._sent_seq[drive_id] = newest[0]
+            put(drive_id, newest[1])
 
     def _io_publish_diag(self, drive_id: str, payload: bytes) -> None:
         if self._link is not None:
@@ -291,16 +334,25 @@ class ZenohFrontEnd:
         return True
 
     def _put_change(self, drive_id: str) -> None:
-        """The drive's newest payload with DROP, unless the I/O thread is putting it."""
+        """The drive's newest payload with DROP; deferred while the I/O thread holds the
+        drive's lock (whoever takes the lock next puts it, in order)."""
         publisher = self._changes.get(drive_id)
         lock = self._put_locks.get(drive_id)
-        if publisher is not None and lock is not None and lock.acquire(blocking=False):
-            try:
-                publisher.put(self._newest[drive_id][1])
-            except zenoh.ZError as exc:
-                log.debug("state put of %s failed: %s", drive_id, exc)
-            finally:
-                lock.release()
+        if publisher is None or lock is None:
+            return
+        if not lock.acquire(blocking=False):
+            self._deferred[drive_id].append(self._newest[drive_id])
+            return
+        try:
+            if self._deferred[drive_id]:
+                self._catch_up(drive_id, partial(_drop_put, publisher))
+                return
+            seq, payload = self._newest[drive_id]  # the usual case, without the detour
+            if seq > self._sent_seq.get(drive_id, -1):
+                self._sent_seq[drive_id] = seq
+                _drop_put(publisher, drive_id, payload)
+        finally:
+            lock.release()
 
     def _set_live(self, drive_id: str, live: bool) -> None:
         if live:

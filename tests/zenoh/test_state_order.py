@@ -127,3 +127,55 @@ def test_a_heartbeat_repeats_what_was_put_not_what_waits_in_the_subscription() -
     job()
     # every committed state reached the wire, in order (the slot's job put the newest)
     assert seqs(wire) == [first.seq, waiting.seq, newer.seq, newer.seq]
+
+
+def test_every_change_while_the_thread_holds_the_lock_reaches_the_wire_in_order() -> None:
+    """The I/O thread can hold a drive's lock for milliseconds (it must win the GIL back
+    from a busy loop to return from ``put``): each change made meanwhile gets its own put."""
+    fe, wire = front_end()
+    first = change(fe, 100.0)
+    fe._confirm(DRIVE, 0.0)
+    job = settle_job(fe)
+    in_put = threading.Event()
+    go_on = threading.Event()
+    block = fe._link
+
+    class SlowLink:
+        def __init__(self) -> None:
+            self.calls = 0
+
+        def publish_state(self, drive_id: str, payload: bytes) -> None:
+            self.calls += 1
+            if self.calls == 1:
+                in_put.set()
+                go_on.wait(5)
+            block.publish_state(drive_id, payload)  # type: ignore[union-attr]
+
+    fe._link = SlowLink()  # type: ignore[assignment]
+    thread = threading.Thread(target=job)
+    thread.start()
+    try:
+        assert in_put.wait(5)
+        meanwhile = [change(fe, 200.0 + i) for i in range(3)]
+        assert seqs(wire) == [first.seq]
+    finally:
+        go_on.set()
+        thread.join(5)
+    assert not thread.is_alive()
+    assert wire == [("drop", first.seq), ("block", first.seq)] + [
+        ("block", s.seq) for s in meanwhile
+    ]
+
+
+def test_a_deferred_change_goes_out_before_the_loops_next_one() -> None:
+    fe, wire = front_end()
+    first = change(fe, 100.0)
+    lock = fe._put_locks[DRIVE]
+    with lock:  # the I/O thread's put is under way...
+        deferred = change(fe, 200.0)
+    # ...and it let the lock go before it looked again: the loop's next change comes first
+    latest = change(fe, 300.0)
+    assert wire == [("drop", first.seq), ("drop", deferred.seq), ("drop", latest.seq)]
+    fe._confirm(DRIVE, 0.0)
+    settle_job(fe)()  # the settle put repeats the newest, and nothing older comes after it
+    assert seqs(wire) == [first.seq, deferred.seq, latest.seq, latest.seq]
