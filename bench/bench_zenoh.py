@@ -140,18 +140,25 @@ def _ask_ready(peer: Peer) -> None:
         raise RuntimeError("the bench peer did not get ready")
 
 
+def _publishers(
+    session: zenoh.Session, part: str, congestion: zenoh.CongestionControl
+) -> dict[str, Any]:
+    """Drive id -> a publisher of its state under ``<prefix>/<part>/drives/``."""
+    return {
+        drive_id: session.declare_publisher(
+            f"{PREFIX}/{part}/drives/{drive_id}/state",
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+            congestion_control=congestion,
+        )
+        for drive_id in DRIVE_IDS
+    }
+
+
 def _raw_phase(session: zenoh.Session, peer: Peer) -> None:
     """Raw puts of the same payload, one publisher per drive, for FANOUT_SECONDS."""
     state = _hub().state("d0")
     payload = encode_state(state)
-    pubs = [
-        session.declare_publisher(
-            f"{PREFIX}/raw/drives/d{i}/state",
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-            congestion_control=zenoh.CongestionControl.BLOCK,
-        )
-        for i in range(DRIVES)
-    ]
+    pubs = list(_publishers(session, "raw", zenoh.CongestionControl.BLOCK).values())
     end = time.monotonic() + FANOUT_SECONDS
     i = 0
     while time.monotonic() < end:
@@ -166,14 +173,7 @@ def _raw_phase(session: zenoh.Session, peer: Peer) -> None:
 def _floor_phase(session: zenoh.Session) -> int:
     """hub.update, encode_state and a DROP put inline, for FANOUT_SECONDS; updates made."""
     hub = _hub()
-    pubs = {
-        f"d{i}": session.declare_publisher(
-            f"{PREFIX}/floor/drives/d{i}/state",
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-            congestion_control=zenoh.CongestionControl.DROP,
-        )
-        for i in range(DRIVES)
-    }
+    pubs = _publishers(session, "floor", zenoh.CongestionControl.DROP)
     end = time.monotonic() + FANOUT_SECONDS
     n = 0
     while time.monotonic() < end:
@@ -191,14 +191,7 @@ def _floor_phase(session: zenoh.Session) -> int:
 async def _naive_phase(session: zenoh.Session) -> int:
     """The least a front end must do: hub -> subscription -> to_json -> put, on the loop."""
     hub = _hub()
-    pubs = {
-        f"d{i}": session.declare_publisher(
-            f"{PREFIX}/naive/drives/d{i}/state",
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-            congestion_control=zenoh.CongestionControl.DROP,
-        )
-        for i in range(DRIVES)
-    }
+    pubs = _publishers(session, "naive", zenoh.CongestionControl.DROP)
     with hub.subscribe_states() as sub:
 
         async def bridge() -> None:

@@ -9,8 +9,10 @@ with recording publishers in place of Zenoh's, so each interleaving is shown exa
 
 from __future__ import annotations
 
+import contextlib
 import json
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 from gateway.zenoh.frontend import ZenohFrontEnd
@@ -55,26 +57,10 @@ def settle_job(fe: ZenohFrontEnd) -> Any:
     return fe.worker._latest.pop((KeyKind.STATE, DRIVE))
 
 
-def seqs(wire: list[tuple[str, int]]) -> list[int]:
-    return [seq for _, seq in wire]
-
-
-def test_a_settle_put_prepared_before_a_change_never_sends_the_older_state() -> None:
-    fe, wire = front_end()
-    first = change(fe, 100.0)
-    fe._confirm(DRIVE, 0.0)  # the heartbeat hands the state over...
-    job = settle_job(fe)
-    second = change(fe, 200.0)  # ...a change is put before the I/O thread runs
-    job()
-    assert seqs(wire) == [first.seq, second.seq, second.seq]
-    assert seqs(wire) == sorted(seqs(wire))
-
-
-def test_a_change_while_the_thread_puts_is_put_by_the_thread_after_its_own() -> None:
-    fe, wire = front_end()
-    first = change(fe, 100.0)
-    fe._confirm(DRIVE, 0.0)
-    job = settle_job(fe)
+@contextlib.contextmanager
+def thread_in_its_put(fe: ZenohFrontEnd, job: Any) -> Iterator[None]:
+    """Run the I/O thread's ``job`` in a thread, held inside its first put (with the
+    drive's lock) while the body runs; then let it finish."""
     in_put = threading.Event()
     go_on = threading.Event()
     block = fe._link
@@ -95,12 +81,35 @@ def test_a_change_while_the_thread_puts_is_put_by_the_thread_after_its_own() -> 
     thread.start()
     try:
         assert in_put.wait(5)
-        second = change(fe, 200.0)  # the loop neither waits for the thread nor overtakes it
-        assert seqs(wire) == [first.seq]
+        yield
     finally:
         go_on.set()
         thread.join(5)
     assert not thread.is_alive()
+
+
+def seqs(wire: list[tuple[str, int]]) -> list[int]:
+    return [seq for _, seq in wire]
+
+
+def test_a_settle_put_prepared_before_a_change_never_sends_the_older_state() -> None:
+    fe, wire = front_end()
+    first = change(fe, 100.0)
+    fe._confirm(DRIVE, 0.0)  # the heartbeat hands the state over...
+    job = settle_job(fe)
+    second = change(fe, 200.0)  # ...a change is put before the I/O thread runs
+    job()
+    assert seqs(wire) == [first.seq, second.seq, second.seq]
+    assert seqs(wire) == sorted(seqs(wire))
+
+
+def test_a_change_while_the_thread_puts_is_put_by_the_thread_after_its_own() -> None:
+    fe, wire = front_end()
+    first = change(fe, 100.0)
+    fe._confirm(DRIVE, 0.0)
+    with thread_in_its_put(fe, settle_job(fe)):
+        second = change(fe, 200.0)  # the loop neither waits for the thread nor overtakes it
+        assert seqs(wire) == [first.seq]
     # nothing lost, nothing backwards: the thread put the change right after its own put
     assert wire == [("drop", first.seq), ("block", first.seq), ("block", second.seq)]
 
@@ -135,33 +144,9 @@ def test_every_change_while_the_thread_holds_the_lock_reaches_the_wire_in_order(
     fe, wire = front_end()
     first = change(fe, 100.0)
     fe._confirm(DRIVE, 0.0)
-    job = settle_job(fe)
-    in_put = threading.Event()
-    go_on = threading.Event()
-    block = fe._link
-
-    class SlowLink:
-        def __init__(self) -> None:
-            self.calls = 0
-
-        def publish_state(self, drive_id: str, payload: bytes) -> None:
-            self.calls += 1
-            if self.calls == 1:
-                in_put.set()
-                go_on.wait(5)
-            block.publish_state(drive_id, payload)  # type: ignore[union-attr]
-
-    fe._link = SlowLink()  # type: ignore[assignment]
-    thread = threading.Thread(target=job)
-    thread.start()
-    try:
-        assert in_put.wait(5)
+    with thread_in_its_put(fe, settle_job(fe)):
         meanwhile = [change(fe, 200.0 + i) for i in range(3)]
         assert seqs(wire) == [first.seq]
-    finally:
-        go_on.set()
-        thread.join(5)
-    assert not thread.is_alive()
     assert wire == [("drop", first.seq), ("block", first.seq)] + [
         ("block", s.seq) for s in meanwhile
     ]
