@@ -5,8 +5,8 @@ through the streaming decoder into ``engine.step(now, event)``; each resulting
 :class:`~adapters.profibus.master.Transmit` is written once its ``not_before`` (the TSYN idle
 time, fact sheet 1.1) has come; the other actions go to ``on_action`` once the step's
 requests are on their way (a reply's handling is not part of the turnaround); a timer
-steps the engine at ``engine.next_deadline()``. Before each request the decoder is told the line was
-idle, so a reply cut short by noise cannot swallow the next one.
+steps the engine at ``engine.next_deadline()``. Before each request the decoder is told
+the line was idle, so a reply cut short by noise cannot swallow the next one.
 
 A wait shorter than :data:`SPIN_LIMIT` (TSYN is 66 us at 500 kbit/s) is spun out on the
 monotonic clock: the event loop's timers cannot sleep less than a millisecond.

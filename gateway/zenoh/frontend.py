@@ -344,13 +344,7 @@ class ZenohFrontEnd:
             self._deferred[drive_id].append(self._newest[drive_id])
             return
         try:
-            if self._deferred[drive_id]:
-                self._catch_up(drive_id, partial(_drop_put, publisher))
-                return
-            seq, payload = self._newest[drive_id]  # the usual case, without the detour
-            if seq > self._sent_seq.get(drive_id, -1):
-                self._sent_seq[drive_id] = seq
-                _drop_put(publisher, drive_id, payload)
+            self._catch_up(drive_id, partial(_drop_put, publisher))
         finally:
             lock.release()
 
