@@ -142,6 +142,10 @@ class LineDriver:
     # ------------------------------------------------------------------ receiving
 
     def _on_data(self, data: bytes, now: float) -> None:
+        telegram = self.decoder.whole(data)
+        if telegram is not None:
+            self._step(Received(telegram))
+            return
         self.decoder.feed(data)
         for event in self._events():
             self._step(event)

@@ -476,6 +476,22 @@ class TelegramDecoder:
     def feed(self, data: bytes) -> None:
         self._buf += data
 
+    def whole(self, data: bytes) -> Telegram | None:
+        """``data`` as one telegram, if nothing is buffered and it is one decoded before.
+
+        The steady exchange's shortcut: a reply arrives in one read, and a slave's unchanged
+        inputs are the bytes of its last reply. Counted as :meth:`next_frame` counts it;
+        None (nothing taken): feed the bytes instead.
+        """
+        if self._buf or self._garbage:
+            return None
+        telegram = self._memo.get(data)
+        if telegram is not None:
+            self._base += len(data)
+            self._telegrams += 1
+            self._telegram_bytes += len(data)
+        return telegram
+
     def mark_idle(self) -> None:
         """The line was idle after the bytes fed so far: no telegram spans this point."""
         end = self._base + len(self._buf)

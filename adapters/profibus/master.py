@@ -138,7 +138,7 @@ class _Job:
     requested: bool = False  # the request was accepted: poll for the answer
 
 
-@dataclass
+@dataclass(slots=True)
 class _Turn:
     count: int = 0
     data: bool = False
@@ -172,7 +172,7 @@ class _Slave:
         return self.params.address
 
 
-@dataclass
+@dataclass(slots=True)
 class _Pending:
     address: int
     purpose: Purpose
@@ -211,6 +211,8 @@ class Master:
                 since=now,
             )
         self.stats = LineStats()
+        self._tsyn = bus.tsyn  # BusParams computes these on every call; each message needs them
+        self._reply_wait = bus.reply_wait
         self.mode = LineMode.OPERATE
         self._pending: _Pending | None = None
         self._idle_since = now - bus.tsyn
@@ -352,7 +354,7 @@ class Master:
         self._queue.clear()
         self._current = None
         self._next_cycle = now
-        self._idle_since = now - self.bus.tsyn
+        self._idle_since = now - self._tsyn
         return self._take()
 
     def leave(self, now: float) -> list[Transmit]:
@@ -361,8 +363,8 @@ class Master:
         self._pending = None
         self.mode = LineMode.CLEAR
         data = global_control_request(GlobalControl.clear(), sa=self.address).encode()
-        first = max(now, self._idle_since + self.bus.tsyn)
-        second = first + self.bus.tx_time(len(data)) + self.bus.tsyn
+        first = max(now, self._idle_since + self._tsyn)
+        second = first + self.bus.tx_time(len(data)) + self._tsyn
         return [Transmit(data, first, False), Transmit(data, second, False)]
 
     # ------------------------------------------------------------------ stepping
@@ -372,7 +374,8 @@ class Master:
             return []
         if event is not None:
             self._on_event(event, now)
-        self._check_jobs(now)
+        if self._jobs:
+            self._check_jobs(now)
         if self._pending is not None and now >= self._pending.deadline:
             self._on_timeout(self._pending, now)
         if self._timed:  # slaves in start-up only: nothing to do per step in data exchange
@@ -750,8 +753,6 @@ class Master:
         self._out.append(RecordDone(job.id, job.address, data, error, failure, text))
 
     def _check_jobs(self, now: float) -> None:
-        if not self._jobs:
-            return
         for job in [j for j in self._jobs.values() if now >= j.deadline]:
             self._finish(
                 job,
@@ -805,7 +806,7 @@ class Master:
         while True:
             if self._current is not None:
                 sl = self._slaves[self._current]
-                purpose = self._want(sl, now) if sl.turn.count < MAX_TURN else None
+                purpose = _WANTS[sl.state](self, sl, now) if sl.turn.count < MAX_TURN else None
                 if purpose is not None:
                     self._send_for(sl, purpose, now)
                     return True
@@ -819,9 +820,6 @@ class Master:
                 return True
             self._line_done = True
         return False
-
-    def _want(self, sl: _Slave, now: float) -> Purpose | None:
-        return _WANTS[sl.state](self, sl, now)
 
     def _want_exchange(self, sl: _Slave, now: float) -> Purpose | None:
         turn = sl.turn
@@ -841,39 +839,43 @@ class Master:
         return Purpose.DIAG
 
     def _send_for(self, sl: _Slave, purpose: Purpose, now: float) -> None:
-        turn = sl.turn
-        turn.count += 1
+        sl.turn.count += 1
+        fc = sl.fcb.fc(RequestFunction.SRD_HIGH)
         job: _Job | None = None
-        if purpose is Purpose.DATA:
-            turn.data = True
-        elif purpose is Purpose.DIAG and sl.state is SlaveState.DATA_EXCHANGE:
+        if purpose is Purpose.DATA:  # the message of every cycle: nothing else to decide
+            sl.turn.data = True
+            data, dsap, tries = self._data_frame(sl, fc), None, 1 + self.bus.retries
+        else:
+            job = self._count_in_turn(sl, purpose)
+            telegram = _BUILDERS[purpose](self, sl, fc, job)
+            data, dsap = telegram.encode(), telegram.dsap
+            tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
+        sl.stats.requests += 1
+        pending = _Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
+        self._transmit(pending, now, fresh=True)
+
+    def _count_in_turn(self, sl: _Slave, purpose: Purpose) -> _Job | None:
+        """Note a telegram other than Data_Exchange in the slave's turn; a DP-V1 one's job."""
+        turn = sl.turn
+        if purpose is Purpose.DIAG and sl.state is SlaveState.DATA_EXCHANGE:
             turn.diag = True
         elif purpose is Purpose.DIAG and sl.state is SlaveState.WAIT_READY:
             turn.ready_polls += 1
         elif purpose in (Purpose.RECORD, Purpose.POLL):
             turn.acyclic += 1
-            job = sl.jobs[0]
+            return sl.jobs[0]
         elif purpose is Purpose.SET_PRM:
             sl.prm_attempts += 1
-        fc = sl.fcb.fc(RequestFunction.SRD_HIGH)
-        if purpose is Purpose.DATA:
-            data, dsap = self._data_frame(sl, fc), None
-        else:
-            telegram = _BUILDERS[purpose](self, sl, fc, job)
-            data, dsap = telegram.encode(), telegram.dsap
-        tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
-        sl.stats.requests += 1
-        pending = _Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
-        self._transmit(pending, now, fresh=True)
+        return None
 
     def _transmit(self, pending: _Pending, now: float, fresh: bool = False) -> None:
-        not_before = max(now, self._idle_since + self.bus.tsyn)
+        not_before = max(now, self._idle_since + self._tsyn)
         if not fresh:
             pending.tries += 1
         pending.sent_at = not_before
         sent = not_before + self.bus.tx_time(len(pending.data))
         self._idle_since = sent  # 1.1: the line is ours until the request's last bit
-        pending.deadline = sent + self.bus.reply_wait
+        pending.deadline = sent + self._reply_wait
         self._pending = pending
         self._cycle_sent += 1
         self.stats.telegrams += 1
@@ -881,9 +883,9 @@ class Master:
 
     def _broadcast(self, control: GlobalControl, now: float) -> None:
         data = global_control_request(control, sa=self.address).encode()
-        not_before = max(now, self._idle_since + self.bus.tsyn)
+        not_before = max(now, self._idle_since + self._tsyn)
         self._idle_since = not_before + self.bus.tx_time(len(data))
-        self._busy_until = self._idle_since + self.bus.tsyn
+        self._busy_until = self._idle_since + self._tsyn
         self._cycle_sent += 1
         self.stats.telegrams += 1
         self._out.append(Transmit(data, not_before, False))

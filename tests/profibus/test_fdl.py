@@ -495,3 +495,64 @@ def test_stream_bit_flips_lose_only_the_damaged_frame(
     _, events = run(stream)
     good = [f for i, f in enumerate(frames) if i != victim]
     assert is_subsequence(good, only_telegrams(events))
+
+
+def run_taking_whole(chunks: list[bytes | None]) -> tuple[TelegramDecoder, list[object]]:
+    """As the driver reads: a chunk that is a whole telegram seen before is taken at once."""
+    decoder = TelegramDecoder()
+    events: list[object] = []
+    for chunk in chunks:
+        if chunk is IDLE:
+            decoder.mark_idle()
+            events += drain(decoder)
+            continue
+        known = decoder.whole(chunk)
+        if known is not None:
+            events.append(known)
+            continue
+        decoder.feed(chunk)
+        events += drain(decoder)
+    return decoder, events
+
+
+def seen(events: list[object]) -> list[object]:
+    """Events comparable by value (an error is an exception: compare what it says)."""
+    return [(e.error.reason, e.raw) if isinstance(e, Discarded) else e for e in events]
+
+
+def test_whole_takes_only_a_telegram_seen_before_with_nothing_buffered() -> None:
+    reply = h(GOLDEN[1][0])
+    decoder = TelegramDecoder()
+    assert decoder.whole(reply) is None  # never decoded: feed it
+    decoder.feed(reply)
+    assert drain(decoder) == [GOLDEN[1][1]]
+    assert decoder.whole(reply) == GOLDEN[1][1]
+    assert decoder.stats.telegrams == 2
+    assert decoder.stats.telegram_bytes == 2 * len(reply)
+    decoder.feed(h("68 05"))  # half a telegram waits: the same bytes are no telegram now
+    assert decoder.whole(reply) is None
+    assert decoder.stats.telegrams == 2
+    assert decoder.buffered == 2
+
+
+@FAST
+@given(
+    st.lists(
+        st.sampled_from([t.encode() for _, t in GOLDEN]) | st.binary(max_size=20), max_size=12
+    ),
+    st.lists(st.booleans(), max_size=12),
+)
+def test_taking_whole_telegrams_changes_no_event_and_no_count(
+    parts: list[bytes], idles: list[bool]
+) -> None:
+    stream: list[bytes | None] = []
+    for i, part in enumerate(parts):
+        stream.append(part)
+        if i < len(idles) and idles[i]:
+            stream.append(IDLE)
+    stream.append(IDLE)
+    plain, plain_events = run(stream)
+    taking, taking_events = run_taking_whole(stream)
+    assert seen(taking_events) == seen(plain_events)
+    assert taking.stats == plain.stats
+    assert taking.buffered == plain.buffered == 0
