@@ -25,6 +25,37 @@ def test_felser_estimate() -> None:
     assert bench.felser_cycle(32, 187500) == pytest.approx((380 + 9600 + 11 * 512) / 187500 + 75e-6)
 
 
+class _Clock:
+    """perf_counter and process_time for the bench, set by the test."""
+
+    def __init__(self) -> None:
+        self.wall = self.cpu = 0.0
+
+    def at(self, wall: float, cpu: float) -> None:
+        self.wall, self.cpu = wall, cpu
+
+
+def test_windows_give_the_best_stretch_and_the_least_cpu(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = _Clock()
+    monkeypatch.setattr(bench.time, "perf_counter", lambda: clock.wall)
+    monkeypatch.setattr(bench.time, "process_time", lambda: clock.cpu)
+    windows = bench.Windows()
+    assert windows.best_rate() == 0.0  # no whole window yet
+    for wall, cpu, done in [
+        (0.00, 0.000, 0),
+        (0.05, 0.010, 100),  # 2,000/s, 100 us CPU each
+        (0.07, 0.012, 150),  # inside the next window: no mark
+        (0.10, 0.016, 400),  # 6,000/s over 0.05 s, 20 us CPU each
+        (0.16, 0.028, 500),  # 1,667/s, 120 us each
+    ]:
+        clock.at(wall, cpu)
+        windows.tick(done)
+    assert windows.best_rate() == pytest.approx(6000)
+    assert windows.least_cpu() == pytest.approx(20e-6)
+
+
 async def test_the_masters_own_time_without_io() -> None:
     assert await bench.engine_cost(3, messages=200) > 0  # seconds per message, measured
 
@@ -32,6 +63,7 @@ async def test_the_masters_own_time_without_io() -> None:
 def test_one_short_round_measures_everything(monkeypatch: pytest.MonkeyPatch) -> None:
     """Master and both bare requesters get their replies (a wrong length would hang)."""
     monkeypatch.setattr(bench, "MEASURE", 0.05)
+    monkeypatch.setattr(bench, "WINDOW", 0.01)
     monkeypatch.setattr(bench, "SETTLE", 0.01)
     monkeypatch.setattr(bench, "ROUNDS", 1)
     case = bench.measure(2)
@@ -67,6 +99,7 @@ def test_a_responder_runs_on_the_responder_cpu() -> None:
 def test_pinned_rounds_give_the_process_its_affinity_back(monkeypatch: pytest.MonkeyPatch) -> None:
     where = _two_cpus()
     monkeypatch.setattr(bench, "MEASURE", 0.05)
+    monkeypatch.setattr(bench, "WINDOW", 0.01)
     monkeypatch.setattr(bench, "SETTLE", 0.01)
     monkeypatch.setattr(bench, "ROUNDS", 1)
     before = os.sched_getaffinity(0)
