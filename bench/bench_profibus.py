@@ -242,15 +242,21 @@ class Windows:
     each at its own completions (docs/decisions.md, "Benchmarks: windows").
     """
 
-    def __init__(self) -> None:
+    def __init__(
+        self,
+        clock: Callable[[], float] = time.perf_counter,
+        cpu_clock: Callable[[], float] = time.process_time,
+    ) -> None:
+        self._clock = clock
+        self._cpu_clock = cpu_clock
         self._marks: list[tuple[float, float, int]] = []
         self._next = 0.0
 
     def tick(self, done: int) -> None:
         """``done`` completions so far; a window closes at the first tick after its end."""
-        now = time.perf_counter()
+        now = self._clock()
         if now >= self._next:
-            self._marks.append((now, time.process_time(), done))
+            self._marks.append((now, self._cpu_clock(), done))
             self._next = now + WINDOW
 
     def _spans(self) -> list[tuple[float, float, int]]:

@@ -10,10 +10,13 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
+from typing import Any
 
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from adapters.profibus.dp import GlobalControl
 from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from adapters.profibus.fdl import (
     DataTelegram,
@@ -27,6 +30,8 @@ from adapters.profibus.fdl import (
     decode_telegram,
 )
 from adapters.profibus.master import (
+    InputsReceived,
+    LineMode,
     LineNoise,
     Master,
     Received,
@@ -35,6 +40,7 @@ from adapters.profibus.master import (
     SlaveUp,
     Transmit,
 )
+from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.sim.slave import DpSlave
 from gateway.sim import FaultInjector
 
@@ -166,3 +172,104 @@ def test_nothing_from_a_master_makes_the_simulated_slave_raise(script: list[Data
         if reply is not None:
             reply.encode()
         slave.tick(i * 0.01)
+
+
+# --------------------------------------------------------------------------- the short path
+
+
+class GeneralPathOnly(Master):
+    """The engine without its short path for the steady case of data exchange."""
+
+    def _steady_reply(self, t: object, now: float) -> bool:
+        return False
+
+
+Command = tuple[str, int]
+commands: st.SearchStrategy[Command] = st.tuples(
+    st.sampled_from(
+        [
+            "read",
+            "write",
+            "clear",
+            "operate",
+            "sync",
+            "power",
+            "diag",
+            "static",
+            "slowstart",
+            "drop",
+        ]
+    ),
+    st.integers(0, 3),
+)
+EXT_DIAG = bytes([0x03, 0x01, 0x02])  # a device-related block of 3 bytes, header included
+
+
+def _slow_start(w: Wire, address: int) -> None:
+    """The slave restarts and stays not ready (its application does not come up)."""
+    w.line[address].faults.not_ready = True
+    w.line[address].power_cycle(w.now, off_time=0.01)
+
+
+def _apply(w: Wire, addresses: list[int], command: Command) -> None:
+    what, n = command
+    address = addresses[n % len(addresses)]
+    device = w.line[address].device
+    faults = w.line[address].faults
+    assert isinstance(device, EchoSim)
+    actions: dict[str, Callable[[], object]] = {
+        "read": lambda: w.master.read_record(address, 0, 1 + n, 4, w.now),
+        "write": lambda: w.master.write_record(address, 0, 1, bytes([n] * 4), w.now),
+        "clear": lambda: w.master.set_mode(LineMode.CLEAR, w.now),
+        "operate": lambda: w.master.set_mode(LineMode.OPERATE, w.now),
+        "sync": lambda: w.master.global_control(GlobalControl(sync=True)),
+        "power": lambda: w.line[address].power_cycle(w.now, off_time=0.01),
+        "diag": lambda: setattr(device, "diag", b"" if device.diag else EXT_DIAG),
+        "static": lambda: setattr(faults, "stat_diag", not faults.stat_diag),
+        "slowstart": lambda: _slow_start(w, address),
+        "drop": lambda: setattr(w, "drop_replies", n),
+    }
+    actions[what]()
+    w.poke()
+
+
+def _trace(
+    engine: type[Master],
+    addresses: list[int],
+    noise: float,
+    seed: int,
+    script: list[tuple[float, Command]],
+) -> tuple[list[tuple[float, bytes]], list[Any], dict[str, Any], list[dict[str, Any]]]:
+    master = engine(FAST_BUS, [echo_params(a) for a in addresses])
+    line = echo_line(addresses)
+    line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
+    w = Wire(master, line)
+
+    def adapter(action: object) -> None:  # new outputs from every reply's inputs
+        if isinstance(action, InputsReceived):
+            master.set_outputs(action.address, bytes((b + 1) % 256 for b in action.data))
+
+    w.on_action = adapter
+    w.run(0.2)
+    for wait, command in script:
+        w.run(wait)
+        _apply(w, addresses, command)
+    w.run(2.0)  # past the start-up states' timeouts (a slave left not ready, 1 s)
+    slaves = [master.slave_diagnostics(a) for a in addresses]
+    return w.sent, w.actions, master.line_diagnostics(), slaves
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    addresses=st.lists(st.integers(3, 9), min_size=1, max_size=4, unique=True),
+    noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
+    seed=st.integers(0, 99),
+    script=st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10),
+)
+def test_the_short_path_sends_and_reports_what_the_general_path_does(
+    addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
+) -> None:
+    short = _trace(Master, addresses, noise, seed, script)
+    general = _trace(GeneralPathOnly, addresses, noise, seed, script)
+    assert short == general
+    assert len(short[0]) > 50  # telegrams went out: the comparison compared something

@@ -69,6 +69,8 @@ class SlaveFaults:
     prm_req_forever: bool = False  # takes Set_Prm, then asks for parameters again
     silent: bool = False  # answers nothing (a missing or dead station)
     record_delay: float = 0.0  # s before a DP-V1 answer is ready (polls get E5 meanwhile)
+    not_ready: bool = False  # Station_Not_Ready in every diagnosis (its application is down)
+    stat_diag: bool = False  # Stat_Diag in every diagnosis: "keep reading it" (1.8 Status_2)
 
 
 @dataclass
@@ -202,7 +204,7 @@ class DpSlave:
         self._diag_delivered = ext
         diag = SlaveDiag(
             ident_number=self.device.ident_number,
-            station_not_ready=self.mode is not SlaveMode.DATA_EXCH,
+            station_not_ready=self.mode is not SlaveMode.DATA_EXCH or self.faults.not_ready,
             cfg_fault=self.cfg_fault,
             ext_diag=self._alert(ext),
             prm_fault=self.prm_fault,
@@ -210,6 +212,7 @@ class DpSlave:
             wd_on=self.watchdog is not None,
             freeze_mode=self.freeze,
             sync_mode=self.sync,
+            stat_diag=self.faults.stat_diag,
             master_address=NO_MASTER if self.master is None else self.master,
         )
         return request.reply(diag.encode() + ext)
