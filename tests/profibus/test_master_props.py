@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 from hypothesis import example, given, settings
@@ -235,12 +236,15 @@ def _apply(w: Wire, addresses: list[int], command: Command) -> None:
 
 def _trace(
     engine: type[Master],
+    *,
     addresses: list[int],
     noise: float,
     seed: int,
     script: list[tuple[float, Command]],
+    probe: float,
 ) -> tuple[list[tuple[float, bytes]], list[Any], dict[str, Any], list[dict[str, Any]]]:
-    master = engine(FAST_BUS, [echo_params(a) for a in addresses])
+    bus = dataclasses.replace(FAST_BUS, live_list_period=probe)
+    master = engine(bus, [echo_params(a) for a in addresses])
     line = echo_line(addresses)
     line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
     w = Wire(master, line)
@@ -265,11 +269,16 @@ def _trace(
     noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
     seed=st.integers(0, 99),
     script=st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10),
+    probe=st.sampled_from([0.0, 0.005]),  # live-list probes off, or one every 5 ms
 )
 def test_the_short_path_sends_and_reports_what_the_general_path_does(
-    addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
+    addresses: list[int],
+    noise: float,
+    seed: int,
+    script: list[tuple[float, Command]],
+    probe: float,
 ) -> None:
-    short = _trace(Master, addresses, noise, seed, script)
-    general = _trace(GeneralPathOnly, addresses, noise, seed, script)
+    trace = partial(_trace, addresses=addresses, noise=noise, seed=seed, script=script, probe=probe)
+    short, general = trace(Master), trace(GeneralPathOnly)
     assert short == general
     assert len(short[0]) > 50  # telegrams went out: the comparison compared something
