@@ -318,11 +318,21 @@ def drain(decoder: TelegramDecoder) -> list[object]:
     return events
 
 
-def run(chunks: list[bytes | None]) -> tuple[TelegramDecoder, list[object]]:
-    """Feed chunks (None = the line went idle), draining after each step."""
+def run(
+    chunks: list[bytes | None], *, take_whole: bool = False
+) -> tuple[TelegramDecoder, list[object]]:
+    """Feed chunks (None = the line went idle), draining after each step.
+
+    ``take_whole``: as the driver reads, a chunk that is a whole telegram seen before is
+    taken at once (``TelegramDecoder.whole``), the others fed.
+    """
     decoder = TelegramDecoder()
     events: list[object] = []
     for chunk in chunks:
+        known = decoder.whole(chunk) if take_whole and chunk is not IDLE else None
+        if known is not None:
+            events.append(known)
+            continue
         if chunk is IDLE:
             decoder.mark_idle()
         else:
@@ -497,24 +507,6 @@ def test_stream_bit_flips_lose_only_the_damaged_frame(
     assert is_subsequence(good, only_telegrams(events))
 
 
-def run_taking_whole(chunks: list[bytes | None]) -> tuple[TelegramDecoder, list[object]]:
-    """As the driver reads: a chunk that is a whole telegram seen before is taken at once."""
-    decoder = TelegramDecoder()
-    events: list[object] = []
-    for chunk in chunks:
-        if chunk is IDLE:
-            decoder.mark_idle()
-            events += drain(decoder)
-            continue
-        known = decoder.whole(chunk)
-        if known is not None:
-            events.append(known)
-            continue
-        decoder.feed(chunk)
-        events += drain(decoder)
-    return decoder, events
-
-
 def seen(events: list[object]) -> list[object]:
     """Events comparable by value (an error is an exception: compare what it says)."""
     return [(e.error.reason, e.raw) if isinstance(e, Discarded) else e for e in events]
@@ -552,7 +544,7 @@ def test_taking_whole_telegrams_changes_no_event_and_no_count(
             stream.append(IDLE)
     stream.append(IDLE)
     plain, plain_events = run(stream)
-    taking, taking_events = run_taking_whole(stream)
+    taking, taking_events = run(stream, take_whole=True)
     assert seen(taking_events) == seen(plain_events)
     assert taking.stats == plain.stats
     assert taking.buffered == plain.buffered == 0
