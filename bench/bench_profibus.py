@@ -239,7 +239,7 @@ class Windows:
     a stretch of a round down, by a factor that changes from one stretch to the next. The
     rate of the best window, and the least CPU time per completion of any window, are
     what the code can do on this transport; master and reference are counted the same way,
-    each at its own completions (docs/decisions.md, "Benchmarks: windows").
+    each at its own completions (docs/decisions.md, "Benchmarks: windows and medians").
     """
 
     def __init__(
@@ -336,9 +336,9 @@ async def loop_round_trips(
             return
         send()
 
-    loop.add_reader(fd, readable)
     windows = Windows()
     windows.tick(0)
+    loop.add_reader(fd, readable)
     try:
         send()
         await asyncio.wait_for(finished, duration + REPLY_TIMEOUT)
@@ -567,7 +567,10 @@ def _placed(where: Placement | None) -> str:
 
 
 def _case_figures(slaves: int, case: Case, where: Placement | None = None) -> list[Figure]:
-    sizes = f"{REQUEST_LEN} B request, {REPLY_LEN} B reply; {_placed(where)}"
+    sizes = (
+        f"{REQUEST_LEN} B request, {REPLY_LEN} B reply; {_placed(where)}; median of "
+        f"{ROUNDS} rounds, each its best {WINDOW:g} s window"
+    )
     return [
         Figure(
             f"profibus_master_msg_cycles_{slaves}_slaves",
