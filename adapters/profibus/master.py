@@ -500,12 +500,10 @@ class Master:
             if now < self._next_cycle:
                 return True  # the cycle time is not over: the timer starts the next
             self._begin_cycle(now)
-        following = self._slaves[self._queue[0]]
-        if following.state is not SlaveState.DATA_EXCHANGE:
+        # a turn in data exchange starts with its Data_Exchange
+        if self._slaves[self._queue[0]].state is not SlaveState.DATA_EXCHANGE:
             return False
-        self._current = self._queue.popleft()
-        following.turn = _Turn()  # a turn in data exchange starts with Data_Exchange
-        self._send_for(following, Purpose.DATA, now)
+        self._send_for(self._start_turn(), Purpose.DATA, now)
         return True
 
     def _steady_slave(self, p: _Pending | None, t: object) -> _Slave | None:
@@ -889,13 +887,19 @@ class Master:
                 self._current = None
             if not self._queue:
                 break
-            self._current = self._queue.popleft()
-            self._slaves[self._current].turn = _Turn()
+            self._start_turn()
         if not self._line_done:
             if self._line_task(now):
                 return True
             self._line_done = True
         return False
+
+    def _start_turn(self) -> _Slave:
+        """The next slave of the cycle; its turn begins."""
+        self._current = self._queue.popleft()
+        sl = self._slaves[self._current]
+        sl.turn = _Turn()
+        return sl
 
     def _want_exchange(self, sl: _Slave, now: float) -> Purpose | None:
         turn = sl.turn
