@@ -90,14 +90,17 @@ class StateSubscription:
     """Conflating view of state changes: a slow reader sees the newest state of
     each drive, never an unbounded queue, and never misses the last one."""
 
-    def __init__(self, hub: Hub) -> None:
+    def __init__(self, hub: Hub, on_ready: Callable[[], None] | None = None) -> None:
         self._hub = hub
         self._pending: dict[str, DriveState] = {}
         self._ready = asyncio.Event()
+        self._signal = self._ready.set if on_ready is None else on_ready
 
     def _offer(self, state: DriveState) -> None:
-        self._pending[state.id] = state
-        self._ready.set()
+        pending = self._pending
+        if not pending:  # else signalled already: get clears the event only when empty
+            self._signal()
+        pending[state.id] = state
 
     async def get(self) -> DriveState:
         while not self._pending:
@@ -112,7 +115,8 @@ class StateSubscription:
         return out
 
     def close(self) -> None:
-        self._hub._state_subs.discard(self)
+        hub = self._hub
+        hub._state_subs = tuple(s for s in hub._state_subs if s is not self)
 
     def __enter__(self) -> StateSubscription:
         return self
@@ -164,7 +168,7 @@ class Hub:
         self._clock = clock
         self._wallclock = wallclock
         self._drives: dict[str, _Drive] = {}
-        self._state_subs: set[StateSubscription] = set()
+        self._state_subs: tuple[StateSubscription, ...] = ()
         self._event_subs: set[EventSubscription] = set()
         self._seq = 0
         self._listeners: list[Callable[[str], None]] = []
@@ -228,17 +232,18 @@ class Hub:
         if drv is None:
             raise UnknownDrive(f"no drive {drive_id!r}")
         old = drv.state
-        current = old.__dict__
+        current = old.__dict__  # the fields, and nothing else (see DriveState._derive)
+        delta: dict[str, Any] = {}
+        transition = False
         try:
-            delta = {name: value for name, value in changes.items() if current[name] != value}
+            for name, value in changes.items():
+                if current[name] != value and name not in _HUB_FIELDS:
+                    delta[name] = value
+                    if name in _TRANSITION_FIELDS:
+                        transition = True
         except KeyError:
-            delta = changes  # a name that is no attribute at all: reported just below
-        if not delta.keys() <= STATE_FIELDS:  # also catches the state's private attributes
             unknown = sorted(changes.keys() - STATE_FIELDS)
-            raise TypeError(f"DriveState has no field(s) {unknown}")
-        if not _HUB_FIELDS.isdisjoint(delta):
-            for name in _HUB_FIELDS:
-                delta.pop(name, None)
+            raise TypeError(f"DriveState has no field(s) {unknown}") from None
         if not delta:
             return old
         self._seq += 1
@@ -248,9 +253,9 @@ class Hub:
         if source is not old.control_source:
             delta["control_source"] = source
         new = drv.state = old._derive(delta)
-        if not _TRANSITION_FIELDS.isdisjoint(delta):
+        if transition:
             self._on_transitions(drive_id, drv, old, new)
-        for sub in tuple(self._state_subs):
+        for sub in self._state_subs:
             sub._offer(drv.state)
         return drv.state
 
@@ -260,7 +265,7 @@ class Hub:
             {"seq": self._seq, "ts": self._wallclock(), "control_source": drv.desired.source}
         )
         drv.state = new
-        for sub in tuple(self._state_subs):
+        for sub in self._state_subs:
             sub._offer(new)
         return new
 
@@ -295,9 +300,12 @@ class Hub:
             self.event(drive_id, EventKind.SAFETY, f"run command cleared: {why}")
             self._notify_command(drive_id)
 
-    def subscribe_states(self) -> StateSubscription:
-        sub = StateSubscription(self)
-        self._state_subs.add(sub)
+    def subscribe_states(self, on_ready: Callable[[], None] | None = None) -> StateSubscription:
+        """A conflating view of state changes. Read it with ``get`` and ``drain``; or
+        give ``on_ready``, called (synchronously, on the loop) when a state arrives while
+        none is pending, and ``drain`` it from there."""
+        sub = StateSubscription(self, on_ready)
+        self._state_subs = (*self._state_subs, sub)
         return sub
 
     async def wait_for(self, drive_id: str, predicate: Callable[[DriveState], bool]) -> DriveState:

@@ -9,23 +9,18 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from operator import attrgetter
 from typing import Any
+
+import orjson
 
 from gateway.adapter import ParamValue
 from gateway.errors import CommandRejected, GatewayError, ParameterError
 from gateway.model import (
-    EXTRA_JSON_FIELDS,
-    JSON_FIELDS,
-    CommState,
-    Device,
-    Direction,
     DriveCommand,
     DriveState,
     DriveStatus,
-    Source,
 )
 
 PARAM_NUMBER_MAX = 65535
@@ -70,16 +65,6 @@ def _finite(value: Any) -> Any:
     return value if value is None or math.isfinite(value) else None
 
 
-def _mapping(value: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: _finite(v) if isinstance(v, float) else v for k, v in value.items()}
-
-
-_STATE_FIELDS = JSON_FIELDS + EXTRA_JSON_FIELDS
-_STATE_VALUES = attrgetter(*_STATE_FIELDS)
-_STRICT = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
-_encode_str: Callable[[str], str] = json.encoder.encode_basestring_ascii
-
-
 def _sanitise(obj: Any) -> Any:
     if isinstance(obj, float):
         return _finite(obj)
@@ -93,75 +78,24 @@ def _sanitise(obj: Any) -> Any:
 def encode_state(state: DriveState) -> bytes:
     """The published form of a state: ``DriveState.to_json()`` as compact JSON.
 
-    Hot path of the fan-out. Each value is turned into its JSON text by a table
-    keyed on its type (the same text ``json.dumps`` writes for it). The texts of
-    the last state encoded for each drive are kept: a state derived from that
-    one (``DriveState.delta``) redoes only the fields given to the hub; any other
-    state reuses the texts of the values that are the very same objects. A value
-    the table does not know falls back to ``to_json`` with every non-finite
-    number made null.
+    Hot path of the fan-out. The state's fields, in their order (its ``__dict__``
+    holds them and nothing else), go to orjson with the enums given as their JSON
+    text; orjson writes a non-finite number as null. A value it cannot write (an
+    integer beyond 64 bits, a mapping that is no dict, a key that is no string)
+    falls back to ``to_json`` with every non-finite number made null.
     """
-    cached = _LAST_TEXT.get(state.id)
+    doc = state.__dict__.copy()
+    doc["status"] = _STATUS_TEXT[doc["status"]]
+    for name in _ENUM_FIELDS:
+        doc[name] = doc[name]._value_  # not a dict keyed on members: their hash is Python code
     try:
-        if cached is None:
-            parts = [
-                key + _TEXT[type(v)](v)
-                for key, v in zip(_STATE_KEYS, _STATE_VALUES(state), strict=True)
-            ]
-        else:
-            last, parts = cached
-            delta = state.delta()
-            if delta is not None and delta[0] is last:
-                parts = parts.copy()
-                for name, value in delta[1].items():
-                    i = _STATE_INDEX[name]
-                    parts[i] = _STATE_KEYS[i] + _TEXT[type(value)](value)
-            else:
-                parts = _by_identity(state, last, parts)
-    except (KeyError, TypeError, ValueError):
+        return orjson.dumps(doc)
+    except TypeError:  # orjson.JSONEncodeError
         return encode_json(_sanitise(state.to_json()))
-    if len(_LAST_TEXT) > _LAST_TEXT_LIMIT:
-        _LAST_TEXT.clear()
-    _LAST_TEXT[state.id] = (state, parts)
-    return ("{" + ",".join(parts) + "}").encode()
 
 
-def _by_identity(state: DriveState, last: DriveState, last_parts: list[str]) -> list[str]:
-    """The texts of ``state``'s fields, reusing those of ``last`` for the very same values."""
-    return [
-        old_part if v is old_v else key + _TEXT[type(v)](v)
-        for key, v, old_v, old_part in zip(
-            _STATE_KEYS, _STATE_VALUES(state), _STATE_VALUES(last), last_parts, strict=True
-        )
-    ]
-
-
-_LAST_TEXT: dict[str, tuple[DriveState, list[str]]] = {}
-"""Per drive id, the state last encoded and the JSON texts of its fields."""
-_LAST_TEXT_LIMIT = 4096
-
-
-def _float_text(value: float) -> str:
-    return float.__repr__(value) if math.isfinite(value) else "null"
-
-
-def _mapping_text(value: Mapping[str, Any]) -> str:
-    return _STRICT(_mapping(value)) if value else "{}"
-
-
-_STATE_KEYS = tuple(_encode_str(name) + ":" for name in _STATE_FIELDS)
-_STATE_INDEX = {name: i for i, name in enumerate(_STATE_FIELDS)}
-_TEXT: dict[type, Callable[[Any], str]] = {
-    bool: lambda v: "true" if v else "false",
-    int: int.__repr__,
-    float: _float_text,
-    str: _encode_str,
-    type(None): lambda v: "null",
-    dict: _mapping_text,
-}
-for _enum_type in (Device, CommState, Direction, Source):
-    _TEXT[_enum_type] = {m: _encode_str(m.value) for m in _enum_type}.__getitem__
-_TEXT[DriveStatus] = {m: _encode_str(m.label) for m in DriveStatus}.__getitem__
+_STATUS_TEXT = {m: m.label for m in DriveStatus}
+_ENUM_FIELDS = ("device", "comm", "direction", "control_source")
 
 
 def decode_json(payload: bytes) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import pytest
@@ -257,6 +258,32 @@ async def test_state_subscription_conflates_to_the_newest() -> None:
         assert sub.drain() == []
 
 
+async def test_a_subscription_with_a_callback_is_called_once_until_it_is_drained() -> None:
+    hub, _ = make_hub()
+    calls: list[int] = []
+    with hub.subscribe_states(on_ready=lambda: calls.append(len(calls))) as sub:
+        hub.update("d", speed_rpm=1.0)
+        hub.update("d", speed_rpm=2.0)  # one is waiting already: no second call
+        assert calls == [0]
+        assert [s.speed_rpm for s in sub.drain()] == [2.0]
+        hub.update("d", speed_rpm=3.0)
+        assert calls == [0, 1]
+    hub.update("d", speed_rpm=4.0)  # closed: the hub no longer offers it anything
+    assert calls == [0, 1] and [s.speed_rpm for s in sub.drain()] == [3.0]
+
+
+async def test_an_emptied_subscription_wakes_its_reader_on_the_next_change() -> None:
+    hub, _ = make_hub()
+    with hub.subscribe_states() as sub:
+        hub.update("d", speed_rpm=1.0)
+        assert (await sub.get()).speed_rpm == 1.0  # taken: none waits, the event is stale
+        reader = asyncio.create_task(sub.get())
+        await asyncio.sleep(0)  # the reader clears the event and waits
+        assert not reader.done()
+        hub.update("d", speed_rpm=2.0)
+        assert (await asyncio.wait_for(reader, 5)).speed_rpm == 2.0
+
+
 def test_seq_grows_only_on_change() -> None:
     hub, _ = make_hub()
     s1 = hub.update("d", speed_rpm=1.0)
@@ -311,8 +338,8 @@ def test_update_refuses_unknown_fields_and_ignores_the_hubs_own() -> None:
     before = hub.state("d")
     with pytest.raises(TypeError, match=r"no field\(s\) \['sped_rpm'\]"):
         hub.update("d", sped_rpm=1.0)
-    with pytest.raises(TypeError, match="_delta"):
-        hub.update("d", _delta=None)  # the state's private record is no field either
+    with pytest.raises(TypeError, match="__dict__"):
+        hub.update("d", __dict__={})  # an attribute of the state, but no field
     assert hub.state("d") is before
     # seq, ts and control_source are the hub's: an adapter cannot set them
     assert hub.update("d", seq=999, ts=5.0, control_source=Source.MODBUS) is before
@@ -320,10 +347,7 @@ def test_update_refuses_unknown_fields_and_ignores_the_hubs_own() -> None:
     after = hub.update("d", seq=999, speed_rpm=12.0)
     assert after.seq == before.seq + 1 and after.ts == clock.t
     assert after.control_source is Source.NONE
-    # the new state records what it came from and what changed (for the Zenoh encoder)
-    delta = after.delta()
-    assert delta is not None and delta[0] is before
-    assert set(delta[1]) == {"speed_rpm", "seq", "ts"}
+    assert after == before.changed(seq=after.seq, ts=after.ts, speed_rpm=12.0)
 
 
 def test_watchdog_hold_keeps_the_drive_running_until_the_client_speaks_again() -> None:

@@ -154,7 +154,7 @@ class Recorder(StateSubscription):
         super().__init__(hub)
         self.commits: collections.Counter[str] = collections.Counter()
         self.since: dict[str, int] = {}  # counting starts above this seq
-        hub._state_subs.add(self)
+        hub._state_subs = (*hub._state_subs, self)
 
     def start(self, hub: Hub) -> None:
         self.since = {s.id: s.seq for s in hub.states()}
