@@ -216,11 +216,19 @@ async def _gateway_phase(hub: Hub) -> int:
     end = loop.time() + FANOUT_SECONDS
     n = 0
     while loop.time() < end:
-        hub.update(DRIVE_IDS[n % DRIVES], speed_rpm=float(n % 1800))
-        n += 1
-        if n % DRIVES == 0:
-            await asyncio.sleep(0)  # one line cycle: every drive updated, then the loop turns
+        n = _line_cycle(hub, n)
+        await asyncio.sleep(0)
     hub.update("d0", speed_rpm=SENTINEL)
+    return n
+
+
+def _line_cycle(hub: Hub, n: int) -> int:
+    """One cycle of a line: every drive updated, each to a speed other than its last
+    (``n`` counts the updates; returned grown by one cycle). The loop turns between."""
+    update = hub.update
+    for drive_id in DRIVE_IDS:
+        update(drive_id, speed_rpm=float(n % 1800))
+        n += 1
     return n
 
 
@@ -240,10 +248,8 @@ async def _hub_alone() -> float:
         end = start + FANOUT_SECONDS
         n = 0
         while loop.time() < end:
-            hub.update(DRIVE_IDS[n % DRIVES], speed_rpm=float(n % 1800))
-            n += 1
-            if n % DRIVES == 0:
-                await asyncio.sleep(0)
+            n = _line_cycle(hub, n)
+            await asyncio.sleep(0)
         rate = n / (loop.time() - start)
         drainer.cancel()
         with contextlib.suppress(asyncio.CancelledError):

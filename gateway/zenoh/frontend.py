@@ -28,6 +28,10 @@ Threading model and delivery:
   lock for milliseconds (it must win the GIL back from a busy loop to return from
   ``put``); every change made meanwhile still gets its own put. A state older than
   one already put is never put.
+- The hub's subscription calls back when a change arrives while none waits; the
+  changes are taken in the loop's next turn (so those an adapter makes in one
+  cycle are encoded, then put back to back) without a task, a future or an event
+  per turn: the fan-out's hot path (docs/decisions.md, "State fan-out").
 - Every state the hub's subscription yields gets its own put (on an uncongested
   link every committed state arrives, unless the same drive changed twice in one
   turn of the loop: the subscription keeps the newest). The settle and heartbeat
@@ -48,7 +52,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Any
@@ -86,6 +90,7 @@ PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a clien
 CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
 HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
 SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
+_ONLINE = CommState.ONLINE  # a module constant: an Enum class attribute is slow to look up
 DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
 
@@ -173,14 +178,17 @@ class ZenohFrontEnd:
         self._worker.start()
         tasks: list[asyncio.Task[None]] = []
         try:
-            with self.hub.subscribe_states() as states, self.hub.subscribe_events() as events:
+            with (
+                self.hub.subscribe_states(on_ready=self._states_waiting) as states,
+                self.hub.subscribe_events() as events,
+            ):
                 self.state_subscription = states
                 self._changes = await asyncio.wrap_future(
                     self._worker.call(partial(self._io_open, config))
                 )
                 self._serving = True
-                for state in self.hub.states():
-                    self._send_state(state, self._now())
+                self._send_batch(self.hub.states(), self._now())
+                self._forward_states()  # what the subscription took meanwhile
                 await asyncio.wrap_future(self._worker.call(self._io_gateway_token))
                 self.ready.set()
                 log.info(
@@ -189,7 +197,6 @@ class ZenohFrontEnd:
                     *_endpoints_of(config),
                 )
                 tasks = [
-                    asyncio.create_task(self._forward_states(states), name="zenoh-states"),
                     asyncio.create_task(self._forward_events(events), name="zenoh-events"),
                     asyncio.create_task(self._heartbeat(), name="zenoh-heartbeat"),
                 ]
@@ -314,39 +321,57 @@ class ZenohFrontEnd:
 
     def _send_state(self, state: DriveState, now: float) -> None:
         """A change: put it now with DROP; the newest state follows with BLOCK (settle)."""
-        if self._prepare(state, now):
-            self._put_change(state.id)
+        self._send_batch((state,), now)
 
-    def _prepare(self, state: DriveState, now: float) -> bool:
-        """Encode a change to be put (False: a newer state was handed over already)."""
-        drive_id = state.id
-        live = state.comm is CommState.ONLINE
-        if live is not (drive_id in self._live):
-            self._set_live(drive_id, live)
-        newest = self._newest.get(drive_id)
-        if newest is not None and state.seq <= newest[0]:
-            return False
-        self._newest[drive_id] = (state.seq, encode_state(state))
-        changed_at = self._changed_at
-        if drive_id not in changed_at:
-            self._wake.set()
-        changed_at[drive_id] = now
-        return True
+    def _send_batch(self, batch: Iterable[DriveState], now: float) -> None:
+        """Changes of different drives: encode them all, then put them back to back
+        (Zenoh packs puts that follow each other closely into fewer transmissions).
 
-    def _put_change(self, drive_id: str) -> None:
-        """The drive's newest payload with DROP; deferred while the I/O thread holds the
-        drive's lock (whoever takes the lock next puts it, in order)."""
-        publisher = self._changes.get(drive_id)
-        lock = self._put_locks.get(drive_id)
-        if publisher is None or lock is None:
-            return
-        if not lock.acquire(blocking=False):
-            self._deferred[drive_id].append(self._newest[drive_id])
-            return
-        try:
-            self._catch_up(drive_id, partial(_drop_put, publisher))
-        finally:
-            lock.release()
+        A state no newer than one handed over already is skipped. Hot path of the
+        fan-out: every state of every drive passes here.
+        """
+        newest, changed_at, live = self._newest, self._changed_at, self._live
+        ready: list[tuple[str, tuple[int, bytes]]] = []
+        for state in batch:
+            drive_id = state.id
+            online = state.comm is _ONLINE
+            if online is not (drive_id in live):
+                self._set_live(drive_id, online)
+            entry = newest.get(drive_id)
+            if entry is not None and state.seq <= entry[0]:
+                continue
+            newest[drive_id] = entry = (state.seq, encode_state(state))
+            if drive_id not in changed_at:
+                self._wake.set()
+            changed_at[drive_id] = now
+            ready.append((drive_id, entry))
+        self._put_changes(ready)
+
+    def _put_changes(self, changes: list[tuple[str, tuple[int, bytes]]]) -> None:
+        """Each drive's change (seq, payload) with DROP, under the drive's lock; deferred
+        while the I/O thread holds that lock (whoever takes it next puts it, in order)."""
+        publishers, locks, deferred, sent = (
+            self._changes,
+            self._put_locks,
+            self._deferred,
+            self._sent_seq,
+        )
+        for drive_id, (seq, payload) in changes:
+            publisher = publishers.get(drive_id)
+            if publisher is None:
+                continue
+            lock = locks[drive_id]
+            if not lock.acquire(False):  # positional: a keyword costs as much again
+                deferred[drive_id].append((seq, payload))
+                continue
+            try:
+                if deferred[drive_id]:
+                    self._catch_up(drive_id, partial(_drop_put, publisher))
+                elif seq > sent.get(drive_id, -1):
+                    sent[drive_id] = seq
+                    _drop_put(publisher, drive_id, payload)
+            finally:
+                lock.release()
 
     def _set_live(self, drive_id: str, live: bool) -> None:
         if live:
@@ -385,16 +410,21 @@ class ZenohFrontEnd:
         loop = self._loop
         return loop.time() if loop is not None else time.monotonic()
 
-    async def _forward_states(self, states: StateSubscription) -> None:
-        prepare, put = self._prepare, self._put_change
-        while True:
-            first = await states.get()
-            now = self._now()
-            batch = [first, *states.drain()]  # at most one state per drive (conflating)
-            # encode every change first, then put them back to back: Zenoh batches
-            # puts that follow each other closely into fewer transmissions
-            for drive_id in [state.id for state in batch if prepare(state, now)]:
-                put(drive_id)
+    def _states_waiting(self) -> None:
+        """The hub has changes for this front end: they are forwarded in the loop's next
+        turn, so the changes an adapter makes in one cycle are put back to back."""
+        loop = self._loop
+        if loop is not None:
+            loop.call_soon(self._forward_states)
+
+    def _forward_states(self) -> None:
+        states = self.state_subscription
+        if not self._serving or states is None:
+            return  # before serving, run() forwards them; at shutdown, the last word does
+        try:
+            self._send_batch(states.drain(), self._now())  # at most one state per drive
+        except Exception:
+            log.exception("zenoh front end: state changes could not be published")
 
     async def _forward_events(self, events: EventSubscription) -> None:
         while True:
