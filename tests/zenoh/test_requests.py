@@ -236,17 +236,21 @@ def test_a_value_json_cannot_hold_becomes_null() -> None:
     assert (data["fault_code"], data["values"]) == (None, {"x": None, "y": 1})
 
 
-def test_the_published_state_is_the_model_json() -> None:
-    state = DriveState(
+def running_drive(speed_rpm: float, values: dict[str, float | int]) -> DriveState:
+    return DriveState(
         id="d1",
         device=Device.CFW11,
         bus="line1",
         address=3,
         comm=CommState.ONLINE,
         status=DriveStatus.RUNNING,
-        speed_rpm=math.inf,
-        values={"P0002": 5},
+        speed_rpm=speed_rpm,
+        values=values,
     )
+
+
+def test_the_published_state_is_the_model_json() -> None:
+    state = running_drive(math.inf, {"P0002": 5})
     assert json.loads(encode_state(state)) == state.to_json()
     assert json.loads(encode_state(state))["speed_rpm"] is None
     assert encode_json({"x": {1, 2} and object}).startswith(b'{"x":"<class')
@@ -317,16 +321,7 @@ def test_a_state_of_plain_values_never_takes_the_slow_path(
     def slow(obj: Any) -> bytes:
         raise AssertionError("the slow path")
 
-    state = DriveState(
-        id="d1",
-        device=Device.CFW11,
-        bus="line1",
-        address=3,
-        comm=CommState.ONLINE,
-        status=DriveStatus.RUNNING,
-        speed_rpm=math.nan,
-        values={"P0002": 5, "P0003": 1.5},
-    )
+    state = running_drive(math.nan, {"P0002": 5, "P0003": 1.5})
     monkeypatch.setattr(requests, "encode_json", slow)
     for s in (state, state.evolve({"speed_rpm": 1750.0, "seq": 9, "ts": 1.5})):
         assert strict_json(encode_state(s)) == model_doc(s)
