@@ -367,8 +367,8 @@ class ZenohFrontEnd:
             try:
                 if deferred[drive_id]:
                     self._catch_up(drive_id, partial(_drop_put, publisher))
-                elif seq > sent.get(drive_id, -1):
-                    sent[drive_id] = seq
+                elif seq > sent.get(drive_id, -1):  # _catch_up's usual case, inline: the
+                    sent[drive_id] = seq  # partial and the call were 5 % of a state's work
                     _drop_put(publisher, drive_id, payload)
             finally:
                 lock.release()
