@@ -85,9 +85,13 @@ def encode_state(state: DriveState) -> bytes:
     falls back to ``to_json`` with every non-finite number made null.
     """
     doc = state.__dict__.copy()
-    doc["status"] = _STATUS_TEXT[doc["status"]]
-    for name in _ENUM_FIELDS:
-        doc[name] = doc[name]._value_  # not a dict keyed on members: their hash is Python code
+    doc["status"] = _STATUS_TEXT[doc["status"]]  # an IntEnum: its hash is int's
+    # the plain Enums by their value (hashing one runs Python code); spelt out, not a
+    # loop over the names: a tenth of the encoder's work
+    doc["device"] = doc["device"]._value_
+    doc["comm"] = doc["comm"]._value_
+    doc["direction"] = doc["direction"]._value_
+    doc["control_source"] = doc["control_source"]._value_
     try:
         return orjson.dumps(doc)
     except TypeError:  # orjson.JSONEncodeError
@@ -95,7 +99,6 @@ def encode_state(state: DriveState) -> bytes:
 
 
 _STATUS_TEXT = {m: m.label for m in DriveStatus}
-_ENUM_FIELDS = ("device", "comm", "direction", "control_source")
 
 
 def decode_json(payload: bytes) -> Any:
