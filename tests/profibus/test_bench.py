@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import select
 
 import pytest
 
@@ -78,6 +79,7 @@ def _two_cpus() -> bench.Placement:
 
 
 def _say_affinity(fd: int) -> None:
+    os.read(fd, 1)  # only once asked: opening the line flushes what came before
     os.write(fd, repr(sorted(os.sched_getaffinity(0))).encode() + b"\n")
 
 
@@ -85,9 +87,11 @@ def test_a_responder_runs_on_the_responder_cpu() -> None:
     where = _two_cpus()
     assert where.requester.isdisjoint(where.responder)
     with bench._child(_say_affinity, where=where) as path, bench._open_raw(path) as fd:
-        os.set_blocking(fd, True)
+        os.write(fd, b"?")
         said = b""
         while not said.endswith(b"\n"):
+            readable, _, _ = select.select([fd], [], [], 10.0)
+            assert readable, "the responder did not say its CPUs within 10 s"
             said += os.read(fd, 64)
     assert said.decode().strip() == repr(sorted(where.responder))
 
