@@ -18,7 +18,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from adapters.profibus.sim.slave import SlaveCounters
 from gateway.config import load
-from gateway.daemon import Daemon
+from gateway.daemon import READY_BOUND, Daemon
 from gateway.model import DriveState
 from gateway.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
@@ -161,10 +161,9 @@ async def running_gateway(
     try:
         with client.liveliness(f"{PREFIX}/gateway") as live:
             await live.auntil(lambda g: g.put, TIMEOUT)
-        for _ in range(100):
-            if await modbus.connect():
-                break
-            await asyncio.sleep(0.05)
+        # READY: every front end serves (or the daemon gave up waiting and says which not)
+        await asyncio.wait_for(daemon.ready.wait(), READY_BOUND + TIMEOUT)
+        assert await modbus.connect(), "the Modbus front end does not accept a connection"
         for drive in drives:
             await asyncio.wait_for(daemon.hub.wait_for(drive, lambda s: s.online), TIMEOUT)
         yield Gateway(daemon, client, modbus)
