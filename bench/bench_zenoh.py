@@ -3,9 +3,13 @@
 - State fan-out: the bench drives a hub flat out (``hub.update`` on 10 drives, the
   loop turning once per round of 10, as a fieldbus adapter updates every drive of
   its line in one cycle; each drive's state differs from its last); the front end publishes; a subscriber in another process counts the states it gets
-  per second. Reference, in the same run and to the same subscriber: raw
-  zenoh-python puts of the same JSON payload (pre-encoded, one publisher per drive,
-  CongestionControl.BLOCK). Two more references: a naive bridge (the same hub
+  per second. Reference, in the same run and to the same subscriber, measured just
+  before the gateway's run: raw zenoh-python puts of the same JSON payload
+  (pre-encoded, one publisher per drive, zenoh-python's default QoS: CongestionControl
+  .DROP, the QoS the gateway puts a change with), counted as they arrive. Also
+  reported: the same raw puts with CongestionControl.BLOCK, where the putter waits
+  for the subscriber, loses nothing and leaves it the CPU meanwhile (the gateway may
+  not wait; docs/decisions.md). Two more references: a naive bridge (the same hub
   updates, each state taken off a hub subscription, ``json.dumps(state.to_json())``
   and put at once on the loop: the least any front end must do), the hub
   alone (``hub.update`` with a conflating subscription drained, no Zenoh): the
@@ -154,20 +158,31 @@ def _publishers(
     }
 
 
-def _raw_phase(session: zenoh.Session, peer: Peer) -> None:
+def _raw_phase(session: zenoh.Session, part: str, congestion: zenoh.CongestionControl) -> None:
     """Raw puts of the same payload, one publisher per drive, for FANOUT_SECONDS."""
     state = _hub().state("d0")
     payload = encode_state(state)
-    pubs = list(_publishers(session, "raw", zenoh.CongestionControl.BLOCK).values())
+    pubs = list(_publishers(session, part, congestion).values())
     end = time.monotonic() + FANOUT_SECONDS
     i = 0
     while time.monotonic() < end:
         for _ in range(100):
             pubs[i % DRIVES].put(payload)
             i += 1
-    pubs[0].put(encode_state(state.changed(speed_rpm=SENTINEL)))
     for pub in pubs:
         pub.undeclare()
+    _last_word(session, part, encode_state(state.changed(speed_rpm=SENTINEL)))
+
+
+def _last_word(session: zenoh.Session, part: str, payload: bytes) -> None:
+    """A run's sentinel state, put with BLOCK: a congested link cannot drop it."""
+    pub = session.declare_publisher(
+        f"{PREFIX}/{part}/drives/d0/state",
+        encoding=zenoh.Encoding.APPLICATION_JSON,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+    )
+    pub.put(payload)
+    pub.undeclare()
 
 
 def _floor_phase(session: zenoh.Session) -> int:
@@ -181,10 +196,9 @@ def _floor_phase(session: zenoh.Session) -> int:
             drive_id = DRIVE_IDS[n % DRIVES]
             pubs[drive_id].put(encode_state(hub.update(drive_id, speed_rpm=float(n % 1800))))
             n += 1
-    last = hub.update("d0", speed_rpm=SENTINEL)
-    pubs["d0"].put(encode_state(last))
     for pub in pubs.values():
         pub.undeclare()
+    _last_word(session, "floor", encode_state(hub.update("d0", speed_rpm=SENTINEL)))
     return n
 
 
@@ -268,9 +282,10 @@ async def _fanout() -> list[Figure]:
     peer = Peer("count", gw_endpoint, raw_endpoint)
     try:
         await asyncio.to_thread(_ask_ready, peer)
-        _raw_phase(raw, peer)
+        _raw_phase(raw, "rawblock", zenoh.CongestionControl.BLOCK)
         _floor_phase(raw)
         await _naive_phase(raw)
+        _raw_phase(raw, "raw", zenoh.CongestionControl.DROP)  # next to the gateway's run
         updates = await _gateway_phase(hub)
         await asyncio.to_thread(peer.write, "report")
         report = json.loads(await asyncio.to_thread(peer.read))
@@ -283,12 +298,14 @@ async def _fanout() -> list[Figure]:
     gw, rw, nv, fl = report["gateway"], report["raw"], report["naive"], report["floor"]
     gw_rate = gw["n"] / gw["seconds"]
     raw_rate = rw["n"] / rw["seconds"]
+    block_rate = report["rawblock"]["n"] / report["rawblock"]["seconds"]
     naive_rate = nv["n"] / nv["seconds"]
     floor_rate = fl["n"] / fl["seconds"]
     note = (
         f"{DRIVES} drives; {updates} hub updates in {FANOUT_SECONDS:g} s, {gw['n']} states "
-        f"delivered ({fe.worker.replaced} replaced in the I/O slot); raw: {rw['n']} puts of "
-        f"the same {len(encode_state(hub.state('d0')))}-byte payload"
+        f"delivered ({fe.worker.replaced} replaced in the I/O slot); raw: {rw['n']} of the "
+        f"same {len(encode_state(hub.state('d0')))}-byte payload delivered, put with "
+        "zenoh-python's default QoS (CongestionControl.DROP), as the gateway puts a change"
     )
     return [
         Figure(
@@ -298,6 +315,15 @@ async def _fanout() -> list[Figure]:
             reference=round(raw_rate),
             target="ratio >= 0.5",
             note=note,
+        ),
+        Figure(
+            "zenoh state fan-out (vs raw BLOCK puts)",
+            round(gw_rate),
+            "states/s",
+            reference=round(block_rate),
+            note="reference: the same raw puts with CongestionControl.BLOCK: the putter waits "
+            "for the subscriber instead of losing puts, and leaves it the CPU while it waits "
+            "(the gateway may not wait: a change is put with DROP)",
         ),
         Figure(
             "zenoh state fan-out (vs naive bridge)",
@@ -395,7 +421,8 @@ def _settle(session: zenoh.Session, selector: str) -> None:
 def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
     session = _session(connect=(gw_endpoint, raw_endpoint))
     stats: dict[str, dict[str, Any]] = {
-        name: {"n": 0, "first": 0.0, "last": 0.0} for name in ("gateway", "raw", "naive", "floor")
+        name: {"n": 0, "first": 0.0, "last": 0.0}
+        for name in ("gateway", "raw", "rawblock", "naive", "floor")
     }
     ended = {name: threading.Event() for name in stats}
     sentinel = f'"speed_rpm":{SENTINEL}'.encode()
