@@ -48,6 +48,7 @@ from gateway.config import Config, ZenohSection
 from gateway.daemon import Runtime
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState, SpeedScale
+from gateway.zenoh import link
 from gateway.zenoh.frontend import ZenohFrontEnd
 from gateway.zenoh.requests import encode_state
 from gateway.zenoh.session import zenoh_config
@@ -61,6 +62,7 @@ COMMANDS = 1000
 COMMAND_PERIOD = 0.002
 QUERIES = 200
 SENTINEL = -1.0  # speed_rpm of the last state of a run
+REFERENCE_QOS = link.DROP  # the raw puts of the target's reference: the gateway's for a change
 
 
 def _free_endpoint() -> str:
@@ -287,7 +289,7 @@ async def _fanout() -> list[Figure]:
         _raw_phase(raw, "rawblock", zenoh.CongestionControl.BLOCK)
         _floor_phase(raw)
         await _naive_phase(raw)
-        raw_puts = _raw_phase(raw, "raw", zenoh.CongestionControl.DROP)  # next to the gateway
+        raw_puts = _raw_phase(raw, "raw", REFERENCE_QOS)  # next to the gateway's run
         updates = await _gateway_phase(hub)
         await asyncio.to_thread(peer.write, "report")
         report = json.loads(await asyncio.to_thread(peer.read))
@@ -421,43 +423,55 @@ def _settle(session: zenoh.Session, selector: str) -> None:
     raise RuntimeError(f"no answer from {selector}")
 
 
-def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
-    session = _session(connect=(gw_endpoint, raw_endpoint))
-    stats: dict[str, dict[str, Any]] = {
-        name: {"n": 0, "first": 0.0, "last": 0.0}
-        for name in ("gateway", "raw", "rawblock", "naive", "floor")
-    }
-    ended = {name: threading.Event() for name in stats}
-    sentinel = f'"speed_rpm":{SENTINEL}'.encode()
-    sentinel_spaced = f'"speed_rpm": {SENTINEL}'.encode()  # json.dumps' default separators
+class RunCounts:
+    """What the counting peer keeps of each run: the states, the first and the last
+    arrival. A run ends at its sentinel state; a repeat of it (a settle put) is not
+    counted. Runs are told apart by the key's second level (``bench/raw/...``); the
+    gateway's keys (``bench/drives/...``) count as "gateway"."""
 
-    def on_sample(sample: zenoh.Sample) -> None:
-        now = time.monotonic()
-        part = str(sample.key_expr).split("/")[1]
-        name = part if part in stats else "gateway"
-        if ended[name].is_set():
-            return  # a run ends at its sentinel: a repeat of it (a settle put) is not counted
-        entry = stats[name]
+    RUNS = ("gateway", "raw", "rawblock", "naive", "floor")
+    _SENTINEL = f'"speed_rpm":{SENTINEL}'.encode()
+    _SENTINEL_SPACED = f'"speed_rpm": {SENTINEL}'.encode()  # json.dumps' default separators
+
+    def __init__(self) -> None:
+        self.stats = {name: {"n": 0, "first": 0.0, "last": 0.0} for name in self.RUNS}
+        self.ended = {name: threading.Event() for name in self.RUNS}
+
+    def add(self, key: str, payload: bytes, now: float) -> None:
+        part = key.split("/")[1]
+        name = part if part in self.stats else "gateway"
+        if self.ended[name].is_set():
+            return
+        entry = self.stats[name]
         if entry["n"] == 0:
             entry["first"] = now
         entry["n"] += 1
         entry["last"] = now
-        payload = sample.payload.to_bytes()
-        if sentinel in payload or sentinel_spaced in payload:
-            ended[name].set()
+        if self._SENTINEL in payload or self._SENTINEL_SPACED in payload:
+            self.ended[name].set()
+
+    def report(self) -> dict[str, dict[str, float]]:
+        return {
+            name: {"n": e["n"], "seconds": max(e["last"] - e["first"], 1e-9)}
+            for name, e in self.stats.items()
+        }
+
+
+def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
+    session = _session(connect=(gw_endpoint, raw_endpoint))
+    counts = RunCounts()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        counts.add(str(sample.key_expr), sample.payload.to_bytes(), time.monotonic())
 
     sub = session.declare_subscriber(f"{PREFIX}/**/state", on_sample)
     _settle(session, f"{PREFIX}/gateway/health")
     _settle(session, f"{PREFIX}/raw/ping")
     print("ready", flush=True)
-    sys.stdin.readline()  # "report": both runs are over
-    for event in ended.values():
+    sys.stdin.readline()  # "report": every run is over
+    for event in counts.ended.values():
         event.wait(30)  # the sentinel state is the last word of each run
-    report = {
-        name: {"n": e["n"], "seconds": max(e["last"] - e["first"], 1e-9)}
-        for name, e in stats.items()
-    }
-    print(json.dumps(report), flush=True)
+    print(json.dumps(counts.report()), flush=True)
     sub.undeclare()
     session.close()
 
