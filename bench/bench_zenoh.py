@@ -21,7 +21,10 @@
 - Command latency: another process puts 1000 commands (one every 2 ms) on
   ``<prefix>/drives/d0/command``; the latency is from just before the put to the
   moment the hub's desired command changes (CLOCK_MONOTONIC is one clock for both
-  processes). Also the round trip of a command query, seen by the client.
+  processes). Reference, in the same run: between the commands, the same puts to a
+  plain subscriber's callback in the gateway's process (what Zenoh and the host take
+  alone; the gateway adds the hand-over to its loop and its own work). Also the round
+  trip of a command query, seen by the client.
 
 Run: ``.venv/bin/python -m bench zenoh``. Everything stays on 127.0.0.1.
 """
@@ -139,6 +142,13 @@ async def _stop(task: asyncio.Task[None]) -> None:
     task.cancel()
     with contextlib.suppress(asyncio.CancelledError):
         await task
+
+
+def _ping(session: zenoh.Session) -> Any:
+    """The raw session's queryable that the peer settles its declarations with."""
+    return session.declare_queryable(
+        f"{PREFIX}/raw/ping", lambda q: (q.reply(f"{PREFIX}/raw/ping", b"{}"), q.drop())
+    )
 
 
 def _ask_ready(peer: Peer) -> None:
@@ -280,9 +290,7 @@ async def _fanout() -> list[Figure]:
     gw_endpoint, raw_endpoint = _free_endpoint(), _free_endpoint()
     fe, task = await _serve(hub, gw_endpoint)
     raw = _session(listen=(raw_endpoint,))
-    raw_ping = raw.declare_queryable(
-        f"{PREFIX}/raw/ping", lambda q: (q.reply(f"{PREFIX}/raw/ping", b"{}"), q.drop())
-    )
+    raw_ping = _ping(raw)
     peer = Peer("count", gw_endpoint, raw_endpoint)
     try:
         await asyncio.to_thread(_ask_ready, peer)
@@ -357,41 +365,62 @@ async def _fanout() -> list[Figure]:
     ]
 
 
+def _latencies_ms(sent: dict[str, float], arrived: dict[float, float]) -> list[float]:
+    """Put to arrival, in ms, of each speed that arrived (CLOCK_MONOTONIC in both)."""
+    return [(arrived[float(rpm)] - t) * 1000 for rpm, t in sent.items() if float(rpm) in arrived]
+
+
 async def _commands() -> list[Figure]:
     hub = _hub()
-    endpoint = _free_endpoint()
+    endpoint, raw_endpoint = _free_endpoint(), _free_endpoint()
     _, task = await _serve(hub, endpoint)
     arrived: dict[float, float] = {}
+    raw_arrived: dict[float, float] = {}
 
     def on_command(drive_id: str) -> None:
         rpm = hub.desired(drive_id).speed_rpm
         if rpm is not None and rpm not in arrived:
             arrived[rpm] = time.monotonic()
 
+    def on_raw(sample: zenoh.Sample) -> None:  # on Zenoh's callback thread, as the gateway's
+        raw_arrived[json.loads(sample.payload.to_bytes())["speed_rpm"]] = time.monotonic()
+
     hub.on_command(on_command)
-    peer = Peer("command", endpoint)
+    raw = _session(listen=(raw_endpoint,))
+    raw_ping = _ping(raw)
+    raw_sub = raw.declare_subscriber(f"{PREFIX}/raw/command", on_raw)
+    peer = Peer("command", endpoint, raw_endpoint)
     try:
         await asyncio.to_thread(_ask_ready, peer)
         await asyncio.to_thread(peer.write, "go")
         report = json.loads(await asyncio.to_thread(peer.read))
     finally:
         peer.close()
+        raw_sub.undeclare()
+        raw_ping.undeclare()
+        raw.close()
         await _stop(task)
-    sent: dict[str, float] = report["sent"]
-    latencies = [
-        (arrived[float(rpm)] - t) * 1000 for rpm, t in sent.items() if float(rpm) in arrived
-    ]
-    lost = len(sent) - len(latencies)
+    latencies = _latencies_ms(report["sent"], arrived)
+    raw_latencies = _latencies_ms(report["raw_sent"], raw_arrived)
     rtt: list[float] = report["query_ms"]
-    note = f"{len(latencies)} of {len(sent)} commands arrived ({lost} missing)"
+    note = (
+        f"{len(latencies)} of {COMMANDS} commands arrived; reference: {len(raw_latencies)} "
+        "of the same puts, sent between them, to a plain subscriber's callback in the "
+        "gateway's process (Zenoh and the host alone)"
+    )
     return [
         Figure(
-            "zenoh command latency p50", round(statistics.median(latencies), 3), "ms", note=note
+            "zenoh command latency p50",
+            round(statistics.median(latencies), 3),
+            "ms",
+            reference=round(statistics.median(raw_latencies), 3),
+            note=note,
         ),
         Figure(
             "zenoh command latency p99",
             round(_percentile(latencies, 99), 3),
             "ms",
+            reference=round(_percentile(raw_latencies, 99), 3),
             target="p99 < 5 ms",
             note=note,
         ),
@@ -476,18 +505,21 @@ def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
     session.close()
 
 
-def _peer_command(endpoint: str) -> None:
-    session = _session(connect=(endpoint,))
-    key = f"{PREFIX}/drives/d0/command"
+def _peer_command(endpoint: str, raw_endpoint: str) -> None:
+    session = _session(connect=(endpoint, raw_endpoint))
+    key, raw_key = f"{PREFIX}/drives/d0/command", f"{PREFIX}/raw/command"
     _settle(session, f"{PREFIX}/gateway/health")
+    _settle(session, f"{PREFIX}/raw/ping")
     print("ready", flush=True)
     sys.stdin.readline()
     sent: dict[str, float] = {}
+    raw_sent: dict[str, float] = {}
     for i in range(1, COMMANDS + 1):
         payload = json.dumps({"run": True, "speed_rpm": float(i)}).encode()
-        sent[str(float(i))] = time.monotonic()
-        session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
-        time.sleep(COMMAND_PERIOD)
+        for to, times in ((key, sent), (raw_key, raw_sent)):  # one period: one of each
+            times[str(float(i))] = time.monotonic()
+            session.put(to, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(COMMAND_PERIOD / 2)
     query_ms = []
     for i in range(QUERIES):
         payload = json.dumps({"speed_rpm": float(1000 + i)}).encode()
@@ -496,7 +528,7 @@ def _peer_command(endpoint: str) -> None:
         query_ms.append((time.monotonic() - start) * 1000)
         if not replies or replies[0].ok is None:
             raise RuntimeError("a command query got no reply")
-    print(json.dumps({"sent": sent, "query_ms": query_ms}), flush=True)
+    print(json.dumps({"sent": sent, "raw_sent": raw_sent, "query_ms": query_ms}), flush=True)
     session.close()
 
 

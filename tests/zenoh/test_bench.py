@@ -1,4 +1,4 @@
-"""The Zenoh benchmark's fan-out machinery, run very short (the figures are `make bench`'s)."""
+"""The Zenoh benchmark's machinery, run short (the figures are `make bench`'s)."""
 
 from __future__ import annotations
 
@@ -60,3 +60,14 @@ def test_one_short_fanout_measures_every_reference(monkeypatch: pytest.MonkeyPat
     assert target.target == "ratio >= 0.5"
     assert "(CongestionControl.DROP)" in target.note
     assert figures["zenoh state fan-out (vs raw BLOCK puts)"].target is None
+
+
+def test_the_command_latency_has_its_reference_from_the_same_puts() -> None:
+    figures = {f.name: f for f in asyncio.run(bench._commands())}
+    p99 = figures["zenoh command latency p99"]
+    assert p99.target == "p99 < 5 ms"
+    assert p99.reference is not None and p99.reference > 0
+    assert figures["zenoh command latency p50"].reference is not None
+    assert p99.note.startswith(
+        f"{bench.COMMANDS} of {bench.COMMANDS} commands arrived; reference: "
+    )
