@@ -160,14 +160,17 @@ def _publishers(
     session: zenoh.Session, part: str, congestion: zenoh.CongestionControl
 ) -> dict[str, Any]:
     """Drive id -> a publisher of its state under ``<prefix>/<part>/drives/``."""
-    return {
-        drive_id: session.declare_publisher(
-            f"{PREFIX}/{part}/drives/{drive_id}/state",
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-            congestion_control=congestion,
-        )
-        for drive_id in DRIVE_IDS
-    }
+    return {drive_id: _publisher(session, part, drive_id, congestion) for drive_id in DRIVE_IDS}
+
+
+def _publisher(
+    session: zenoh.Session, part: str, drive_id: str, congestion: zenoh.CongestionControl
+) -> Any:
+    return session.declare_publisher(
+        f"{PREFIX}/{part}/drives/{drive_id}/state",
+        encoding=zenoh.Encoding.APPLICATION_JSON,
+        congestion_control=congestion,
+    )
 
 
 def _raw_phase(session: zenoh.Session, part: str, congestion: zenoh.CongestionControl) -> int:
@@ -189,11 +192,7 @@ def _raw_phase(session: zenoh.Session, part: str, congestion: zenoh.CongestionCo
 
 def _last_word(session: zenoh.Session, part: str, payload: bytes) -> None:
     """A run's sentinel state, put with BLOCK: a congested link cannot drop it."""
-    pub = session.declare_publisher(
-        f"{PREFIX}/{part}/drives/d0/state",
-        encoding=zenoh.Encoding.APPLICATION_JSON,
-        congestion_control=zenoh.CongestionControl.BLOCK,
-    )
+    pub = _publisher(session, part, "d0", zenoh.CongestionControl.BLOCK)
     pub.put(payload)
     pub.undeclare()
 
