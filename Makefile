@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint typecheck pytest bench soak clean venv
+.PHONY: run test test-vcan lint typecheck pytest bench soak clean venv
 
 venv: $(STAMP)
 
@@ -30,6 +30,10 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
+# The `vcan` tests in a kernel with SocketCAN: this one's, else a qemu VM (tests/vcan_vm).
+test-vcan: $(STAMP)
+	$(BIN)/python -m tests.vcan_vm
+
 bench: $(STAMP)
 	$(BIN)/python -m bench
 
@@ -39,4 +43,4 @@ soak: $(STAMP)
 	SOAK_SECONDS=$(SOAK_SECONDS) $(BIN)/python -m pytest -q -m slow tests/reliability
 
 clean:
-	rm -rf $(VENV) build *.egg-info .mypy_cache .pytest_cache .ruff_cache
+	rm -rf $(VENV) build *.egg-info .mypy_cache .pytest_cache .ruff_cache .vcan-vm

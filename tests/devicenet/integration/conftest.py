@@ -23,6 +23,7 @@ from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.hub import EventSubscription, Hub
 from gateway.model import DriveState
+from tests.support.timing import scaled
 
 VCAN = "vcan0"
 FAST_BUS: dict[str, Any] = {
@@ -82,13 +83,15 @@ class Rig:
     async def wait(
         self, drive_id: str, predicate: Callable[[DriveState], bool], within: float = 5.0
     ) -> DriveState:
-        return await asyncio.wait_for(self.hub.wait_for(drive_id, predicate), within)
+        return await asyncio.wait_for(self.hub.wait_for(drive_id, predicate), scaled(within))
 
     async def until(
         self, predicate: Callable[[], bool], within: float = 5.0, runner: SimRunner | None = None
     ) -> None:
-        """Wait for a condition on the simulated line (checked as the simulator works)."""
-        await asyncio.wait_for((runner or self.sim).until(predicate), within)
+        """Wait for a condition on the simulated line (checked as the simulator works).
+
+        Every wait here is ``within`` seconds times the suite's time scale (tests/support/timing.py)."""
+        await asyncio.wait_for((runner or self.sim).until(predicate), scaled(within))
 
     async def event(self, predicate: Callable[[Event], bool], within: float = 5.0) -> Event:
         async def find() -> Event:
@@ -101,7 +104,7 @@ class Rig:
         for ev in self.seen:
             if predicate(ev):
                 return ev
-        return await asyncio.wait_for(find(), within)
+        return await asyncio.wait_for(find(), scaled(within))
 
 
 @contextlib.asynccontextmanager
@@ -131,7 +134,7 @@ async def rig(
     hub.attach_params([d["id"] for d in drives], adapter)
     runner = SimRunner(line, adapter.sim_configs() if sims is None else sims)
     sim_task = asyncio.create_task(runner.run(), name="sim")
-    await asyncio.wait_for(runner.started.wait(), 5)
+    await asyncio.wait_for(runner.started.wait(), scaled(5))
     if settle:  # the simulated nodes finish their Duplicate MAC ID check first
         checking = SimPhase.CHECKING
         await runner.until(lambda: all(n.phase is not checking for n in runner.nodes.values()))

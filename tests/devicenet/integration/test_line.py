@@ -29,6 +29,7 @@ from gateway.adapter import Event, EventKind
 from gateway.errors import AdapterError, DriveOffline, ParameterError
 from gateway.model import CommState, Direction, DriveCommand, DriveStatus, Source
 from tests.devicenet.integration.conftest import FAST_BUS, drive, rig
+from tests.support.timing import scaled
 
 ONLINE = CommState.ONLINE
 Z = Source.ZENOH
@@ -58,7 +59,13 @@ async def test_63_drives_come_online(can_line: LinkConfig) -> None:
     macs = range(1, 64)
     async with rig(can_line, [drive(m) for m in macs], bus={"poll_interval": 0.05}) as r:
         for m in macs:
-            await r.wait(f"d{m}", online, within=15.0)
+            try:
+                await r.wait(f"d{m}", online, within=15.0)
+            except TimeoutError:
+                line = {k: v for k, v in r.adapter.diagnostics().items() if k != "drives"}
+                pytest.fail(
+                    f"d{m} not online; line {line}; sim send failures {r.sim.send_failures}"
+                )
         diag = r.adapter.diagnostics()
         assert diag["online"] == 63
         before = diag["drives"]["d63"]["frames_rx"]
@@ -196,7 +203,7 @@ async def test_scanner_mac_taken_refuses_to_go_online(can_line: LinkConfig) -> N
     sims = [SimNodeConfig(0, dupmac_timeout=0.05), SimNodeConfig(5, dupmac_timeout=0.05)]
     async with rig(can_line, [drive(5)], sims=sims, settle=True) as r:
         with pytest.raises(AdapterError, match="scanner MAC ID 0 is taken on the line"):
-            await asyncio.wait_for(r.task, 5)
+            await asyncio.wait_for(r.task, scaled(5))
         ev = await r.event(lambda e: e.kind is EventKind.BUS)
         assert "not going online" in ev.text
         assert r.sim.node(5).allocation == 0
