@@ -62,7 +62,15 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
 )
 from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.link import CanLink, LinkConfig, LinkEvent, RxBad, RxError, RxFrame
+from adapters.devicenet.link import (
+    CanLink,
+    LinkConfig,
+    LinkEvent,
+    RxBad,
+    RxError,
+    RxFailed,
+    RxFrame,
+)
 from adapters.devicenet.options import BusOptions, DriveOptions, parse_bus, parse_drive
 from adapters.devicenet.scanner import (
     Action,
@@ -75,6 +83,7 @@ from adapters.devicenet.scanner import (
     InputData,
     LineFault,
     LineOnline,
+    LinkDown,
     NodeConfig,
     NodeDown,
     NodeUnavailable,
@@ -369,8 +378,11 @@ class DeviceNetAdapter:
         if not frames or self.link is None or self.engine is None:
             return
         result = self.link.send(frames)
-        if result.error is not None:
-            self._act(now, self.engine.step(now, TxFailed(result.error, result.dropped)))
+        if result.error is None:
+            return
+        if result.link_down:
+            self._act(now, self.engine.step(now, LinkDown(result.error)))
+        self._act(now, self.engine.step(now, TxFailed(result.error, result.dropped)))
 
     def _hub_port(self) -> HubPort:
         if self._hub is None:
@@ -756,6 +768,8 @@ def _event(event: LinkEvent) -> Event:
         return BusErrorIn(event.conditions)
     if isinstance(event, RxBad):
         return BadFrame(event.reason)
+    if isinstance(event, RxFailed):
+        return LinkDown(event.reason) if event.link_down else BadFrame(event.reason)
     raise TypeError(event)
 
 

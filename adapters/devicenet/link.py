@@ -6,16 +6,24 @@ interface works (``socketcan``, ``virtual``, vendor interfaces); ``udp_multicast
 refused (it sends multicast out of the network interface and is lossy). Frames go out
 with ``is_extended_id=False`` (11-bit DeviceNet identifiers). Send failures
 (``CanOperationError``: transmit buffer full, interface down) are reported, never
-raised, so the engine can back off. :meth:`CanLink.close` always stops the Notifier and
-shuts the bus down: no thread is left behind.
+raised, so the engine can back off; so are receive failures (a SocketCAN socket reports
+ENETDOWN once when its interface goes down): never an exception in the Notifier.
+:meth:`CanLink.close` always stops the Notifier and shuts the bus down: no thread is left
+behind.
+
+On real SocketCAN (not ``virtual``) a send fails with ENOBUFS when the interface's transmit
+queue (``txqueuelen``) is full and with ENETDOWN while the interface is down: the first is
+a back-off, the second means every connection on the line is gone (``link_down``).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
-from collections.abc import Iterable
+import threading
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -63,7 +71,18 @@ class RxBad:
     reason: str
 
 
-LinkEvent = RxFrame | RxError | RxBad
+@dataclass(frozen=True, slots=True)
+class RxFailed:
+    """Receiving failed (the socket reported an error); ``link_down``: the interface is down."""
+
+    reason: str
+    link_down: bool
+
+
+LinkEvent = RxFrame | RxError | RxBad | RxFailed
+
+# errnos that mean the interface is not there to carry frames (down, or removed)
+LINK_DOWN_ERRNOS = frozenset({errno.ENETDOWN, errno.ENODEV, errno.ENXIO})
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +90,7 @@ class SendResult:
     sent: int
     dropped: int = 0
     error: str | None = None
+    link_down: bool = False  # the interface is down: nothing can be sent on it
 
 
 @dataclass(slots=True)
@@ -81,9 +101,46 @@ class LinkFigures:
     bad_frames: int = 0
     send_failures: int = 0
     last_send_error: str | None = None
+    receive_failures: int = 0
+    last_receive_error: str | None = None
 
 
 _WAKE = can.Message(arbitration_id=0, is_extended_id=False)  # marker put in our own queue
+
+
+def error_number(exc: BaseException) -> int | None:
+    """The errno behind a python-can or OS error (python-can keeps it in ``error_code``)."""
+    number = getattr(exc, "errno", None)
+    if number is None:
+        number = getattr(exc, "error_code", None)
+    return number if isinstance(number, int) else None
+
+
+def open_problem(config: LinkConfig, exc: BaseException) -> str:
+    """Why the bus did not open, with what to do about it where we know."""
+    text = f"cannot open CAN interface {config.interface!r} channel {config.channel!r}: {exc}"
+    if config.interface != "socketcan":
+        return text
+    number = error_number(exc)
+    ch = config.channel
+    make_vcan = (
+        f"`sudo modprobe vcan && sudo ip link add dev {ch} type vcan && sudo ip link set up {ch}`"
+    )
+    if number == errno.EAFNOSUPPORT:
+        return (
+            f"{text}. This kernel has no SocketCAN (AF_CAN, module can-raw). Where the "
+            f"kernel has it as modules: {make_vcan}; otherwise use the in-process "
+            'interface `virtual` (`--interface virtual`, or interface = "virtual" in the '
+            "config; simulated drives in the same process only)"
+        )
+    if number == errno.ENODEV:
+        make = (
+            make_vcan
+            if ch.startswith("vcan")
+            else f"check the adapter, then `sudo ip link set {ch} up type can bitrate 125000`"
+        )
+        return f"{text}. There is no network interface {ch!r}: {make}"
+    return text
 
 
 def convert(msg: can.Message) -> LinkEvent:
@@ -114,6 +171,9 @@ class CanLink:
         self._bus: can.BusABC | None = None
         self._reader: can.AsyncBufferedReader | None = None
         self._notifier: can.Notifier | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._loop_thread: int | None = None
+        self._failures: list[RxFailed] = []
 
     async def __aenter__(self) -> CanLink:
         self.open(asyncio.get_running_loop())
@@ -128,6 +188,7 @@ class CanLink:
         self.close()
 
     def open(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop, self._loop_thread = loop, threading.get_ident()
         kwargs: dict[str, Any] = {
             "interface": self.config.interface,
             "channel": self.config.channel,
@@ -138,10 +199,8 @@ class CanLink:
         try:
             self._bus = can.Bus(**kwargs)
         except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
-            raise AdapterError(
-                f"cannot open CAN interface {self.config.interface!r} "
-                f"channel {self.config.channel!r}: {exc}"
-            ) from exc
+            raise AdapterError(open_problem(self.config, exc)) from exc
+        self._guard_receive(self._bus)
         self._reader = can.AsyncBufferedReader()
         try:
             self._notifier = can.Notifier(
@@ -152,6 +211,37 @@ class CanLink:
             self._bus = None
             raise
         log.debug("CAN %s %s open", self.config.interface, self.config.channel)
+
+    def _guard_receive(self, bus: can.BusABC) -> None:
+        """A receive error becomes an :class:`RxFailed` event, never an exception in the
+        Notifier (whose thread would end, or whose loop callback would raise)."""
+        bus.recv = self._guarded(bus.recv)  # type: ignore[method-assign]
+
+    def _guarded(
+        self, recv: Callable[[float | None], can.Message | None]
+    ) -> Callable[[float | None], can.Message | None]:
+        def guarded(timeout: float | None = None) -> can.Message | None:
+            try:
+                return recv(timeout)
+            except (can.CanError, OSError) as exc:
+                self._receive_failed(exc)
+                return None
+
+        return guarded
+
+    def _receive_failed(self, exc: BaseException) -> None:
+        self.figures.receive_failures += 1
+        self.figures.last_receive_error = str(exc)
+        failure = RxFailed(str(exc), error_number(exc) in LINK_DOWN_ERRNOS)
+        reader, loop = self._reader, self._loop
+        if reader is None or loop is None:
+            return
+        if threading.get_ident() == self._loop_thread:
+            self._failures.append(failure)
+            reader.buffer.put_nowait(_WAKE)
+        else:  # the Notifier's thread (buses without a file descriptor)
+            loop.call_soon_threadsafe(self._failures.append, failure)
+            loop.call_soon_threadsafe(reader.buffer.put_nowait, _WAKE)
 
     def close(self) -> None:
         """Stop the Notifier (joins its thread) and shut the bus down; idempotent."""
@@ -194,6 +284,9 @@ class CanLink:
         while not buffer.empty():
             messages.append(buffer.get_nowait())
         events: list[LinkEvent] = []
+        if self._failures:
+            events.extend(self._failures)
+            self._failures.clear()
         for msg in messages:
             if msg is _WAKE:
                 continue
@@ -225,7 +318,8 @@ class CanLink:
             except (can.CanError, OSError) as exc:
                 self.figures.send_failures += 1
                 self.figures.last_send_error = str(exc)
-                return SendResult(i, len(batch) - i, str(exc))
+                down = error_number(exc) in LINK_DOWN_ERRNOS
+                return SendResult(i, len(batch) - i, str(exc), link_down=down)
             self.figures.frames_tx += 1
         return SendResult(len(batch))
 
@@ -240,4 +334,6 @@ class CanLink:
             "link_bad_frames": f.bad_frames,
             "send_failures": f.send_failures,
             "last_send_error": f.last_send_error,
+            "receive_failures": f.receive_failures,
+            "last_receive_error": f.last_receive_error,
         }

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import socket
 
 import pytest
 
@@ -46,3 +48,23 @@ def test_udp_multicast_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
 def test_an_interface_that_cannot_open_is_an_error() -> None:
     argv = ["sim", "devicenet", "--interface", "no-such-interface", "--nodes", "1"]
     assert main([*argv, "--duration", "0.2", "--log-level", "ERROR"]) == 2
+
+
+def test_without_af_can_it_says_what_is_missing_and_what_to_do(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """On a kernel without SocketCAN (these build machines), not a bare
+    ``[Errno 97] Address family not supported by protocol``."""
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except OSError:
+        pass
+    else:
+        pytest.skip("this kernel has AF_CAN (the vcan suite covers it)")
+    argv = ["sim", "devicenet", "--interface", "socketcan", "--channel", "vcan0", "--nodes", "1"]
+    with caplog.at_level(logging.ERROR):
+        assert main([*argv, "--duration", "0.2", "--log-level", "ERROR"]) == 2
+    text = caplog.text
+    assert "[Errno 97]" in text and "no SocketCAN (AF_CAN" in text
+    assert "modprobe vcan" in text and "ip link add dev vcan0 type vcan" in text
+    assert "--interface virtual" in text

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import errno
 import uuid
 
 import can
@@ -10,8 +11,20 @@ import pytest
 
 from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.link import CanLink, LinkConfig, RxBad, RxError, RxFrame, convert
+from adapters.devicenet.link import (
+    LINK_DOWN_ERRNOS,
+    CanLink,
+    LinkConfig,
+    RxBad,
+    RxError,
+    RxFailed,
+    RxFrame,
+    convert,
+    error_number,
+    open_problem,
+)
 from gateway.errors import AdapterError
+from tests.support.timing import scaled
 
 
 def channel() -> str:
@@ -142,3 +155,63 @@ async def test_close_is_idempotent_and_sending_after_close_fails() -> None:
     assert link.send([CanFrame(0x455, b"")]).error == "CAN link is closed"
     with pytest.raises(AdapterError, match="closed"):
         await link.receive(0.0)
+
+
+def test_open_problem_says_what_is_missing_and_what_to_do() -> None:
+    """A kernel without AF_CAN fails with a bare errno 97; say what to do instead."""
+    vcan = LinkConfig("socketcan", "vcan0")
+    no_af_can = OSError(errno.EAFNOSUPPORT, "Address family not supported by protocol")
+    text = open_problem(vcan, no_af_can)
+    assert text.startswith("cannot open CAN interface 'socketcan' channel 'vcan0': [Errno 97]")
+    assert "no SocketCAN (AF_CAN" in text and "modprobe vcan" in text
+    assert "ip link add dev vcan0 type vcan" in text and "--interface virtual" in text
+    no_device = OSError(errno.ENODEV, "No such device")
+    text = open_problem(vcan, no_device)
+    assert "ip link add dev vcan0 type vcan && sudo ip link set up vcan0" in text
+    text = open_problem(LinkConfig("socketcan", "can0"), no_device)
+    assert "ip link set can0 up type can bitrate" in text
+    other = LinkConfig("virtual", "x")
+    assert (
+        open_problem(other, no_af_can)
+        == f"cannot open CAN interface 'virtual' channel 'x': {no_af_can}"
+    )
+
+
+def test_send_failures_say_whether_the_interface_is_down() -> None:
+    """ENETDOWN: the interface is down (every connection is gone); ENOBUFS: a full queue."""
+    down = can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)
+    full = can.CanOperationError("Failed to transmit: No buffer space available", errno.ENOBUFS)
+    assert error_number(down) in LINK_DOWN_ERRNOS
+    assert error_number(full) not in LINK_DOWN_ERRNOS
+    assert error_number(can.CanOperationError("Transmit buffer full")) is None
+
+
+async def test_a_receive_error_is_an_event_not_an_exception_in_the_notifier() -> None:
+    """A SocketCAN socket reports ENETDOWN once on receive when its interface goes down;
+    it comes out of receive() as RxFailed and the link keeps receiving."""
+    ch = channel()
+    async with CanLink(LinkConfig("virtual", ch)) as link:
+        assert link._bus is not None
+        inner = link._bus
+        raw = can.Bus(interface="virtual", channel=ch)
+        try:
+            failing = True
+            recv = type(inner).recv
+
+            def flaky(timeout: float | None = None) -> can.Message | None:
+                nonlocal failing
+                if failing:
+                    failing = False
+                    raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
+                return recv(inner, timeout)
+
+            link._bus.recv = link._guarded(flaky)  # type: ignore[method-assign]
+            events = await link.receive(scaled(2.0))
+            assert events == [
+                RxFailed("Error receiving: Network is down [Error Code 100]", link_down=True)
+            ]
+            raw.send(can.Message(arbitration_id=0x3CA, data=b"\x01", is_extended_id=False))
+            assert await link.receive(scaled(2.0)) == [RxFrame(CanFrame(0x3CA, b"\x01"))]
+            assert link.diagnostics()["receive_failures"] == 1
+        finally:
+            raw.shutdown()

@@ -139,7 +139,15 @@ class TxFailed:
     dropped: int = 1
 
 
-Event = FrameIn | BadFrame | BusErrorIn | TxFailed
+@dataclass(frozen=True, slots=True)
+class LinkDown:
+    """The CAN interface is down (SocketCAN ENETDOWN on a send or a receive): every
+    connection on the line is gone; nodes are allocated again once frames pass."""
+
+    reason: str
+
+
+Event = FrameIn | BadFrame | BusErrorIn | TxFailed | LinkDown
 
 
 # ---------------------------------------------------------------- actions (out)

@@ -78,6 +78,7 @@ from adapters.devicenet.scanner.api import (
     IoKind,
     LineFault,
     LineOnline,
+    LinkDown,
     NodeConfig,
     NodeDown,
     NodeIdentity,
@@ -113,6 +114,7 @@ class LineFigures:
     tx_failures: int = 0
     tx_dropped: int = 0
     last_tx_failure: str | None = None
+    link_down: int = 0  # times the interface was found down
     cycles: int = 0
     cycle_last: float | None = None
     cycle_sum: float = 0.0
@@ -150,6 +152,7 @@ class Scanner:
         self._tx_hold_until = 0.0
         self._tx_backoff = config.tx_backoff_min
         self._last_tx_failure: float | None = None
+        self._link_down_reported = False  # until a frame is received again
         self._request_slot = 0.0  # no Allocate/Release before this (request_spacing)
         self._no_ack_reported = False
         self._poll_queue: deque[int] = deque()
@@ -291,6 +294,7 @@ class Scanner:
             "tx_failures": f.tx_failures,
             "tx_dropped": f.tx_dropped,
             "last_tx_failure": f.last_tx_failure,
+            "link_down": f.link_down,
             "poll_cycles": f.cycles,
             "cycle_time_ms": _ms(f.cycle_last),
             "cycle_time_avg_ms": _ms(avg),
@@ -323,11 +327,14 @@ class Scanner:
         if isinstance(event, FrameIn):
             self._tx_backoff = self.config.tx_backoff_min
             self._no_ack_reported = False  # someone acknowledges frames on this line
+            self._link_down_reported = False
             self._on_frame(now, event.frame)
         elif isinstance(event, BusErrorIn):
             self._on_bus_error(now, event.conditions)
         elif isinstance(event, TxFailed):
             self._on_tx_failed(now, event)
+        elif isinstance(event, LinkDown):
+            self._on_link_down(now, event.reason)
         elif isinstance(event, BadFrame):
             self.line.bad_frames += 1
 
@@ -393,6 +400,23 @@ class Scanner:
             )
         self._tx_hold_until = now + self._tx_backoff
         self._tx_backoff = min(2 * self._tx_backoff, self.config.tx_backoff_max)
+
+    def _on_link_down(self, now: float, reason: str) -> None:
+        """The interface is down: every connection is gone now, not after 4 x EPR. The
+        nodes wait to be allocated again; the send hold paces the attempts."""
+        self.line.link_down += 1
+        if not self._link_down_reported:
+            self._link_down_reported = True
+            self._report(None, ReportKind.BUS, f"CAN interface down ({reason})")
+        if not self.online or self._leaving:
+            return
+        for node in self.nodes.values():
+            if node.phase in (Phase.ONLINE, Phase.CONFIGURING):
+                self._node_down(node, now, f"CAN interface down ({reason})")
+                node.retry_at = now
+                node.backoff = self.config.retry_min
+            elif node.phase is Phase.ALLOCATING:
+                self._retry_later(node, now)
 
     def _tx_ok(self, now: float) -> bool:
         if now < self._tx_hold_until:

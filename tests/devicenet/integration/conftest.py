@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
+import shutil
 import socket
+import subprocess
+import sys
 import uuid
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +30,7 @@ from gateway.model import DriveState
 from tests.support.timing import scaled
 
 VCAN = "vcan0"
+SIM_STOP_BOUND = 10.0  # s: a simulator process ends on SIGTERM within this (scaled)
 FAST_BUS: dict[str, Any] = {
     "poll_interval": 0.01,
     "expected_packet_rate": 0.05,
@@ -48,6 +53,49 @@ def vcan_problem() -> str | None:
     if not Path(f"/sys/class/net/{VCAN}").exists():
         return f"no {VCAN} interface (sudo ip link add dev {VCAN} type vcan)"
     return None
+
+
+def vcan_admin_problem() -> str | None:
+    """Why a test cannot change vcan0 (down/up, its queue), or None when it can."""
+    problem = vcan_problem()
+    if problem is not None:
+        return problem
+    if os.geteuid() != 0:
+        return f"not root: cannot set {VCAN} down/up or change its queue"
+    for tool in ("ip", "tc"):
+        if shutil.which(tool) is None:
+            return f"no `{tool}` command (iproute2)"
+    return None
+
+
+def admin(*args: str) -> None:
+    """An ``ip``/``tc`` command on the test interface; it must succeed."""
+    done = subprocess.run(args, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, f"{' '.join(args)}: {done.stderr.strip()}"
+
+
+@pytest.fixture
+def vcan_line() -> LinkConfig:
+    """SocketCAN vcan0 only (tests that ``virtual`` can never give); mark them ``vcan``."""
+    problem = vcan_problem()
+    if problem is not None:
+        pytest.skip(problem)
+    return LinkConfig("socketcan", VCAN)
+
+
+@pytest.fixture
+def vcan_admin(vcan_line: LinkConfig) -> Iterator[LinkConfig]:
+    """vcan0 that the test may take down and throttle; left up, queue removed."""
+    problem = vcan_admin_problem()
+    if problem is not None:
+        pytest.skip(problem)
+    try:
+        yield vcan_line
+    finally:
+        subprocess.run(
+            ["tc", "qdisc", "del", "dev", VCAN, "root"], capture_output=True, check=False
+        )
+        admin("ip", "link", "set", "up", VCAN)
 
 
 @pytest.fixture(params=["virtual", pytest.param("vcan", marks=pytest.mark.vcan)])
@@ -148,3 +196,22 @@ async def rig(
             for t in (task, sim_task):
                 t.cancel()
             await asyncio.gather(task, sim_task, return_exceptions=True)
+
+
+@contextlib.asynccontextmanager
+async def sim_process(macs: str, *extra: str) -> AsyncIterator[asyncio.subprocess.Process]:
+    """``drive-gateway sim devicenet`` on vcan0 in a process of its own; ended with SIGTERM."""
+    argv = ["-m", "gateway", "sim", "devicenet", "--interface", "socketcan", "--channel", VCAN,
+            "--nodes", macs, "--log-level", "WARNING", *extra]  # fmt: skip
+    proc = await asyncio.create_subprocess_exec(sys.executable, *argv)
+    try:
+        yield proc
+    finally:
+        if proc.returncode is None:
+            proc.terminate()
+        try:
+            await asyncio.wait_for(proc.wait(), scaled(SIM_STOP_BOUND))
+        except TimeoutError:
+            proc.kill()
+            await proc.wait()
+            raise
