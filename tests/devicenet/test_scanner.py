@@ -43,6 +43,7 @@ from adapters.devicenet.scanner import (
     LineFault,
     LineOnline,
     LinePhase,
+    LinkDown,
     NodeConfig,
     NodeDown,
     NodeUnavailable,
@@ -694,3 +695,55 @@ def test_other_allocate_refusals_name_the_additional_code() -> None:
         "unavailable [0x02 Resource unavailable (additional 0x04)]"
     ]
     assert lin.scanner.nodes[7].phase is Phase.WAITING  # retried with back-off
+
+
+@pytest.mark.parametrize("window", [4, 63])
+def test_explicit_requests_in_flight_are_bounded(window: int) -> None:
+    """A request to each of 63 drives at once (the adapter's status reads do this every
+    ``status_interval``) would put 63 frames into one pass: more than a SocketCAN transmit
+    queue of 10 takes (ENOBUFS), and on a slow host they all race their timeouts. At most
+    ``explicit_window`` (4 by default) are in flight; every request is answered."""
+    macs = list(range(1, 64))
+    config = replace(FAST, explicit_window=window)
+    lin = Line(config, [node(m) for m in macs], [sim(m) for m in macs])
+    lin.power_on()
+    lin.run(1.0)
+    assert sorted(ups(lin)) == macs
+    lin.take(ExplicitResult)
+    tokens = {lin.scanner.submit(m, GetAttributeSingle(1, 1, 1)) for m in macs}
+    sent = [a for a in lin.scanner.step(lin.now) if isinstance(a, Send)]
+    requests = [a for a in sent if a.frame.arbitration_id & 0x607 == 0x404]  # G2 message 4
+    if window == 4:
+        assert ScannerConfig().explicit_window == 4
+        assert len(requests) == 4
+    else:
+        assert len(requests) == 63  # what the window prevents
+    lin._pending.extend((lin.scanner, a.frame) for a in sent)
+    lin.run(0.5)
+    results = lin.take(ExplicitResult)
+    assert {r.token for r in results} >= tokens
+    assert all(r.error is None for r in results if r.token in tokens)
+    assert lin.late_deadlines == []
+
+
+def test_link_down_takes_every_node_offline_at_once_with_the_reason() -> None:
+    """SocketCAN ENETDOWN (``ip link set can0 down``): every connection is gone now, not
+    after 4 x EPR; reported once per series; the nodes come back when frames pass."""
+    lin = line(2, 3)
+    lin.run(0.3)
+    assert sorted(ups(lin)) == [2, 3]
+    s = lin.scanner
+    down = LinkDown("Failed to transmit: Network is down [Error Code 100]")
+    actions = s.step(lin.now, down)
+    reason = "CAN interface down (Failed to transmit: Network is down [Error Code 100])"
+    assert sorted((a.mac, a.reason) for a in actions if isinstance(a, NodeDown)) == [
+        (2, reason),
+        (3, reason),
+    ]
+    assert [a.text for a in actions if isinstance(a, Report)] == [reason]
+    again = s.step(lin.now, down)
+    assert not [a for a in again if isinstance(a, Report | NodeDown)]  # once per series
+    assert s.line_diagnostics()["link_down"] == 2
+    lin.run(1.0)  # the interface is up again: allocated again, stopped
+    assert sorted(ups(lin)) == [2, 3]
+    assert lin.late_deadlines == []

@@ -92,6 +92,10 @@ class ScannerConfig:
     retry_min: float = 0.5
     retry_max: float = 30.0
     poll_window: int = 8  # polls in flight at once (keeps a SocketCAN tx queue short)
+    # explicit requests in flight on the line at once, bounded as polls are: a request to
+    # each of 63 nodes in one pass would overflow a SocketCAN transmit queue of 10
+    # (ENOBUFS), and on a slow host 63 bring-ups at once all race their timeouts (decision)
+    explicit_window: int = 4
     # s between Allocate/Release requests: a line of 63 drives coming up (or leaving) does
     # not put 63 frames at once into a SocketCAN transmit queue of 10 (decision).
     request_spacing: float = 0.002
@@ -103,6 +107,8 @@ class ScannerConfig:
             raise ValueError(f"scanner MAC ID {self.mac} out of 0..63")
         if self.poll_window < 1:
             raise ValueError("poll_window must be at least 1")
+        if self.explicit_window < 1:
+            raise ValueError("explicit_window must be at least 1")
         if self.request_spacing < 0:
             raise ValueError("request_spacing cannot be negative")
 

@@ -157,6 +157,7 @@ class Scanner:
         self._no_ack_reported = False
         self._poll_queue: deque[int] = deque()
         self._in_flight: dict[int, float] = {}
+        self._explicit_busy: set[int] = set()  # nodes with an explicit request in flight
         self._cycle_started: float | None = None
         self._cycle_due = 0.0
         self._ids: dict[int, PredefinedId | None] = {}
@@ -554,7 +555,7 @@ class Scanner:
             out.append(gated(self._request_slot))
         if node.current is not None:
             out.append(node.current.deadline)
-        elif node.queue and node.phase in _EXPLICIT_PHASES:
+        elif node.queue and node.phase in _EXPLICIT_PHASES and self._explicit_free():
             out.append(gated(0.0))
         deadline = node.reassembler.deadline
         if deadline is not None:
@@ -823,7 +824,7 @@ class Scanner:
     def _tick_explicit(self, node: Node, now: float) -> None:
         current = node.current
         if current is not None and now >= current.deadline:
-            node.current = None
+            self._end_transaction(node)
             node.reassembler.reset()
             node.figures.explicit_timeouts += 1
             timeout = self.config.explicit_timeout
@@ -835,8 +836,20 @@ class Scanner:
                     reassembler.tick(now)
                 except FragmentationError:
                     node.figures.bad_frames += 1
-        if node.current is None and node.queue and self._tx_ok(now):
+        if node.current is None and node.queue and self._explicit_free() and self._tx_ok(now):
             self._start_request(node, now, node.queue.popleft())
+
+    def _explicit_free(self) -> bool:
+        """Whether another explicit request may go out (``explicit_window``)."""
+        return len(self._explicit_busy) < self.config.explicit_window
+
+    def _end_transaction(self, node: Node) -> None:
+        """The node's explicit request is over; a node waiting for the window may go."""
+        node.current = None
+        full = not self._explicit_free()
+        self._explicit_busy.discard(node.mac)
+        if full:
+            self._fold((0.0,))  # wake the next step: every waiting node is ticked
 
     def _start_request(self, node: Node, now: float, pending: Pending) -> None:
         message = ExplicitMessage(self.config.mac, node.next_xid(), pending.body)
@@ -849,6 +862,7 @@ class Scanner:
         node.current = Transaction(
             pending, message, sender, now, now + self.config.explicit_timeout
         )
+        self._explicit_busy.add(node.mac)
         node.last_explicit = now
 
     def _on_explicit_frame(self, node: Node, now: float, data: bytes) -> None:
@@ -876,7 +890,7 @@ class Scanner:
         try:
             nxt = current.sender.on_ack(now, ack)
         except FragmentationError as exc:
-            node.current = None
+            self._end_transaction(node)
             self._complete(node, now, current.pending, None, f"fragment refused: {exc}")
             return
         if nxt is not None:
@@ -916,7 +930,7 @@ class Scanner:
         if current is None or not message.answers(current.message):
             node.figures.stale_responses += 1
             return
-        node.current = None
+        self._end_transaction(node)
         node.figures.explicit_rtt_last = now - current.started
         self._complete(node, now, current.pending, body, None)
 
@@ -944,7 +958,7 @@ class Scanner:
         node.queue.clear()
         if node.current is not None:
             pendings.insert(0, node.current.pending)
-            node.current = None
+            self._end_transaction(node)
         node.reassembler.reset()
         for pending in pendings:
             if pending.token is not None:

@@ -31,15 +31,22 @@ from tests.support.timing import scaled
 
 VCAN = "vcan0"
 SIM_STOP_BOUND = 10.0  # s: a simulator process ends on SIGTERM within this (scaled)
+# The rig's line timing; on a slow machine (the vcan VM) every timer grows with the suite's
+# time scale, so that the protocol's timeouts keep their meaning (tests/support/timing.py).
 FAST_BUS: dict[str, Any] = {
-    "poll_interval": 0.01,
-    "expected_packet_rate": 0.05,
-    "response_timeout": 0.05,
-    "explicit_timeout": 0.2,
-    "dupmac_timeout": 0.05,
-    "retry_max": 0.3,
-    "status_interval": 0.2,
+    key: scaled(seconds)
+    for key, seconds in {
+        "poll_interval": 0.01,
+        "expected_packet_rate": 0.05,
+        "response_timeout": 0.05,
+        "explicit_timeout": 0.2,
+        "dupmac_timeout": 0.05,
+        "retry_max": 0.3,
+        "status_interval": 0.2,
+    }.items()
 }
+EPR: float = FAST_BUS["expected_packet_rate"]
+DUPMAC: float = FAST_BUS["dupmac_timeout"]
 
 
 def vcan_problem() -> str | None:
@@ -72,6 +79,15 @@ def admin(*args: str) -> None:
     """An ``ip``/``tc`` command on the test interface; it must succeed."""
     done = subprocess.run(args, capture_output=True, text=True, check=False)
     assert done.returncode == 0, f"{' '.join(args)}: {done.stderr.strip()}"
+
+
+async def aadmin(*args: str) -> None:
+    """:func:`admin` without blocking the event loop (the gateway keeps running meanwhile)."""
+    proc = await asyncio.create_subprocess_exec(
+        *args, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+    )
+    _, err = await proc.communicate()
+    assert proc.returncode == 0, f"{' '.join(args)}: {err.decode().strip()}"
 
 
 @pytest.fixture
