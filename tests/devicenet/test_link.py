@@ -13,12 +13,14 @@ from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
     LINK_DOWN_ERRNOS,
+    RX_BATCH,
     CanLink,
     LinkConfig,
     RxBad,
     RxError,
     RxFailed,
     RxFrame,
+    _Notifier,
     convert,
     error_number,
     open_problem,
@@ -205,7 +207,7 @@ async def test_a_receive_error_is_an_event_not_an_exception_in_the_notifier() ->
                     raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
                 return recv(inner, timeout)
 
-            link._bus.recv = link._guarded(flaky)  # type: ignore[method-assign]
+            link._bus.recv = link._guarded(flaky)  # type: ignore[method-assign,assignment]
             events = await link.receive(scaled(2.0))
             assert events == [
                 RxFailed("Error receiving: Network is down [Error Code 100]", link_down=True)
@@ -215,3 +217,24 @@ async def test_a_receive_error_is_an_event_not_an_exception_in_the_notifier() ->
             assert link.diagnostics()["receive_failures"] == 1
         finally:
             raw.shutdown()
+
+
+def test_a_readable_socket_is_drained_not_read_one_frame_per_loop_pass() -> None:
+    """python-can's Notifier reads one frame per readiness of a SocketCAN socket; ours
+    reads what is waiting (at most RX_BATCH), as virtual's reader thread hands over."""
+    waiting = [can.Message(arbitration_id=0x3CA, data=bytes([i])) for i in range(RX_BATCH + 3)]
+    got: list[can.Message] = []
+
+    class Bus:
+        def recv(self, timeout: float | None = None) -> can.Message | None:
+            assert timeout == 0
+            return waiting.pop(0) if waiting else None
+
+    assert hasattr(can.Notifier, "_on_message_available")  # python-can 4.6's callback
+    notifier = _Notifier.__new__(_Notifier)
+    notifier.listeners = [got.append]
+    notifier._loop = None
+    notifier._on_message_available(Bus())  # type: ignore[arg-type]
+    assert len(got) == RX_BATCH and len(waiting) == 3  # bounded: the loop gets its turn
+    notifier._on_message_available(Bus())  # type: ignore[arg-type]
+    assert len(got) == RX_BATCH + 3 and not waiting

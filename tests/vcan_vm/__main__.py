@@ -262,10 +262,10 @@ def module_order(tree: Path, version: str) -> list[Path]:
         order.append(path)
 
     for name in MODULES:
-        path = by_name.get(name)
-        if path is None:
+        found = by_name.get(name)
+        if found is None:
             raise VmError(f"kernel {version} has no module {name}")
-        visit(path)
+        visit(found)
     return [base / path for path in order]
 
 

@@ -102,9 +102,7 @@ async def test_interface_down_takes_the_drives_offline_and_up_brings_them_back_s
         await r.wait("d2", lambda s: s.running)
         await aadmin("ip", "link", "set", "down", VCAN)
         for drive_id in ("d2", "d3"):
-            ev = await r.event(
-                lambda e, d=drive_id: e.drive_id == d and e.text.startswith("CAN interface down")
-            )
+            ev = await r.event(_event_starting(drive_id, "CAN interface down"))
             assert ev.kind is EventKind.BUS and "Network is down" in ev.text, ev.text
             await r.wait(drive_id, offline)
         # the drives' own offline events say so too, unless silence (4 x EPR) was noticed first
@@ -140,10 +138,10 @@ async def test_the_gateway_and_a_simulator_process_share_vcan0(vcan_line: LinkCo
         await r.wait("d9", lambda s: not s.running and s.speed_rpm == 0.0)
         proc.terminate()
         assert await asyncio.wait_for(proc.wait(), scaled(SIM_STOP_BOUND)) == 0
-        ev = await r.event(_offline_event("d9"))
+        ev = await r.event(_event_starting("d9", "drive offline"))
         assert "no data" in ev.text
         await r.wait("d9", offline)
 
 
-def _offline_event(drive_id: str) -> Callable[[Event], bool]:
-    return lambda e: e.drive_id == drive_id and e.text.startswith("drive offline")
+def _event_starting(drive_id: str, text: str) -> Callable[[Event], bool]:
+    return lambda e: e.drive_id == drive_id and e.text.startswith(text)
