@@ -420,7 +420,7 @@ async def test_standard_objects_with_their_rights(can_line: LinkConfig) -> None:
         assert await a.read_object("d3", 0x01, 1, 1) == 0x355
         assert await a.read_object("d3", 0x01, 1, 4) == (4, 6)
         assert await a.read_object("d3", 0x03, 1, 1) == 3  # MAC ID
-        assert await a.read_object("d3", 0x05, 2, 9) == 50  # the poll EPR in use
+        assert await a.read_object("d3", 0x05, 2, 9) == round(EPR * 1000)  # the poll EPR in use
         assert await a.read_object("d3", 0x29, 1, 6) == 3  # Control Supervisor: Ready
         await a.write_object("d3", 0x28, 1, 7, 380)  # Motor Data rated voltage (Get/Set)
         assert await a.read_object("d3", 0x28, 1, 7) == 380
