@@ -55,9 +55,15 @@ async def test_one_drive_comes_online(can_line: LinkConfig) -> None:
         assert d7["epr_ms"] == round(EPR * 1000) and d7["frames_rx"] > 0
 
 
+SLOW_63 = {"poll_interval": 0.05, "expected_packet_rate": 0.2, "response_timeout": 0.2}
+
+
 async def test_63_drives_come_online(can_line: LinkConfig) -> None:
     macs = range(1, 64)
-    async with rig(can_line, [drive(m) for m in macs], bus={"poll_interval": scaled(0.05)}) as r:
+    # A poll cycle of 63 drives must fit well inside 4 x EPR: on a slow machine (the VM
+    # under TCG handled about 70 frames/s) a cycle took up to 3.5 s (docs/decisions.md).
+    bus = {key: scaled(value) for key, value in SLOW_63.items()}
+    async with rig(can_line, [drive(m) for m in macs], bus=bus) as r:
         for m in macs:
             try:
                 await r.wait(f"d{m}", online, within=15.0)
