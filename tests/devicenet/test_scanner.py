@@ -747,3 +747,21 @@ def test_link_down_takes_every_node_offline_at_once_with_the_reason() -> None:
     lin.run(1.0)  # the interface is up again: allocated again, stopped
     assert sorted(ups(lin)) == [2, 3]
     assert lin.late_deadlines == []
+
+
+@pytest.mark.parametrize("window", [4, 63])
+def test_nodes_are_brought_up_a_few_at_a_time(window: int) -> None:
+    """A node is allocated only when it can be configured at once: an allocated node left
+    waiting would lose its explicit connection (EPR 2.5 s, fact sheet 2.9) on a busy line.
+    With nobody answering, only ``bringup_window`` Allocates go out before they time out."""
+    config = replace(FAST, bringup_window=window)
+    s = Scanner(config, [node(m) for m in range(1, 11)])
+    now, sent = 0.0, []
+    while now < 2 * config.dupmac_timeout + config.allocate_timeout * 0.8:
+        sent += [a.frame for a in s.step(now) if isinstance(a, Send)]
+        deadline = s.next_deadline()
+        assert deadline is not None
+        now = max(deadline, now + 1e-4)
+    allocates = [f for f in sent if f.arbitration_id & 0x607 == 0x406]  # G2 message 6
+    assert len(allocates) == min(window, 10)
+    assert ScannerConfig().bringup_window == 4

@@ -96,6 +96,10 @@ class ScannerConfig:
     # each of 63 nodes in one pass would overflow a SocketCAN transmit queue of 10
     # (ENOBUFS), and on a slow host 63 bring-ups at once all race their timeouts (decision)
     explicit_window: int = 4
+    # nodes being brought up (Allocate sent, or configuring) at once: a node is allocated
+    # only when it can be configured at once, or its explicit connection (EPR 2.5 s) would
+    # time out while it waits (decision)
+    bringup_window: int = 4
     # s between Allocate/Release requests: a line of 63 drives coming up (or leaving) does
     # not put 63 frames at once into a SocketCAN transmit queue of 10 (decision).
     request_spacing: float = 0.002
@@ -109,6 +113,8 @@ class ScannerConfig:
             raise ValueError("poll_window must be at least 1")
         if self.explicit_window < 1:
             raise ValueError("explicit_window must be at least 1")
+        if self.bringup_window < 1:
+            raise ValueError("bringup_window must be at least 1")
         if self.request_spacing < 0:
             raise ValueError("request_spacing cannot be negative")
 

@@ -158,6 +158,7 @@ class Scanner:
         self._poll_queue: deque[int] = deque()
         self._in_flight: dict[int, float] = {}
         self._explicit_busy: set[int] = set()  # nodes with an explicit request in flight
+        self._bringing = 0  # nodes in bring-up, counted at each step (bringup_window)
         self._cycle_started: float | None = None
         self._cycle_due = 0.0
         self._ids: dict[int, PredefinedId | None] = {}
@@ -194,8 +195,11 @@ class Scanner:
             self._recompute()
         else:
             self._touched = None
+            before = self._bringing = self._bringups()
             self._on_event(now, event)
             self._after_event(now, event)
+            if before >= self.config.bringup_window > self._bringups():
+                self._fold((0.0,))  # a bring-up ended: a waiting node may start its own
         out, self._out = self._out, []
         return out
 
@@ -215,6 +219,7 @@ class Scanner:
                 self._soonest = t
 
     def _all_deadlines(self) -> float | None:
+        self._bringing = self._bringups()
         times: list[float] = []
         if self.phase in (LinePhase.START, LinePhase.CHECK_1, LinePhase.CHECK_2):
             times.append(self._line_deadline)
@@ -523,6 +528,7 @@ class Scanner:
             self._tick_line(now)
         if not self.online:
             return
+        self._bringing = self._bringups()
         for node in self.nodes.values():
             self._phase_ticks[node.phase](node, now)
         if not self._leaving:
@@ -547,7 +553,8 @@ class Scanner:
         """The node's timers; those that lead to a send are gated by the send hold."""
         out: list[float] = []
         gated = self._gated
-        if node.phase in (Phase.WAITING, Phase.REFUSED) and not self._leaving:
+        waiting = node.phase in (Phase.WAITING, Phase.REFUSED) and not self._leaving
+        if waiting and self._bringing < self.config.bringup_window:
             out.append(gated(max(node.retry_at, self._request_slot)))
         if node.unconnected is not None:
             out.append(node.unconnected.deadline)
@@ -576,7 +583,7 @@ class Scanner:
     def _tick_waiting(self, node: Node, now: float) -> None:
         if self._leaving or now < node.retry_at or now < self._request_slot:
             return
-        if self._tx_ok(now):
+        if self._bringing < self.config.bringup_window and self._tx_ok(now):
             self._start_allocate(node, now)
 
     def _tick_refused(self, node: Node, now: float) -> None:
@@ -626,6 +633,7 @@ class Scanner:
         if node.figures.allocations or node.figures.last_problem is not None:
             node.figures.retries += 1
         node.attempt_started = now
+        self._bringing += 1
         c = self.config
         body = AllocateConnectionSet(node.cfg.choice, c.mac)
         self._start_unconnected(node, now, body, Purpose.ALLOCATE, c.allocate_timeout)
@@ -838,6 +846,9 @@ class Scanner:
                     node.figures.bad_frames += 1
         if node.current is None and node.queue and self._explicit_free() and self._tx_ok(now):
             self._start_request(node, now, node.queue.popleft())
+
+    def _bringups(self) -> int:
+        return sum(1 for n in self.nodes.values() if n.phase in _BRINGUP_PHASES)
 
     def _explicit_free(self) -> bool:
         """Whether another explicit request may go out (``explicit_window``)."""
@@ -1139,6 +1150,7 @@ _RELEASE_PHASE = {
 }
 _RESPONSES = (SuccessResponse, AllocateResponse, ErrorResponse)
 _EXPLICIT_PHASES = (Phase.CONFIGURING, Phase.ONLINE)  # an explicit connection is open
+_BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
 # Phases in which a node's own Duplicate MAC ID check means "allocate it when it is done".
 _CLAIM_PHASES = (Phase.WAITING, Phase.REFUSED, Phase.ALLOCATING, Phase.CONFIGURING)
 CLAIM_MARGIN = 0.1  # of a check period, after the node's check is expected to end
