@@ -765,3 +765,28 @@ def test_nodes_are_brought_up_a_few_at_a_time(window: int) -> None:
     allocates = [f for f in sent if f.arbitration_id & 0x607 == 0x406]  # G2 message 6
     assert len(allocates) == min(window, 10)
     assert ScannerConfig().bringup_window == 4
+
+
+def test_a_request_in_flight_longer_than_the_keepalive_period_is_not_a_busy_loop() -> None:
+    """An explicit timeout longer than half the explicit EPR (a slow line, or the rig's
+    timers scaled on a slow machine): the keep-alive is due while a request is in flight,
+    and must not leave a deadline in the past after every timer step."""
+    config = replace(FAST, explicit_epr=0.1, explicit_timeout=0.3)
+    lin = Line(config, [NodeConfig(2, epr=1.0, identity=CFW08)], [sim(2)])
+    lin.power_on()
+    lin.run(0.5)
+    assert ups(lin) == [2]
+    lin.sims[2].power_off()
+    s = lin.scanner
+    s.submit(2, GetAttributeSingle(1, 1, 1))
+    t, end, steps = lin.now, lin.now + 0.25, 0  # past the keep-alive, before the timeout
+    while t < end and steps < 1000:
+        s.step(t)
+        steps += 1
+        deadline = s.next_deadline()
+        assert deadline is not None
+        t = max(deadline, t)
+    assert steps < 100  # the poll cycles' steps, not one step after another at one instant
+    s.leave(t)
+    deadline = s.next_deadline()
+    assert deadline is not None and deadline > t  # leaving: stale poll timeouts are gone

@@ -259,6 +259,7 @@ class Scanner:
     def leave(self, now: float) -> list[Action]:
         """Shutdown: Release every allocated node (fact sheet 2.10 step 8)."""
         self._leaving = True
+        self._in_flight.clear()  # polls are over: their timeouts no longer matter
         for node in self.nodes.values():
             self._fail_explicit(node, "scanner leaving the line")
             if node.phase in (Phase.CONFIGURING, Phase.ONLINE, Phase.ALLOCATING, Phase.RELEASING):
@@ -571,7 +572,8 @@ class Scanner:
             out.append(node.io_reassembler.deadline)
         if node.phase is Phase.ONLINE:
             out.append(node.last_rx + INACTIVITY_EPR_FACTOR * node.epr)
-            out.append(gated(node.last_explicit + self.config.explicit_epr / 2))
+            if not node.queue and node.current is None:  # a keep-alive only when idle
+                out.append(gated(node.last_explicit + self.config.explicit_epr / 2))
             if node.cfg.io is not IoKind.POLLED:
                 out.append(gated(node.last_output_sent + node.epr))
                 if node.cfg.io is IoKind.COS and node.output != node.sent_output:
