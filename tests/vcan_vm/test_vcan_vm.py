@@ -70,7 +70,7 @@ def test_a_vm_that_ran_nothing_fails(tmp_path: Path, monkeypatch: pytest.MonkeyP
         assert cmd[0] == "qemu-system-x86_64" and "-nic" in cmd and "tcg" in cmd
         return subprocess.CompletedProcess(cmd, 0)
 
-    monkeypatch.setattr(vm.subprocess, "run", qemu)
+    monkeypatch.setattr(subprocess, "run", qemu)
     assert vm.run_in_vm(["tests/x.py::t"]) == 1
 
 
