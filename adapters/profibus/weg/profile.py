@@ -147,6 +147,7 @@ class WegProfile:
         self.control_type: int | None = None  # P0202 as read at connect (CFW-11, CFW700)
         self._reported_type: int | None = None  # the last P0202 taken
         self._event: EventSink | None = None
+        self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
 
     # ------------------------------------------------------------------ setup
 
@@ -227,7 +228,9 @@ class WegProfile:
             text = f"quick stop is the drive's quick stop again: {what}"
         log.warning("%s: %s", self.drive.id, text)
         if self._event is not None:
-            self._event(text, "safety", control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp)
+            self._event(
+                text, "safety", control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp
+            )
 
     def _own_values(self) -> dict[str, float | int]:
         """The profile's entries of ``DriveState.values`` (docs/devices.md)."""
@@ -394,8 +397,7 @@ class WegProfile:
         """
         forward = d.direction is Direction.FORWARD
         reference = self._reference(d)
-        stop = d.quick_stop or d.coast_stop
-        run, jog = d.run and not stop, d.jog and not stop
+        run, jog = self._run_jog(d)
         control = w.ManufacturerControl(
             run=run,
             general_enable=not d.coast_stop,
@@ -407,6 +409,18 @@ class WegProfile:
         )
         self._sent = _Sent(run or jog, forward, reference, d.remote)
         return control.encode(self.spec.control_bits), reference
+
+    def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
+        """Run and JOG as sent: off with a quick or coast stop, and after its release until
+        the desired command has had run and JOG off (safety rule 1: the release of a stop
+        never restarts the motor, whatever the desired command still says)."""
+        if d.quick_stop or d.coast_stop:
+            self._stop_held = True
+        elif not d.run and not d.jog:
+            self._stop_held = False
+        if self._stop_held:
+            return False, False
+        return d.run, d.jog
 
     def _profidrive_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
         """STW1 (P0967, Table 3.8 / 4.7) walking the switching-on states, and NSOLL.
@@ -421,7 +435,8 @@ class WegProfile:
         (bit 2 note: not recommended) a quick stop is OFF1: ON = 0 with bit 2 = 1.
         """
         state = w.ProfidriveState.SWITCHING_ON_INHIBITED if self._zsw is None else self._zsw.state
-        want = (d.run or d.jog) and not d.coast_stop and not d.quick_stop
+        run, jog = self._run_jog(d)
+        want = run or jog
         walkable = state in (
             w.ProfidriveState.READY_TO_SWITCH_ON,
             w.ProfidriveState.SWITCHED_ON,
@@ -439,7 +454,7 @@ class WegProfile:
             enable_ramp=True,
             enable_setpoint=True,
             fault_ack=reset,
-            jog=d.jog and on,
+            jog=jog and on,
             control_by_plc=d.remote,
         )
         self._sent = _Sent(on, True, reference, d.remote)

@@ -177,6 +177,7 @@ def test_stop_coast_quick_stop_local() -> None:
     # coast: general enable off, and run off (issue 17 item 4: test_quick_stop.py)
     assert out(p, run=True, coast_stop=True)[0] == 0x0014
     assert out(p, run=True, quick_stop=True)[0] == 0x0056  # bit 6 with run off
+    assert out(p, run=False)[0] == 0x0016  # run seen off after the stop: run allowed again
     assert out(p, run=True, remote=False)[0] == 0x0007  # bit 4 = 0: local
     assert out(p, jog=True)[0] == 0x001E
     c = profile(Device.CFW320, SYNC)

@@ -217,3 +217,31 @@ async def test_cfw700_v_f_quick_stop_takes_the_ramp() -> None:
     assert loop.sim.net.run is False and loop.sim.net.quick_stop is False
     assert not loop.sim.motor.quick_stopping
     assert 0.0 < loop.sim.motor.speed < 900.0  # on the deceleration ramp
+
+
+# ----------------------------------------------------------------- release of a stop
+
+
+@pytest.mark.parametrize("stop", ["quick_stop", "coast_stop"])
+@pytest.mark.parametrize("device", [Device.CFW11, Device.CFW700, Device.CFW320])
+def test_release_with_run_still_desired_does_not_restart(device: Device, stop: str) -> None:
+    # rule 1: run only on a run command given after the release; here the desired command
+    # still says run (a hub that kept it): the profile keeps bit 0 at 0 until run is seen off
+    p = profile(device, SYNC)
+    assert control(p, run=True) == 0x0017
+    assert control(p, run=True, **{stop: True}) & RUN == 0
+    assert control(p, run=True) == 0x0016  # released, run held: ramp-stop word
+    assert control(p, jog=True) == 0x0016  # nor JOG
+    assert control(p, run=False) == 0x0016
+    assert control(p, run=True) == 0x0017  # a new run command after the release
+    assert control(p, jog=True) == 0x001E
+
+
+@pytest.mark.parametrize("stop", ["quick_stop", "coast_stop"])
+def test_profidrive_release_with_run_still_desired_does_not_switch_on(stop: str) -> None:
+    p = profile(Device.CFW700, PD)
+    p.inputs(struct.pack(">2H", ZSW1_OPERATION, 0), 0.0)
+    assert control(p, run=True, **{stop: True}) & STW1_ON == 0
+    assert control(p, run=True) == 0x045E  # ON = 0 (OFF1) while run was not seen off
+    assert control(p, run=False) == 0x045E
+    assert control(p, run=True) == 0x045F
