@@ -75,6 +75,11 @@ def test_coast_and_quick_stop_are_the_quick_stop_action(desired: DesiredCommand)
     word = control(profile, desired)
     # 4.2: bit 4 of byte 0 set = quick stop (coast); never together with a start
     assert word == ControlWord(start=False, quick_stop=True)
+    assert profile.outputs(desired, 1.0) == bytes.fromhex("10 00")
+    # released with run still desired: no start (rule 1, issue 17 item 4) until run is
+    # seen off and given again
+    assert control(profile, DesiredCommand(run=True)) == ControlWord()
+    assert control(profile, DesiredCommand()) == ControlWord()
     assert control(profile, DesiredCommand(run=True)) == ControlWord(start=True)
 
 
