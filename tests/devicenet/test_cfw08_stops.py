@@ -8,12 +8,14 @@ a run. Assembly 100 b1 Habilita Geral = 0 is the coast stop (seed table 7).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from adapters.devicenet.cfw08 import AssemblyPair, ProfileSettings, command_assembly
 from gateway.model import DesiredCommand
 
-RUN = {"run": True, "speed_rpm": 900.0}
+RUN = DesiredCommand(run=True, speed_rpm=900.0)
 
 
 @pytest.mark.parametrize(
@@ -29,15 +31,18 @@ RUN = {"run": True, "speed_rpm": 900.0}
 )
 def test_stops_clear_run(pair: AssemblyPair, run: str, quick: str, coast: str) -> None:
     s = ProfileSettings(pair=pair)
-    assert command_assembly(s, DesiredCommand(**RUN), False).encode().hex(" ") == run
-    q = DesiredCommand(**RUN, quick_stop=True)
+    assert command_assembly(s, RUN, False).encode().hex(" ") == run
+    q = replace(RUN, quick_stop=True)
     assert command_assembly(s, q, False).encode().hex(" ") == quick
-    c = DesiredCommand(**RUN, coast_stop=True)
+    c = replace(RUN, coast_stop=True)
     assert command_assembly(s, c, False).encode().hex(" ") == coast
 
 
-@pytest.mark.parametrize("stop", ["quick_stop", "coast_stop"])
-def test_stops_clear_jog_on_assembly_100(stop: str) -> None:
+@pytest.mark.parametrize(
+    "desired",
+    [DesiredCommand(jog=True, quick_stop=True), DesiredCommand(jog=True, coast_stop=True)],
+)
+def test_stops_clear_jog_on_assembly_100(desired: DesiredCommand) -> None:
     s = ProfileSettings(pair=AssemblyPair.WEG)
-    word = command_assembly(s, DesiredCommand(jog=True, **{stop: True}), False).encode()
+    word = command_assembly(s, desired, False).encode()
     assert word[0] & 0x09 == 0  # b0 Habilita Rampa and b3 JOG off
