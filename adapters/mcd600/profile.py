@@ -134,10 +134,10 @@ class Mcd600Profile:
     def _control_word(self, desired: DesiredCommand, now: float) -> ControlWord:
         reset = self._reset_bit(desired.fault_reset_seq, now)
         coast = desired.coast_stop or desired.quick_stop  # 4.2 t2 byte 0 bit 4: quick stop
-        if coast:
-            self._run_armed = False  # rule 1: the release of the stop never restarts
-        elif not desired.run:
+        if not desired.run:
             self._run_armed = True
+        elif coast:
+            self._run_armed = False  # rule 1: a run asked before the stop never restarts
         # 4.2 note: byte 0 bit 4 must be 0 for a start; never start and reset together.
         start = desired.run and self._run_armed and not coast and not reset
         self._start_sent = start

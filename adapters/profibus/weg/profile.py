@@ -413,9 +413,11 @@ class WegProfile:
     def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
         """Run and JOG as sent: off with a quick or coast stop, and after its release until
         the desired command has had run and JOG off (safety rule 1: the release of a stop
-        never restarts the motor, whatever the desired command still says)."""
+        never restarts the motor on a run that was asked before it). A stop whose desired
+        command has run and JOG off (the hub clears them) holds nothing: the next run is new.
+        """
         if d.quick_stop or d.coast_stop:
-            self._stop_held = True
+            self._stop_held = d.run or d.jog
         elif not d.run and not d.jog:
             self._stop_held = False
         if self._stop_held:

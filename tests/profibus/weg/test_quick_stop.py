@@ -245,3 +245,13 @@ def test_profidrive_release_with_run_still_desired_does_not_switch_on(stop: str)
     assert control(p, run=True) == 0x045E  # ON = 0 (OFF1) while run was not seen off
     assert control(p, run=False) == 0x045E
     assert control(p, run=True) == 0x045F
+
+
+@pytest.mark.parametrize("stop", ["quick_stop", "coast_stop"])
+def test_a_run_given_with_the_release_runs(stop: str) -> None:
+    # the hub clears run with the stop (and refuses run while it is latched): a run given
+    # after, even in the command that releases the stop, is a new run command
+    p = profile(Device.CFW700, SYNC)
+    assert control(p, run=True) == 0x0017
+    assert control(p, **{stop: True}) & RUN == 0
+    assert control(p, run=True) == 0x0017
