@@ -520,7 +520,7 @@ def command_assembly(
     c = _Command(
         settings=settings,
         desired=desired,
-        run=desired.run and not desired.coast_stop,
+        run=desired.run and not desired.coast_stop and not desired.quick_stop,  # rule 1
         reverse=_reverse(desired),
         rpm=min(reference_rpm(settings, desired), settings.max_rpm),
         reset=fault_reset,
@@ -549,7 +549,7 @@ def _out100(c: _Command) -> OutputAssembly:
         ramp_enable=c.run,
         general_enable=not d.coast_stop,
         reverse=c.reverse,
-        jog=d.jog and not d.coast_stop,
+        jog=d.jog and not d.coast_stop and not d.quick_stop,
         remote=d.remote,
         fault_reset=c.reset,
         speed_counts=rpm_to_counts(c.rpm, s.max_rpm, s.weg_speed_scale),

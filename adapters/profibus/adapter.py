@@ -88,6 +88,7 @@ DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "parameter": EventKind.PARAMETER,
     "info": EventKind.BUS,
     "config": EventKind.CONFIG,
+    "safety": EventKind.SAFETY,
 }
 
 
