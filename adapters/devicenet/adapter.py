@@ -496,10 +496,11 @@ class DeviceNetAdapter:
                 return
             except NotConfigured as exc:
                 problem = str(exc)
+                if problem != d.problem:  # the drive's own setup is wrong: a warning
+                    log.warning("DeviceNet %s: drive %s not configured: %s", self.name, d.id, exc)
             except (GatewayTimeout, DriveOffline) as exc:
                 problem = f"no answer while configuring: {exc}"
             if problem != d.problem:
-                log.warning("DeviceNet %s: drive %s not configured: %s", self.name, d.id, problem)
                 self._hub_port().event(
                     d.id,
                     EventKind.CONFIG,
