@@ -575,8 +575,9 @@ class DeviceNetAdapter:
                 P710=p710,
             )
 
-    async def _path_assembly(self, d: _Drive, instance: int, attribute: int) -> int | None:
-        """The Assembly instance a connection path of the I/O connection names."""
+    async def _path_assembly(self, d: _Drive, instance: int, attribute: int) -> int:
+        """The Assembly instance a connection path of the I/O connection names; a path
+        that names none (or cannot be read) leaves the pair in force unknown: refused."""
         where = f"Connection 05h instance {instance} attribute {attribute}"
         body = GetAttributeSingle(CipClass.CONNECTION, instance, attribute)
         try:
@@ -586,11 +587,15 @@ class DeviceNetAdapter:
                 f"reading the assembly in force ({where}) refused: {exc.text}"
             ) from None
         try:
-            return decode_path(data).assembly
+            assembly = decode_path(data).assembly
         except DeviceNetDecodeError:
+            assembly = None
+        if assembly is None:
+            shown = data.hex(" ") or "empty"
             raise NotConfigured(
-                f"the assembly in force is unknown: {where} is {data.hex(' ') or 'empty'}"
-            ) from None
+                f"the assembly in force is unknown: {where} names no assembly ({shown})"
+            )
+        return assembly
 
     async def _check_baud_rate(self, d: _Drive) -> None:
         """P702 against the line's expected rate (seed 4.1.6; effective after a reset).

@@ -25,6 +25,7 @@ from adapters.devicenet.objects import AllocationChoice
 from adapters.devicenet.scanner import Phase
 from adapters.devicenet.sim import Cfw08Node, SimNodeConfig, SimPhase, SimRunner
 from adapters.devicenet.sim import objects as sim_objects
+from adapters.devicenet.sim.connection import SimConnection
 from gateway.adapter import Event, EventKind
 from gateway.errors import AdapterError, CommandRejected, DriveOffline, ParameterError
 from gateway.model import CommState, Direction, DriveCommand, DriveStatus, Source
@@ -344,6 +345,26 @@ async def test_a_p710_that_differs_from_the_pair_in_force_is_reported(
             "until the drive's next reset, then the drive will not be brought online "
             "(seed 4.1.8)"
         )
+
+
+async def test_an_unknown_assembly_in_force_is_not_configured(
+    can_line: LinkConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A drive that shows no Assembly in its I/O path: the pair in force is unknown, so
+    no I/O (decision, docs/devices.md)."""
+    real = SimConnection.attribute
+
+    def no_path(self: SimConnection, attribute: int) -> object:
+        return b"" if attribute == 14 else real(self, attribute)
+
+    monkeypatch.setattr(SimConnection, "attribute", no_path)
+    async with rig(can_line, [drive(2, assembly=21)]) as r:
+        ev = await r.event(_not_configured)
+        assert ev.text == (
+            "not configured: the assembly in force is unknown: Connection 05h instance 2 "
+            "attribute 14 names no assembly (empty); the drive gets no commands (idle I/O)"
+        )
+        assert r.hub.state("d2").comm is CommState.CONNECTING
 
 
 async def test_20_70_refuses_a_reverse_and_keeps_running(can_line: LinkConfig) -> None:
