@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
     ASSEMBLY_SIZE,
     P070_COMM_ERROR,
@@ -64,7 +65,6 @@ from adapters.devicenet.explicit import (
 )
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, LinkEvent, RxBad, RxError, RxFrame
-from adapters.devicenet.objects import ConnectionAttribute, ConnectionInstance, decode_path
 from adapters.devicenet.options import BusOptions, DriveOptions, parse_bus, parse_drive
 from adapters.devicenet.scanner import (
     Action,
@@ -555,8 +555,8 @@ class DeviceNetAdapter:
         """
         want = d.opts.assembly
         instance = _IO_INSTANCE[d.opts.connection]
-        produced = await self._path_assembly(d, instance, ConnectionAttribute.PRODUCED_PATH)
-        consumed = await self._path_assembly(d, instance, ConnectionAttribute.CONSUMED_PATH)
+        produced = await self._path_assembly(d, instance, objects.ConnectionAttribute.PRODUCED_PATH)
+        consumed = await self._path_assembly(d, instance, objects.ConnectionAttribute.CONSUMED_PATH)
         p710 = await self._checked_read(d, P710)
         d.params["P710"] = p710
         stored = AssemblyPair.from_p710(p710)
@@ -587,7 +587,7 @@ class DeviceNetAdapter:
                 f"reading the assembly in force ({where}) refused: {exc.text}"
             ) from None
         try:
-            assembly = decode_path(data).assembly
+            assembly = objects.decode_path(data).assembly
         except DeviceNetDecodeError:
             assembly = None
         if assembly is None:
@@ -805,9 +805,9 @@ def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
 
 
 _IO_INSTANCE: dict[IoKind, int] = {
-    IoKind.POLLED: ConnectionInstance.POLL,  # seed table 13
-    IoKind.COS: ConnectionInstance.COS_CYCLIC,  # seed table 14
-    IoKind.CYCLIC: ConnectionInstance.COS_CYCLIC,
+    IoKind.POLLED: objects.ConnectionInstance.POLL,  # seed table 13
+    IoKind.COS: objects.ConnectionInstance.COS_CYCLIC,  # seed table 14
+    IoKind.CYCLIC: objects.ConnectionInstance.COS_CYCLIC,
 }
 
 

@@ -102,12 +102,11 @@ class SimDrive:
     # ------------------------------------------------------------ life cycle
 
     def power_up(self) -> None:
-        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands cleared.
-
-        The assembly pair in force changes only here: a P710 written while powered
-        (``params``) waits for the next reset or power cycle."""
+        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands cleared."""
         self.pair = AssemblyPair.from_p710(self.params[P710]) or AssemblyPair.BASIC
-        if self._p710_unapplied is not None:  # config p710_stored: changed, not yet reset
+        # The pair in force changes only here: a P710 written while powered waits for the
+        # next reset or power cycle (config p710_stored: one written and not yet reset).
+        if self._p710_unapplied is not None:
             self.params[P710], self._p710_unapplied = self._p710_unapplied, None
         self._clear_commands()
         self.comm_error = None
