@@ -4,6 +4,9 @@ Adapters are found through the name -> "module:Class" table of
 :mod:`gateway.adapter` and front ends through :data:`FRONT_ENDS`, both imported
 lazily. An adapter that crashes is logged with its traceback and restarted with
 back-off while its drives are offline; the rest of the gateway keeps running.
+One master per line: an adapter whose first run finds its line held by another master
+(:class:`LineHeld`) stops the daemon before it starts, one line logged and exit status
+:data:`EXIT_LINE_HELD`; met again after a restart, it is logged and retried.
 SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
 restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
 """
@@ -23,7 +26,7 @@ from typing import Any, Protocol
 from gateway import __version__
 from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
-from gateway.errors import ConfigError, ConfigErrors
+from gateway.errors import ConfigError, ConfigErrors, LineHeld
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -39,6 +42,7 @@ FRONT_ENDS: dict[str, str] = {
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
+EXIT_LINE_HELD = 75  # EX_TEMPFAIL (sysexits.h): another master holds a line; it may be freed
 
 
 class Backoff:
@@ -167,6 +171,7 @@ class Daemon:
         self._started_front_ends: list[str] = []
         self.ready = asyncio.Event()
         """Set when the daemon has reported READY (its front ends serve)."""
+        self.exit_status = 0
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -214,6 +219,7 @@ class Daemon:
     ) -> None:
         """Run ``start()`` again and again, with back-off, until cancelled."""
         backoff = Backoff()
+        first = True
         while True:
             started = time.monotonic()
             error: Exception | None = None
@@ -221,16 +227,33 @@ class Daemon:
                 await start()
             except asyncio.CancelledError:
                 raise
+            except LineHeld as exc:
+                if first:
+                    self._refuse_start(what, exc)
+                    on_crash()
+                    return
+                error = exc
             except Exception as exc:
                 error = exc
+            first = False
             pause = backoff.after_crash(time.monotonic() - started)
-            if error is not None:  # logged with its traceback
+            if isinstance(error, LineHeld):  # its text says it all: one line
+                log.error("%s: %s; retrying in %.1f s", what, error, pause)
+            elif error is not None:  # logged with its traceback
                 log.error("%s crashed; restarting in %.1f s", what, pause, exc_info=error)
             else:
                 log.error("%s returned; restarting in %.1f s", what, pause)
             self.runtime.restarts[what] = self.runtime.restarts.get(what, 0) + 1
             on_crash()
             await asyncio.sleep(pause)
+
+    def _refuse_start(self, what: str, error: LineHeld) -> None:
+        """Another master holds a line of ours at start: stop, never become the second."""
+        log.error(
+            "%s: %s; drive-gateway does not start (exit status %d)", what, error, EXIT_LINE_HELD
+        )
+        self.exit_status = EXIT_LINE_HELD
+        self._stop.set()
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
         async def start() -> None:
@@ -321,7 +344,7 @@ class Daemon:
             log.info("drive-gateway %s running: %s", __version__, status)
         await self._stop.wait()
         await self._shutdown()
-        return 0
+        return self.exit_status
 
     async def _front_ends_serving(self) -> list[str]:
         """Wait until every front end serves (its ``ready`` event), bounded by READY_BOUND;

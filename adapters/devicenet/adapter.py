@@ -95,6 +95,7 @@ from gateway.errors import (
     DriveOffline,
     FrameEncodeError,
     GatewayTimeout,
+    LineHeld,
     ParameterError,
 )
 from gateway.model import CommState, Device
@@ -383,10 +384,17 @@ class DeviceNetAdapter:
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
     def _on_line_fault(self, now: float, action: LineFault) -> None:
+        """The scanner's MAC ID is answered on the line: another master is there (fact
+        sheet 2.3: a device failing its check stays off the line). Nothing but the two
+        check requests went out; the gateway does not start on this line."""
         hub = self._hub_port()
         for d in self.drives.values():
             hub.event(d.id, EventKind.BUS, action.text)
-        raise AdapterError(action.text)
+        o = self.options
+        raise LineHeld(
+            f"DeviceNet {o.interface} channel {o.channel}: {action.text}; another master is "
+            "on this line: stop it (one master per line)"
+        )
 
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]

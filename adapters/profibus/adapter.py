@@ -57,6 +57,7 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
+from .portlock import PortHeld
 from .profile import PROFILES, DpProfile, RecordAccessError, SlaveSetup
 
 if TYPE_CHECKING:
@@ -196,6 +197,7 @@ class ProfibusAdapter:
         self._port_state = "closed"
         self._port_error: str | None = None
         self._reopens = 0
+        self._link_opens = 0  # PortHeld before the first: refuse to start (one master per line)
         self._control_timer: asyncio.TimerHandle | None = None
         self.sim: SimPort | None = None
         self.sim_line: SimLine | None = None  # the simulated slaves (simulate = true)
@@ -240,11 +242,19 @@ class ProfibusAdapter:
                     on_error,
                     rs485=self.options.rs485,
                 )
+            except PortHeld as exc:
+                if self._link_opens == 0:
+                    raise  # at start: refuse to be a second master (the daemon stops)
+                self._port_down(str(exc))  # taken while ours was gone: wait for it
+                await asyncio.sleep(pause)
+                pause = min(2 * pause, REOPEN_BACKOFF[1])
+                continue
             except OPEN_ERRORS as exc:
                 self._port_down(f"cannot open {self._port}: {exc}")
                 await asyncio.sleep(pause)
                 pause = min(2 * pause, REOPEN_BACKOFF[1])
                 continue
+            self._link_opens += 1
             pause = REOPEN_BACKOFF[0]
             self._attach(link)
             lost = await failed
