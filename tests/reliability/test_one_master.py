@@ -25,11 +25,13 @@ from typing import Any
 import pytest
 
 from adapters.profibus.cli import build_line
+from adapters.profibus.link import open_port
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.port import SimPort
 from adapters.profibus.weg.sim import WegSim
 from gateway.config import load, parse
 from gateway.daemon import EXIT_LINE_HELD, Daemon
+from gateway.model import CommState
 from gateway.systemd import Notifier
 from tests.e2e.harness import Gateway, running_gateway
 from tests.reliability.demo import (
@@ -57,6 +59,7 @@ TOLERANT = {"latency": 0.5, "watchdog": 3.0}
 class HeldLine:
     gw: Gateway
     line: SimLine
+    sim: SimPort
     port: Path  # the gateway's configured port: a symlink to the pty
     buses: dict[str, dict[str, Any]]
 
@@ -79,7 +82,7 @@ async def profibus_gateway(tmp_path: Path) -> AsyncIterator[HeldLine]:
     try:
         os.symlink(path, port)
         async with running_gateway(tmp_path, lambda: toml_buses(buses), list(WEG)) as gw:
-            held = HeldLine(gw, line, port, buses)
+            held = HeldLine(gw, line, sim, port, buses)
             await gw.command("cfw11", {"run": True, "speed_rpm": 900})
             await gw.wait_for("cfw11", at_speed(900.0))
             yield held
@@ -154,6 +157,36 @@ async def test_profibus_scan_on_a_running_gateways_port_is_refused(tmp_path: Pat
             assert err.count("\n") == 1 and err.startswith("error: serial port"), err
             holder_named(err, held.port)
             undisturbed(held, events)
+
+
+async def test_a_port_taken_while_ours_was_gone_is_waited_for(tmp_path: Path) -> None:
+    """Once running, the gateway does not stop over its port: unplugged, then held by
+    another process when it comes back, it is retried (the holder named in the events)
+    and taken once that process lets it go."""
+    async with profibus_gateway(tmp_path) as held:
+        gw, port = held.gw, held.port
+        with Events(gw) as events:
+            held.sim.close()  # unplugged
+            port.unlink()
+            await gw.wait_for("cfw11", lambda s: s.comm is CommState.OFFLINE)
+            sim, path = SimPort.on_pty(held.line)  # plugged back, but another process has it
+            other = open_port(path, 500000)
+            try:
+                sim.start()
+                os.symlink(path, port)
+                ev = await events.text("cfw11", f"serial port {port} is held by pid {os.getpid()}")
+                assert "another master is on this line" in ev.text
+                diag = gw.adapter(PROFIBUS).diagnostics()
+                assert diag["port_state"] == "reopening" and "held by" in diag["port_error"]
+                assert not gw.daemon.hub.state("cfw11").online
+            finally:
+                other.close()
+            try:
+                for drive in WEG:
+                    await gw.wait_for(drive, lambda s: s.online)
+                assert gw.daemon.exit_status == 0 and not gw.daemon.runtime.restarts
+            finally:
+                sim.close()
 
 
 async def test_a_second_scanner_on_the_same_can_channel_does_not_start(
