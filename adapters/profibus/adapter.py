@@ -17,7 +17,9 @@ device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive
 * leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
 
 The port disappearing never crashes the gateway: drives go offline and the port is
-reopened with back-off. On cancellation the master sends Global_Control Clear to every
+reopened with back-off. One master per line: a port another process holds when the
+adapter first opens it ends the run with :class:`PortHeld` (the daemon does not start);
+held when it comes back after a loss, it is retried like a missing one, the holder named. On cancellation the master sends Global_Control Clear to every
 slave and closes the port. With ``simulate = true`` the adapter makes a pty pair and runs
 its drives' simulated devices on the other end, in-process.
 """
