@@ -6,7 +6,9 @@ lazily. An adapter that crashes is logged with its traceback and restarted with
 back-off while its drives are offline; the rest of the gateway keeps running.
 One master per line: an adapter whose first run finds its line held by another master
 (:class:`LineHeld`) stops the daemon before it starts, one line logged and exit status
-:data:`EXIT_LINE_HELD`; met again after a restart, it is logged and retried.
+:data:`EXIT_LINE_HELD`; met again after a restart, it is logged and retried. READY waits
+for every adapter's optional ``claimed`` event (its line held) as for the front ends'
+``ready``, so a refused start never reports READY.
 SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
 restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
 """
@@ -333,11 +335,18 @@ class Daemon:
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
             self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
-        not_serving = await self._front_ends_serving()
+        not_serving, unclaimed = await asyncio.gather(
+            self._front_ends_serving(), self._lines_claimed()
+        )
         status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
         if not_serving:
             status += f"; not serving yet: {', '.join(not_serving)}"
             log.error("front end(s) %s not serving after %g s", ", ".join(not_serving), READY_BOUND)
+        if unclaimed:
+            status += f"; line not claimed yet: {', '.join(unclaimed)}"
+            log.warning(
+                "bus(es) %s: line not claimed after %g s", ", ".join(unclaimed), READY_BOUND
+            )
         if not self._stop.is_set():
             self.notifier.ready(status)
             self.ready.set()
@@ -348,30 +357,50 @@ class Daemon:
 
     async def _front_ends_serving(self) -> list[str]:
         """Wait until every front end serves (its ``ready`` event), bounded by READY_BOUND;
-        returns the names of those that do not. A front end restarted meanwhile is a
-        new instance: its own event is the one waited for."""
+        returns the names of those that do not."""
+        deadline = asyncio.get_running_loop().time() + READY_BOUND
+        return [
+            name
+            for name in self._started_front_ends
+            if not await self._until_set(lambda n=name: self.front_ends.get(n), "ready", deadline)
+        ]
+
+    async def _lines_claimed(self) -> list[str]:
+        """Wait until every adapter has claimed its line (its ``claimed`` event: a serial
+        port held, a DeviceNet MAC ID checked), bounded by READY_BOUND, so that a line
+        another master holds stops the daemon before it reports READY; returns the buses
+        that have not. An adapter without the event claims nothing."""
+        deadline = asyncio.get_running_loop().time() + READY_BOUND
+        return [
+            bus.name
+            for bus in self.config.buses
+            if not await self._until_set(
+                lambda b=bus.name: self.runtime.adapters.get(b), "claimed", deadline
+            )
+        ]
+
+    async def _until_set(self, instance: Callable[[], object], attr: str, deadline: float) -> bool:
+        """Wait until the ``attr`` event of ``instance()`` is set, or the daemon stops; False
+        at ``deadline``. A part restarted meanwhile is a new instance: its own event is the
+        one waited for; an instance without such an event is set once it exists."""
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + READY_BOUND
-        pending: list[str] = []
-        for name in self._started_front_ends:
-            while not self._stop.is_set():
-                front_end = self.front_ends.get(name)
-                ready = getattr(front_end, "ready", None)
-                if front_end is not None and not isinstance(ready, asyncio.Event):
-                    break  # a front end without a readiness event serves once started
-                if ready is not None and ready.is_set():
-                    break
-                remaining = deadline - loop.time()
-                if remaining <= 0:
-                    pending.append(name)
-                    break
-                if ready is None:
-                    await asyncio.sleep(0.01)  # its task has not created it yet
-                    continue
-                with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(min(remaining, 0.25)):
-                        await ready.wait()
-        return pending
+        while not self._stop.is_set():
+            current = instance()
+            event = getattr(current, attr, None)
+            if current is not None and not isinstance(event, asyncio.Event):
+                return True
+            if event is not None and event.is_set():
+                return True
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                return False
+            if event is None:
+                await asyncio.sleep(0.01)  # its task has not created it yet
+                continue
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(remaining, 0.25)):
+                    await event.wait()
+        return True
 
     async def _shutdown(self) -> None:
         """Rule 4: on_shutdown, bounded wait for stopped, then leave the buses."""

@@ -197,6 +197,8 @@ class DeviceNetAdapter:
         self._hub: HubPort | None = None
         self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self.claimed = asyncio.Event()
+        """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
             LineOnline: self._on_line_online,
             LineFault: self._on_line_fault,
@@ -380,6 +382,7 @@ class DeviceNetAdapter:
 
     def _on_line_online(self, now: float, action: LineOnline) -> None:
         log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
+        self.claimed.set()
         for d in self.drives.values():
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 

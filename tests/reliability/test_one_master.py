@@ -16,6 +16,7 @@ import asyncio
 import contextlib
 import logging
 import os
+import re
 import sys
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -143,6 +144,7 @@ async def test_a_second_gateway_on_a_held_port_refuses_to_start(tmp_path: Path) 
             holder_named(errors[0], held.port)
             assert "bus profibus:" in errors[0] and "does not start (exit status 75)" in errors[0]
             assert "Traceback" not in log, log
+            assert not re.search(r"drive-gateway \S+ running:", log), log  # never READY
             undisturbed(held, events)
 
 
@@ -204,6 +206,7 @@ async def test_a_second_scanner_on_the_same_can_channel_does_not_start(
             caplog.clear()
             status = await asyncio.wait_for(daemon.run(), START_TIMEOUT)
             assert status == EXIT_LINE_HELD
+            assert not daemon.ready.is_set()  # READY waits for the check: never reported
             errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
             assert len(errors) == 1 and errors[0].exc_info is None, caplog.text
             text = errors[0].getMessage()
