@@ -21,7 +21,7 @@ import importlib
 import logging
 import signal
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -362,7 +362,7 @@ class Daemon:
         return [
             name
             for name in self._started_front_ends
-            if not await self._until_set(lambda n=name: self.front_ends.get(n), "ready", deadline)
+            if not await self._until_set(self.front_ends, name, "ready", deadline)
         ]
 
     async def _lines_claimed(self) -> list[str]:
@@ -374,18 +374,18 @@ class Daemon:
         return [
             bus.name
             for bus in self.config.buses
-            if not await self._until_set(
-                lambda b=bus.name: self.runtime.adapters.get(b), "claimed", deadline
-            )
+            if not await self._until_set(self.runtime.adapters, bus.name, "claimed", deadline)
         ]
 
-    async def _until_set(self, instance: Callable[[], object], attr: str, deadline: float) -> bool:
-        """Wait until the ``attr`` event of ``instance()`` is set, or the daemon stops; False
+    async def _until_set(
+        self, parts: Mapping[str, object], name: str, attr: str, deadline: float
+    ) -> bool:
+        """Wait until the ``attr`` event of ``parts[name]`` is set, or the daemon stops; False
         at ``deadline``. A part restarted meanwhile is a new instance: its own event is the
         one waited for; an instance without such an event is set once it exists."""
         loop = asyncio.get_running_loop()
         while not self._stop.is_set():
-            current = instance()
+            current = parts.get(name)
             event = getattr(current, attr, None)
             if current is not None and not isinstance(event, asyncio.Event):
                 return True
