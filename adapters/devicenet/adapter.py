@@ -98,6 +98,7 @@ from gateway.errors import (
     DriveOffline,
     FrameEncodeError,
     GatewayTimeout,
+    LineHeld,
     ParameterError,
 )
 from gateway.model import CommState, Device
@@ -200,6 +201,8 @@ class DeviceNetAdapter:
         self._hub: HubPort | None = None
         self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self.claimed = asyncio.Event()
+        """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
             LineOnline: self._on_line_online,
             LineFault: self._on_line_fault,
@@ -384,14 +387,22 @@ class DeviceNetAdapter:
 
     def _on_line_online(self, now: float, action: LineOnline) -> None:
         log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
+        self.claimed.set()
         for d in self.drives.values():
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
     def _on_line_fault(self, now: float, action: LineFault) -> None:
+        """The scanner's MAC ID is answered on the line: another master is there (fact
+        sheet 2.3: a device failing its check stays off the line). Nothing but the two
+        check requests went out; the gateway does not start on this line."""
         hub = self._hub_port()
         for d in self.drives.values():
             hub.event(d.id, EventKind.BUS, action.text)
-        raise AdapterError(action.text)
+        o = self.options
+        raise LineHeld(
+            f"DeviceNet {o.interface} channel {o.channel}: {action.text}; another master is "
+            "on this line: stop it (one master per line)"
+        )
 
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]
