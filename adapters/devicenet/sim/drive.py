@@ -98,9 +98,11 @@ class SimDrive:
     # ------------------------------------------------------------ life cycle
 
     def power_up(self) -> None:
-        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands cleared."""
+        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands and any
+        fault cleared (the simulator's faults have no condition that outlives a restart)."""
         self.pair = AssemblyPair.from_p710(self.params[P710]) or AssemblyPair.BASIC
         self._clear_commands()
+        self.fault_code = None
         self.comm_error = None
         self.idle = True
         self.motor.coast()
