@@ -62,8 +62,10 @@ class FakeGateway:
 
     def _on(self, query: zenoh.Query) -> None:
         info = query.source_info
-        ident = info.source_id if info is not None else None
-        self.sources.append(None if ident is None else (str(ident.zid), int(info.source_sn)))
+        if info is None:
+            self.sources.append(None)
+        else:
+            self.sources.append((str(info.source_id.zid), int(info.source_sn)))
         self.payloads.append(json.loads(query.payload.to_string()) if query.payload else None)
         ok, body = self.answer
         if ok:
