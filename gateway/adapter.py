@@ -40,6 +40,7 @@ class EventKind(Enum):
     FAULT = "fault"
     TRIP = "trip"
     ALARM = "alarm"
+    COMMAND = "command"
     COMMAND_REFUSED = "command_refused"
     SAFETY = "safety"
     CONTROL = "control"

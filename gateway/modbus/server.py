@@ -41,7 +41,7 @@ import contextvars
 import ipaddress
 import logging
 import socket
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -162,6 +162,7 @@ class GatewayRequestHandler(ServerRequestHandler):
         super().__init__(owner, *args)  # type: ignore[no-untyped-call]
         self.gateway = owner
         self.client = ""
+        self._peer_open = False  # counted in the owner's peer_changed
         # requests (PDUs) and ready exception replies, in the order they came
         self._queue: collections.deque[tuple[ModbusPDU, tuple[Any, ...] | None]] = (
             collections.deque()
@@ -179,6 +180,8 @@ class GatewayRequestHandler(ServerRequestHandler):
             transport.abort()  # type: ignore[attr-defined]
             return
         self.client = host
+        self._peer_open = True
+        self.gateway.peer_changed(host, True)
         self.gateway.counters.connections_accepted += 1
         keep_alive(transport.get_extra_info("socket"))
         super().connection_made(transport)
@@ -193,6 +196,9 @@ class GatewayRequestHandler(ServerRequestHandler):
         self._time_frame(restart=used > 0)
 
     def connection_lost(self, exc: Exception | None) -> None:
+        if self._peer_open:
+            self._peer_open = False
+            self.gateway.peer_changed(self.client, False)
         super().connection_lost(exc)
         self._stop_frame_timer()
         self._queue.clear()  # nobody is left to read the replies
@@ -357,8 +363,10 @@ class GatewayServer(ModbusTcpServer):
         policy: AccessPolicy,
         counters: Counters,
         limits: ConnectionLimits,
+        on_peer: Callable[[str, bool], None] | None = None,
     ) -> None:
         super().__init__(devices, address=(host, port))
+        self._on_peer = on_peer
         self.policy = policy
         self.counters = counters
         self.limits = limits
@@ -367,6 +375,11 @@ class GatewayServer(ModbusTcpServer):
 
     def callback_new_connection(self) -> GatewayRequestHandler:
         return GatewayRequestHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+    def peer_changed(self, host: str, opened: bool) -> None:
+        """A connection from ``host`` was admitted (``opened``) or is gone."""
+        if self._on_peer is not None:
+            self._on_peer(host, opened)
 
     @property
     def connections_open(self) -> int:

@@ -64,7 +64,7 @@ from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
-from gateway.zenoh.link import Incoming, ZenohLink
+from gateway.zenoh.link import ANONYMOUS, Incoming, ZenohLink
 from gateway.zenoh.requests import (
     Answer,
     BadRequest,
@@ -310,8 +310,8 @@ class ZenohFrontEnd:
             return False
         return True
 
-    def _command_from_zenoh(self, key: str, payload: bytes) -> None:
-        self._to_loop(self._on_command_put, key, payload)
+    def _command_from_zenoh(self, key: str, payload: bytes, client: str) -> None:
+        self._to_loop(self._on_command_put, key, payload, client)
 
     def _query_from_zenoh(self, incoming: Incoming) -> None:
         if not self._to_loop(self._on_query, incoming):
@@ -474,19 +474,20 @@ class ZenohFrontEnd:
 
     # ------------------------------------------------------------ commands (loop)
 
-    def _on_command_put(self, key: str, payload: bytes) -> None:
+    def _on_command_put(self, key: str, payload: bytes, client: str = ANONYMOUS) -> None:
         if not self._serving:
             return
         parsed = self.keys.parse(key)
         if parsed is None or parsed.kind != KeyKind.COMMAND.value or parsed.rest:
             log.warning("zenoh command put on %s ignored: not a drive's command key", key)
             return
-        body = self._apply_command(parsed.drive_id, payload)
-        if not body["accepted"]:
-            log.info("zenoh command put on %s refused: %s", key, body["error"])
+        self._apply_command(parsed.drive_id, payload, client)  # the hub logs a refusal
 
-    def _apply_command(self, drive_id: str, payload: bytes | None) -> dict[str, Any]:
-        """Parse and submit a command; refusals are reported on the drive's events key."""
+    def _apply_command(
+        self, drive_id: str, payload: bytes | None, client: str = ANONYMOUS
+    ) -> dict[str, Any]:
+        """Parse and submit a command; refusals are reported on the drive's events key
+        (and logged by the hub, rate-limited per client and reason)."""
         if drive_id not in self._drive_ids:
             return command_refused(f"no drive {drive_id!r}")
         try:
@@ -495,12 +496,13 @@ class ZenohFrontEnd:
             self.hub.event(
                 drive_id,
                 EventKind.COMMAND_REFUSED,
-                f"command from {Source.ZENOH.value} refused: {exc.reason}",
+                f"command from {Source.ZENOH.value} {client} refused: {exc.reason}",
                 source=Source.ZENOH.value,
+                client=client,
             )
             return command_refused(exc.reason)
         try:
-            self.hub.submit(drive_id, Source.ZENOH, cmd)  # reports its own refusals
+            self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
             return command_refused(exc.reason)
         except UnknownDrive:
@@ -555,7 +557,7 @@ class ZenohFrontEnd:
         if not is_concrete(incoming.key) or parsed is None:
             self._refuse(pending, "a command names one drive: <prefix>/drives/<id>/command")
             return
-        body = self._apply_command(parsed.drive_id, incoming.payload)
+        body = self._apply_command(parsed.drive_id, incoming.payload, incoming.client)
         self._answer(pending, [Answer.reply(incoming.key, body)])
 
     def _query_param(self, pending: _Pending) -> None:

@@ -174,6 +174,8 @@ STATE_FIELD_DOC: dict[str, str] = {
     "control_source": '"none", "zenoh", "modbus", "gateway"',
     "speed_base": "what 100 % speed is, or null",
     "values": "named raw values the profile does not model",
+    "control_client": "the client in control within `control_source` (a Modbus peer address, "
+    'a Zenoh session id, "anonymous"), or null',
 }
 """One line per DriveState JSON field; a test checks it names exactly the model's fields."""
 
@@ -182,9 +184,13 @@ EVENT_KIND_DOC: dict[EventKind, str] = {
     EventKind.FAULT: "fault (with code and the device's text), fault cleared, reset sent",
     EventKind.TRIP: "soft starter trip (with code and text)",
     EventKind.ALARM: "alarm raised",
-    EventKind.COMMAND_REFUSED: "a command was refused (field `source` says from where)",
+    EventKind.COMMAND: "a command was accepted and changed the desired command (the audit "
+    "trail: fields `source`, `client` and `changes`)",
+    EventKind.COMMAND_REFUSED: "a command was refused (fields `source` and `client` say from "
+    "where)",
     EventKind.SAFETY: "a safety action of the gateway (watchdog, shutdown, run cleared)",
-    EventKind.CONTROL: "control passed from one source to another",
+    EventKind.CONTROL: "control passed from one client to another (rule 1: run needs a new "
+    "run command)",
     EventKind.PARAMETER: "a parameter was written",
     EventKind.CONFIG: "configuration",
     EventKind.BUS: "bus-level event",

@@ -40,9 +40,26 @@ class Incoming:
     payload: bytes | None
     query: Any  # zenoh.Query: replied to and dropped on the I/O thread
     targets: tuple[str, ...] = ()
+    client: str = ""  # the querier's session id (client_of)
 
 
-CommandSink = Callable[[str, bytes], None]
+ANONYMOUS = "anonymous"
+"""The client id of a put or query that carries no source info (docs/operations.md)."""
+
+
+def client_of(source_info: Any) -> str:
+    """The client behind a sample or query: its session's id from the source info
+    (``put(..., source_info=SourceInfo(publisher.id, sn))``), or :data:`ANONYMOUS`.
+
+    Every Zenoh client that sends no source info is the same, anonymous client to
+    the gateway: they share control of a drive and feed one command watchdog.
+    """
+    if source_info is None:
+        return ANONYMOUS
+    return str(source_info.source_id.zid)
+
+
+CommandSink = Callable[[str, bytes, str], None]
 QuerySink = Callable[[Incoming], None]
 
 
@@ -112,7 +129,9 @@ class ZenohLink:
     def _command_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:  # PyO3 enums: compare by value, not identity
             return
-        self._on_command(str(sample.key_expr), sample.payload.to_bytes())
+        self._on_command(
+            str(sample.key_expr), sample.payload.to_bytes(), client_of(sample.source_info)
+        )
 
     def _query(self, kind: KeyKind, query: zenoh.Query) -> None:
         try:
@@ -122,9 +141,9 @@ class ZenohLink:
             if kind is KeyKind.STATE:
                 asked = query.key_expr
                 targets = tuple(d for d, k in self._state_keys.items() if asked.intersects(k))
-            self._on_query(
-                Incoming(kind, key, None if payload is None else payload.to_bytes(), query, targets)
-            )
+            body = None if payload is None else payload.to_bytes()
+            client = client_of(query.source_info)
+            self._on_query(Incoming(kind, key, body, query, targets, client))
         except Exception:
             log.exception("zenoh query on %s could not be handed over", query.key_expr)
             query.drop()

@@ -22,12 +22,13 @@ from gateway.daemon import READY_BOUND, Daemon
 from gateway.model import DriveState
 from gateway.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
+from tests.support.timing import scaled
 from tests.zenoh.client import Client
 
 T = TypeVar("T")
 
 PREFIX = "e2e"
-TIMEOUT = 8.0
+TIMEOUT = scaled(30.0)  # a bound on waits for events: tests/support/timing.py
 RUN, REVERSE, RESET, QUICK_STOP, COAST_STOP = 0x01, 0x02, 0x04, 0x08, 0x10  # docs/modbus-map.md
 
 

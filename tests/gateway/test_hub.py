@@ -85,12 +85,14 @@ def test_fault_clears_run_and_reset_does_not_restart() -> None:
     assert hub.desired("d").run is False
 
 
-def test_fault_reset_clears_a_run_given_while_faulted() -> None:
+def test_run_given_while_faulted_is_refused_not_held() -> None:
     hub, _ = make_hub()
-    hub.update("d", status=DriveStatus.FAULTED)
-    hub.submit("d", Source.ZENOH, RUN)  # accepted as a level, but...
+    hub.update("d", status=DriveStatus.FAULTED, fault_code=70, fault_text="overcurrent")
+    with pytest.raises(CommandRejected, match=r"faulted 70 \(overcurrent\): reset the fault"):
+        hub.submit("d", Source.ZENOH, RUN)
+    assert hub.desired("d").run is False
     hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
-    assert hub.desired("d").run is False  # ... the reset needs a new run command after it
+    assert hub.desired("d").run is False  # the reset needs a new run command after it
 
 
 def test_run_and_reset_together_is_refused() -> None:

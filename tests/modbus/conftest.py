@@ -20,9 +20,10 @@ from gateway.model import DriveState
 from gateway.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import free_port
+from tests.support.timing import scaled
 
 FAKE = "tests.support.fake_adapter:FakeAdapter"
-TIMEOUT = 5.0
+TIMEOUT = scaled(20.0)
 INPUTS = 21  # registers in a drive's status block
 D1, D2, D4 = 1, 2, 4  # unit ids: d1 test drive, d2 MCD 600, d4 on line2 (d3 has none)
 
