@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import uuid
 from collections.abc import AsyncIterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -33,6 +34,7 @@ from adapters.mcd600.simparams import AUTO_RESET_ACTION, AUTO_RESET_DELAY, AutoR
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.weg.sim import WegSim
+from gateway.cli import main
 from gateway.model import DriveState, DriveStatus
 from tests.e2e.harness import (
     PREFIX,
@@ -323,3 +325,33 @@ async def test_a_fault_cleared_at_the_drive_never_restarts_it(gateway: Gateway, 
         await never_restarts(gateway, drive, how)
 
     await for_each(DRIVES, lambda d: f"{d.id} ({d.via.value}, {how.value})", check)
+
+
+async def cli(argv: list[str]) -> int:
+    """The command line (blocking Zenoh calls) on a thread of its own, joined after."""
+    with ThreadPoolExecutor(1) as pool:
+        return await asyncio.get_running_loop().run_in_executor(pool, main, argv)
+
+
+async def test_the_cli_cmd_prints_the_refusal_reason(
+    gateway: Gateway, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``drive-gateway cmd`` against the daemon: a run while faulted prints the hub's reason
+    on stderr and exits 1; once the fault is cleared at the drive, a run is accepted (exit 0)."""
+    cfw320 = next(d for d in DRIVES if d.id == "cfw320")
+    sim = Sim(gateway, cfw320)
+    sim.inject_fault()
+    await gateway.wait_for(cfw320.id, lambda s: s.faulted)
+    (endpoint,) = gateway.daemon.config.zenoh.listen
+    argv = ["cmd", "--connect", endpoint, "--prefix", PREFIX, cfw320.id, "run"]
+    assert await cli([*argv, "--speed-pct", "50"]) == 1
+    out = capsys.readouterr()
+    assert out.out == "" and out.err.startswith(f"{cfw320.id}: refused: drive {cfw320.id} is")
+    assert "faulted" in out.err, out.err  # the hub's own reason, as it answered
+    assert not gateway.daemon.hub.desired(cfw320.id).run
+
+    sim.clear(Clear.KEYPAD)
+    await gateway.wait_for(cfw320.id, lambda s: s.online and not s.faulted)
+    assert await cli([*argv, "--speed-pct", "50"]) == 0
+    assert capsys.readouterr().out.startswith(f"{cfw320.id}: accepted")
+    await gateway.wait_for(cfw320.id, lambda s: s.running)
