@@ -75,11 +75,15 @@ class Capabilities:
     ``unsupported``: command field -> the reason it is refused for this drive.
     ``alarm_texts``: alarm code -> the device's own text, for the alarm events (a code
     missing here is shown as its number only).
+    ``reverse_refused``: None when the drive can turn in reverse; else the reason a
+    command asking for reverse (a negative ``speed_rpm`` or ``speed_pct``, or
+    ``direction`` reverse) is refused.
     """
 
     speed_scale: SpeedScale | None = None
     unsupported: Mapping[str, str] = field(default_factory=dict)
     alarm_texts: Mapping[int, str] = field(default_factory=dict)
+    reverse_refused: str | None = None
 
 
 class HubPort(Protocol):

@@ -73,6 +73,13 @@ class AdapterError(GatewayError):
     """A fieldbus adapter failed (port missing, bus down)."""
 
 
+class LineHeld(AdapterError):
+    """Another master already holds the line (safety rule 3, one master per line): a
+    serial port locked by another process, the scanner's DeviceNet MAC ID answered by
+    another device. The text names the line, the holder where it can be known, and what
+    to do. The gateway never becomes a second master: it refuses to start on it."""
+
+
 class DriveOffline(GatewayError):
     """The drive is not online, so the request cannot be served."""
 

@@ -49,6 +49,7 @@ from gateway.model import (
     CommState,
     ControlMode,
     DesiredCommand,
+    Direction,
     DriveCommand,
     DriveState,
     DriveStatus,
@@ -424,6 +425,14 @@ class Hub:
             value = getattr(cmd, name, None)
             if value not in (None, False):
                 raise CommandRejected(reason)
+        no_reverse = drv.caps.reverse_refused
+        if no_reverse is not None:
+            if cmd.direction is Direction.REVERSE:
+                raise CommandRejected(f"direction reverse: {no_reverse}")
+            for name in ("speed_rpm", "speed_pct"):
+                value = getattr(cmd, name)
+                if value is not None and value < 0:
+                    raise CommandRejected(f"{name} {value:g} asks for reverse: {no_reverse}")
         scale = drv.caps.speed_scale
         if cmd.has_speed and scale is None:
             raise CommandRejected(f"{drv.state.device.value} has no speed reference")

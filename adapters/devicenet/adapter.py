@@ -1,8 +1,9 @@
 """The DeviceNet adapter: python-can link + scanner engine + CFW-08 profile, as a DriveAdapter.
 
 Per drive, once the scanner has it online (allocated, identity and sizes checked, EPR
-set), the adapter configures it through explicit messages: P710 must select the
-configured assembly pair (seed 4.1.8), P313 is read (the drive's own reaction to a
+set), the adapter configures it through explicit messages: the I/O connection's paths
+must name the configured assembly pair (seed tables 13-14; P710 counts only after a
+reset, seed 4.1.8), P313 is read (the drive's own reaction to a
 communication error, seed 4.1.3), the maximum speed is read if the config asks, and
 ``startup_params`` are written and read back. Until that succeeds the scanner sends
 idle (zero-length) I/O and the drive stays ``connecting``: it never runs half-set.
@@ -19,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
     ASSEMBLY_SIZE,
     P070_COMM_ERROR,
@@ -73,6 +75,7 @@ from adapters.devicenet.scanner import (
     FrameIn,
     IdentityCheck,
     InputData,
+    IoKind,
     LineFault,
     LineOnline,
     NodeConfig,
@@ -95,6 +98,7 @@ from gateway.errors import (
     DriveOffline,
     FrameEncodeError,
     GatewayTimeout,
+    LineHeld,
     ParameterError,
 )
 from gateway.model import CommState, Device
@@ -138,6 +142,7 @@ class _Drive:
     reset_sent_at: float | None = None
     p313: int | None = None
     problem: str | None = None
+    in_force: str | None = None  # the assembly pair the I/O connection's paths name
     io_values: dict[str, int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
     bad_inputs: int = 0
@@ -196,6 +201,8 @@ class DeviceNetAdapter:
         self._hub: HubPort | None = None
         self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self.claimed = asyncio.Event()
+        """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
             LineOnline: self._on_line_online,
             LineFault: self._on_line_fault,
@@ -252,6 +259,7 @@ class DeviceNetAdapter:
                 SimNodeConfig(
                     mac=d.mac,
                     p710=s.p710 if s.p710 is not None else o.assembly.p710,
+                    p710_stored=s.p710_stored,
                     p313=s.p313,
                     max_rpm=s.max_rpm or o.max_rpm or SIM_DEFAULT_MAX_RPM,
                     ramp_time=s.ramp_time,
@@ -379,14 +387,22 @@ class DeviceNetAdapter:
 
     def _on_line_online(self, now: float, action: LineOnline) -> None:
         log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
+        self.claimed.set()
         for d in self.drives.values():
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
     def _on_line_fault(self, now: float, action: LineFault) -> None:
+        """The scanner's MAC ID is answered on the line: another master is there (fact
+        sheet 2.3: a device failing its check stays off the line). Nothing but the two
+        check requests went out; the gateway does not start on this line."""
         hub = self._hub_port()
         for d in self.drives.values():
             hub.event(d.id, EventKind.BUS, action.text)
-        raise AdapterError(action.text)
+        o = self.options
+        raise LineHeld(
+            f"DeviceNet {o.interface} channel {o.channel}: {action.text}; another master is "
+            "on this line: stop it (one master per line)"
+        )
 
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]
@@ -491,6 +507,8 @@ class DeviceNetAdapter:
                 return
             except NotConfigured as exc:
                 problem = str(exc)
+                if problem != d.problem:  # the drive's own setup is wrong: a warning
+                    log.warning("DeviceNet %s: drive %s not configured: %s", self.name, d.id, exc)
             except (GatewayTimeout, DriveOffline) as exc:
                 problem = f"no answer while configuring: {exc}"
             if problem != d.problem:
@@ -504,13 +522,7 @@ class DeviceNetAdapter:
             pause = min(2 * pause, self.options.retry_max)
 
     async def _try_configure(self, d: _Drive) -> None:
-        p710 = await self._checked_read(d, P710)
-        pair = AssemblyPair.from_p710(p710)
-        if pair is not d.opts.assembly:
-            shown = pair.label if pair is not None else "none"
-            raise NotConfigured(
-                f"P710 = {p710} selects assembly {shown}, the config says {d.opts.assembly.label}"
-            )
+        await self._check_assembly(d)
         d.p313 = await self._checked_read(d, P313)
         d.params["P313"] = d.p313
         if d.opts.max_rpm_param is not None:
@@ -542,6 +554,59 @@ class DeviceNetAdapter:
         d.status = asyncio.get_running_loop().create_task(
             self._watch_status(d), name=f"devicenet-status-{d.id}"
         )
+
+    async def _check_assembly(self, d: _Drive) -> None:
+        """The assembly pair in force must be the configured one, or no I/O.
+
+        P710 is only what the drive will use after its next reset (seed 4.1.8 note), so
+        the pair in force is read from the I/O connection itself: its produced and
+        consumed connection paths (Connection 05h, seed tables 13-14). A P710 that
+        differs while the pair in force is right is reported: the drive runs correctly
+        until its next reset, and is refused then.
+        """
+        want = d.opts.assembly
+        instance = _IO_INSTANCE[d.opts.connection]
+        produced = await self._path_assembly(d, instance, objects.ConnectionAttribute.PRODUCED_PATH)
+        consumed = await self._path_assembly(d, instance, objects.ConnectionAttribute.CONSUMED_PATH)
+        p710 = await self._checked_read(d, P710)
+        d.params["P710"] = p710
+        stored = AssemblyPair.from_p710(p710)
+        in_force = f"{consumed}/{produced}"
+        d.in_force = in_force
+        if (consumed, produced) != (want.output_instance, want.input_instance):
+            raise NotConfigured(_assembly_problem(want, in_force, instance, p710, stored))
+        if stored is not want:
+            shown = stored.label if stored is not None else "none"
+            self._hub_port().event(
+                d.id,
+                EventKind.CONFIG,
+                f"P710 = {p710} selects assembly {shown}, the config says {want.label}: "
+                f"{want.label} is in force until the drive's next reset, then the drive "
+                "will not be brought online (seed 4.1.8)",
+                P710=p710,
+            )
+
+    async def _path_assembly(self, d: _Drive, instance: int, attribute: int) -> int:
+        """The Assembly instance a connection path of the I/O connection names; a path
+        that names none (or cannot be read) leaves the pair in force unknown: refused."""
+        where = f"Connection 05h instance {instance} attribute {attribute}"
+        body = GetAttributeSingle(CipClass.CONNECTION, instance, attribute)
+        try:
+            data = _success(await self._request(d, body))
+        except ParameterError as exc:
+            raise NotConfigured(
+                f"reading the assembly in force ({where}) refused: {exc.text}"
+            ) from None
+        try:
+            assembly = objects.decode_path(data).assembly
+        except DeviceNetDecodeError:
+            assembly = None
+        if assembly is None:
+            shown = data.hex(" ") or "empty"
+            raise NotConfigured(
+                f"the assembly in force is unknown: {where} names no assembly ({shown})"
+            )
+        return assembly
 
     async def _check_baud_rate(self, d: _Drive) -> None:
         """P702 against the line's expected rate (seed 4.1.6; effective after a reset).
@@ -723,6 +788,7 @@ class DeviceNetAdapter:
             entry: dict[str, Any] = {
                 "mac": d.mac,
                 "assembly": d.opts.assembly.label,
+                "assembly_in_force": d.in_force,
                 "connection": d.opts.connection.value,
                 "configured": d.configured,
                 "problem": d.problem,
@@ -747,6 +813,29 @@ def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
         weg_speed_scale=opts.weg_speed_scale,
         at_reference_rpm=opts.at_reference_rpm,
     )
+
+
+_IO_INSTANCE: dict[IoKind, int] = {
+    IoKind.POLLED: objects.ConnectionInstance.POLL,  # seed table 13
+    IoKind.COS: objects.ConnectionInstance.COS_CYCLIC,  # seed table 14
+    IoKind.CYCLIC: objects.ConnectionInstance.COS_CYCLIC,
+}
+
+
+def _assembly_problem(
+    want: AssemblyPair, in_force: str, instance: int, p710: int, stored: AssemblyPair | None
+) -> str:
+    text = (
+        f"the drive's I/O uses assembly {in_force} (Connection 05h instance {instance} "
+        f"paths), the config says {want.label}"
+    )
+    if stored is want:
+        return (
+            f"{text}; P710 = {p710} selects {want.label} but takes effect only after a "
+            "reset of the drive (seed 4.1.8): reset or power-cycle it"
+        )
+    shown = stored.label if stored is not None else "none"
+    return f"{text}; P710 = {p710} selects assembly {shown}"
 
 
 def _event(event: LinkEvent) -> Event:

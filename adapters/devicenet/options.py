@@ -5,7 +5,7 @@ response_timeout, explicit_timeout, dupmac_timeout, retry_max, status_interval,
 simulate. Drive keys: assembly, connection, ack, check_identity, vendor_id,
 product_code, product_name, max_rpm, max_rpm_param, weg_speed_scale,
 at_reference_rpm, startup_params, and the simulator's sim_p313, sim_p710,
-sim_ramp_time, sim_max_rpm. See docs/devices.md.
+sim_p710_stored, sim_ramp_time, sim_max_rpm. See docs/devices.md.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ class BusOptions:
 class SimOptions:
     p313: int = 2
     p710: int | None = None  # default: the one matching ``assembly``
+    p710_stored: int | None = None  # P710 changed but not yet applied by a reset
     ramp_time: float = 2.0
     max_rpm: float | None = None  # default: the drive's max_rpm, else 1800
 
@@ -125,6 +126,7 @@ def _sim(t: Table) -> SimOptions:
     return SimOptions(
         p313=t.integer("sim_p313", d.p313, minimum=0, maximum=3),
         p710=t.integer("sim_p710", d.p710, minimum=0, maximum=2),
+        p710_stored=t.integer("sim_p710_stored", d.p710_stored, minimum=0, maximum=2),
         ramp_time=t.number("sim_ramp_time", d.ramp_time, minimum=0.1, maximum=999.0),
         max_rpm=t.number("sim_max_rpm", d.max_rpm, minimum=1.0, maximum=SPEED_REF_MAX_RPM),
     )

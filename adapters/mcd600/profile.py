@@ -136,6 +136,8 @@ class Mcd600Profile:
         coast = desired.coast_stop or desired.quick_stop  # 4.2 t2 byte 0 bit 4: quick stop
         if not desired.run:
             self._run_armed = True
+        elif coast:
+            self._run_armed = False  # rule 1: a run asked before the stop never restarts
         # 4.2 note: byte 0 bit 4 must be 0 for a start; never start and reset together.
         start = desired.run and self._run_armed and not coast and not reset
         self._start_sent = start

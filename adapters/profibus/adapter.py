@@ -17,9 +17,12 @@ device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive
 * leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
 
 The port disappearing never crashes the gateway: drives go offline and the port is
-reopened with back-off. On cancellation the master sends Global_Control Clear to every
-slave and closes the port. With ``simulate = true`` the adapter makes a pty pair and runs
-its drives' simulated devices on the other end, in-process.
+reopened with back-off. One master per line: a port another process holds when the
+adapter first opens it ends the run with :class:`PortHeld` (the daemon does not start);
+held when it comes back after a loss, it is retried like a missing one, the holder named.
+On cancellation the master sends Global_Control Clear to every slave and closes the port.
+With ``simulate = true`` the adapter makes a pty pair and runs its drives' simulated
+devices on the other end, in-process.
 """
 
 from __future__ import annotations
@@ -57,6 +60,7 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
+from .portlock import PortHeld
 from .profile import PROFILES, DpProfile, RecordAccessError, SlaveSetup
 
 if TYPE_CHECKING:
@@ -88,6 +92,7 @@ DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "parameter": EventKind.PARAMETER,
     "info": EventKind.BUS,
     "config": EventKind.CONFIG,
+    "safety": EventKind.SAFETY,
 }
 
 
@@ -196,6 +201,9 @@ class ProfibusAdapter:
         self._port_state = "closed"
         self._port_error: str | None = None
         self._reopens = 0
+        self._link_opens = 0  # PortHeld before the first: refuse to start (one master per line)
+        self.claimed = asyncio.Event()
+        """Set once the port's first open was not refused as held (the daemon's READY)."""
         self._control_timer: asyncio.TimerHandle | None = None
         self.sim: SimPort | None = None
         self.sim_line: SimLine | None = None  # the simulated slaves (simulate = true)
@@ -240,11 +248,21 @@ class ProfibusAdapter:
                     on_error,
                     rs485=self.options.rs485,
                 )
+            except PortHeld as exc:
+                if self._link_opens == 0:
+                    raise  # at start: refuse to be a second master (the daemon stops)
+                self._port_down(str(exc))  # taken while ours was gone: wait for it
+                await asyncio.sleep(pause)
+                pause = min(2 * pause, REOPEN_BACKOFF[1])
+                continue
             except OPEN_ERRORS as exc:
+                self.claimed.set()  # not held by another master: missing, or refused
                 self._port_down(f"cannot open {self._port}: {exc}")
                 await asyncio.sleep(pause)
                 pause = min(2 * pause, REOPEN_BACKOFF[1])
                 continue
+            self._link_opens += 1
+            self.claimed.set()
             pause = REOPEN_BACKOFF[0]
             self._attach(link)
             lost = await failed

@@ -1,7 +1,8 @@
 """Command-line tools of the Profibus line (the only printing in this package).
 
 * ``drive-gateway profibus scan --port PORT [--baud B] [--from A --to B] [--rs485 MODE]``:
-  the live list, one FDL status request per address (fact sheet 1.2, 1.3).
+  the live list, one FDL status request per address (fact sheet 1.2, 1.3). A port another
+  process holds (a running gateway) is refused before anything is sent: one master per line.
 * ``drive-gateway sim profibus --port PORT --slaves SPEC...``: simulated slaves on a serial
   port (or ``--port pty``: a new pty pair, its path printed for the master), until Ctrl-C.
   SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: cfw11, cfw700, cfw320, mcd600, echo;
@@ -26,6 +27,7 @@ from .driver import LineDriver
 from .fdl import MAX_STATION, StationType
 from .link import OPEN_ERRORS, Rs485, open_link
 from .options import ProfibusDriveOptions
+from .portlock import PortHeld
 from .scan import Scanner
 from .timing import BAUD_RATES, BusParams
 
@@ -163,6 +165,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     addresses = range(args.first, args.last + 1)
     try:
         found = asyncio.run(scan(args.port, bus, addresses, args.rs485))
+    except PortHeld as exc:  # a gateway (or another tool) is master there: nothing was sent
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except OPEN_ERRORS as exc:
         print(f"error: {args.port}: {exc}", file=sys.stderr)
         return 1
@@ -322,6 +327,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     try:
         asyncio.run(main())
+    except PortHeld as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except OPEN_ERRORS as exc:
         print(f"error: {args.port}: {exc}", file=sys.stderr)
         return 1

@@ -12,6 +12,11 @@ and their arrival time to ``on_data``, writes without blocking (a short write wa
 ``on_error``. A port without a file descriptor (rfc2217, whose pyserial class reads in a
 thread of its own) is polled every :data:`POLL_INTERVAL` instead.
 
+One master per line: a local port is held exclusively (:class:`ExclusiveSerial`: an
+advisory flock taken before any setting changes, then ``TIOCEXCL``; :mod:`.portlock`
+says why both). A port another process holds is refused with :class:`PortHeld`, naming the
+holder where ``/proc`` shows it, before anything is sent or set.
+
 RS-485 direction control: a converter with automatic direction control (most USB ones)
 needs nothing; a UART wired to a transceiver needs the kernel's RS-485 mode, RTS driving the
 transmitter (``TIOCSRS485``). :class:`Rs485` says what to do: ``auto`` (the default) asks
@@ -43,6 +48,8 @@ from typing import Any, Final, TypeVar
 
 import serial
 import serial.rs485
+
+from .portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +90,27 @@ def is_pty(port: str) -> bool:
     return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in PTY_MAJORS
 
 
+class ExclusiveSerial(serial.Serial):  # type: ignore[misc]  # pyserial has no types
+    """A local port held exclusively while open (module docstring, :mod:`.portlock`)."""
+
+    def __init__(self) -> None:
+        super().__init__(exclusive=True)  # pyserial flocks before it sets anything
+
+    def open(self) -> None:
+        try:
+            super().open()
+        except serial.SerialException as exc:
+            if not held(exc):
+                raise
+            raise PortHeld(str(self.port), find_holder(str(self.port))) from None
+        set_exclusive(self.fd)
+
+    def close(self) -> None:
+        if self.is_open and self.fd is not None:
+            clear_exclusive(self.fd)
+        super().close()
+
+
 def _configure(ser: Any, baudrate: int) -> None:
     ser.baudrate = baudrate
     ser.bytesize = serial.EIGHTBITS
@@ -97,14 +125,15 @@ def _configure(ser: Any, baudrate: int) -> None:
 
 def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
     """An open pyserial port set to 8E1 at ``baudrate``, RS-485 as ``rs485`` says (a pty
-    keeps what it can).
+    keeps what it can), held exclusively (a local port); :class:`PortHeld` if another
+    process holds it.
 
     Blocks for a URL port (see the module docstring): call :func:`open_link` from a loop.
     """
     if is_url(port):
         ser = serial.serial_for_url(port, do_not_open=True)
     else:
-        ser = serial.Serial()
+        ser = ExclusiveSerial()
         ser.port = port
     _configure(ser, baudrate)
     try:

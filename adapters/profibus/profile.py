@@ -69,7 +69,7 @@ class DiagEvent:
     """Something a profile read from the slave's extended diagnosis, worth an event."""
 
     text: str
-    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info"
+    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info", "config", "safety"
     data: Mapping[str, Any] = field(default_factory=dict)
 
 

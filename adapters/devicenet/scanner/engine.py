@@ -463,6 +463,11 @@ class Scanner:
 
     def _on_own_mac_claimed(self, check: DupMacCheck) -> None:
         who = f"vendor 0x{check.vendor_id:04X} serial {check.serial_number}"
+        if (check.vendor_id, check.serial_number) == (
+            self.config.vendor_id,
+            self.config.serial_number,
+        ):
+            who += ", this scanner's own identity: another instance of this gateway"
         if self.phase in (LinePhase.START, LinePhase.CHECK_1, LinePhase.CHECK_2):
             self.phase = LinePhase.MAC_TAKEN
             text = (

@@ -4,7 +4,8 @@
 (fact sheet 2.3) and answers to others', Allocate/Release with the reference slaves'
 error answers (2.5), the explicit services (:mod:`adapters.devicenet.sim.objects`)
 with fragmentation both ways (2.8), polled and change-of-state/cyclic I/O with the
-P710 assembly pair (seed 3, 4.1.8), inactivity at 4 x EPR (2.9) with the P313 action
+P710 assembly pair in force since the last reset (seed 3, 4.1.8), shown in the I/O
+connections' paths (seed tables 13-14), inactivity at 4 x EPR (2.9) with the P313 action
 (seed 4.1.3), and a fault reset that takes the node offline for a moment (seed 3.4).
 """
 
@@ -47,9 +48,14 @@ from adapters.devicenet.ids import (
     match_predefined,
     predefined_can_id,
 )
-from adapters.devicenet.objects import NO_MASTER, AllocationChoice, ConnectionInstance
+from adapters.devicenet.objects import (
+    NO_MASTER,
+    AllocationChoice,
+    ConnectionInstance,
+    assembly_path,
+)
 from adapters.devicenet.sim import objects
-from adapters.devicenet.sim.connection import IoTrigger, SimConnection, assembly_path
+from adapters.devicenet.sim.connection import IoTrigger, SimConnection
 from adapters.devicenet.sim.drive import E37_TIMEOUT, SimDrive, SimDriveConfig
 from adapters.devicenet.sim.objects import Identity
 from gateway.sim import FaultInjector
@@ -75,6 +81,7 @@ class SimPhase(Enum):
 class SimNodeConfig:
     mac: int
     p710: int = 1
+    p710_stored: int | None = None  # P710 changed but not applied (SimDriveConfig)
     p313: int = 2
     max_rpm: float = 1800.0
     ramp_time: float = 2.0
@@ -138,6 +145,7 @@ class Cfw08Node:
             SimDriveConfig(
                 mac=config.mac,
                 p710=config.p710,
+                p710_stored=config.p710_stored,
                 p313=config.p313,
                 max_rpm=config.max_rpm,
                 ramp_time=config.ramp_time,

@@ -144,6 +144,10 @@ class WegProfile:
         self._alarm = False
         self._polled_fault: int | None = None
         self._polled_alarm: int | None = None
+        self.control_type: int | None = None  # P0202 as read at connect (CFW-11, CFW700)
+        self._reported_type: int | None = None  # the last P0202 taken
+        self._event: EventSink | None = None
+        self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
 
     # ------------------------------------------------------------------ setup
 
@@ -192,7 +196,50 @@ class WegProfile:
         if self.options.verify_mapping:
             await self._verify_programming(channel)
         await self._read_ratings(channel)
-        return {"speed_base": None if self.base is None else self.base.label}
+        self._event = event
+        if self.spec.reads_control_type:
+            self._set_control_type(await self.params.read(channel, 202))
+        changes: dict[str, Any] = {"speed_base": None if self.base is None else self.base.label}
+        if self.control_type is not None:
+            changes["values"] = self._own_values()
+        return changes
+
+    # ------------------------------------------------------------------ P0202
+
+    @property
+    def quick_stop_as_ramp(self) -> bool:
+        """True when a quick stop is sent as a ramp stop (P0202 V/f or VVW, see spec)."""
+        ct = self.control_type
+        return ct is not None and self.spec.quick_stop_as_ramp(ct)
+
+    def _set_control_type(self, raw: int) -> None:
+        """Take P0202 (read at connect or written): says once when quick stop falls back."""
+        before = self._reported_type is not None and self.spec.quick_stop_as_ramp(
+            self._reported_type
+        )
+        self.control_type = self._reported_type = raw
+        what = self.spec.control_type_text(raw)
+        if self.quick_stop_as_ramp == before:
+            log.debug("%s: %s", self.drive.id, what)
+            return
+        if self.quick_stop_as_ramp:
+            text = f"quick stop falls back to ramp stop: {what}"
+        else:
+            text = f"quick stop is the drive's quick stop again: {what}"
+        log.warning("%s: %s", self.drive.id, text)
+        if self._event is not None:
+            self._event(
+                text, "safety", control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp
+            )
+
+    def _own_values(self) -> dict[str, float | int]:
+        """The profile's entries of ``DriveState.values`` (docs/devices.md)."""
+        if self.control_type is None:
+            return {}
+        return {
+            self.spec.pname(202): self.control_type,
+            "quick_stop_as_ramp": int(self.quick_stop_as_ramp),
+        }
 
     async def _startup_param(
         self, channel: RecordChannel, event: EventSink, number: int, value: int
@@ -342,20 +389,40 @@ class WegProfile:
         Run = run/stop + general enable + remote; coast stop drops general enable; quick
         stop is bit 6 where the model has it. Bit 2 = 1 for forward and 0 for reverse, so
         the sign of the speed (normally positive) keeps the manual's meaning.
+
+        Quick stop and coast stop clear run (bit 0) and JOG (bit 3): a drive that does not
+        execute bit 6 (CFW700 "not allowed" in V/f or VVW) still ramps down, and the
+        release of either stop never restarts the motor. With P0202 V/f or VVW bit 6 is
+        not sent: the quick stop is a ramp stop (docs/devices.md).
         """
         forward = d.direction is Direction.FORWARD
         reference = self._reference(d)
+        run, jog = self._run_jog(d)
         control = w.ManufacturerControl(
-            run=d.run,
+            run=run,
             general_enable=not d.coast_stop,
             forward=forward,
-            jog=d.jog,
+            jog=jog,
             remote=d.remote,
-            quick_stop=d.quick_stop and self.spec.quick_stop,
+            quick_stop=d.quick_stop and self.spec.quick_stop and not self.quick_stop_as_ramp,
             fault_reset=reset,
         )
-        self._sent = _Sent(d.run or d.jog, forward, reference, d.remote)
+        self._sent = _Sent(run or jog, forward, reference, d.remote)
         return control.encode(self.spec.control_bits), reference
+
+    def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
+        """Run and JOG as sent: off with a quick or coast stop, and after its release until
+        the desired command has had run and JOG off (safety rule 1: the release of a stop
+        never restarts the motor on a run that was asked before it). A stop whose desired
+        command has run and JOG off (the hub clears them) holds nothing: the next run is new.
+        """
+        if d.quick_stop or d.coast_stop:
+            self._stop_held = d.run or d.jog
+        elif not d.run and not d.jog:
+            self._stop_held = False
+        if self._stop_held:
+            return False, False
+        return d.run, d.jog
 
     def _profidrive_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
         """STW1 (P0967, Table 3.8 / 4.7) walking the switching-on states, and NSOLL.
@@ -364,9 +431,14 @@ class WegProfile:
         with enable operation, ramp and setpoint (switched on, then operation). A fault is
         acknowledged with one bit-7 pulse and ON = 0. Reverse is a negative reference
         (P0967 note). Reserved bits 5 and 9 are sent as 0.
+
+        Quick stop (bit 2 = 0, OFF3) and coast stop (bit 1 = 0, OFF2) go with ON = 0 and
+        JOG = 0, so their release never switches the drive back on. With P0202 V/f or VVW
+        (bit 2 note: not recommended) a quick stop is OFF1: ON = 0 with bit 2 = 1.
         """
         state = w.ProfidriveState.SWITCHING_ON_INHIBITED if self._zsw is None else self._zsw.state
-        want = (d.run or d.jog) and not d.coast_stop and not d.quick_stop
+        run, jog = self._run_jog(d)
+        want = run or jog
         walkable = state in (
             w.ProfidriveState.READY_TO_SWITCH_ON,
             w.ProfidriveState.SWITCHED_ON,
@@ -379,12 +451,12 @@ class WegProfile:
         control = w.ProfidriveControl(
             on=on,
             no_coast_stop=not d.coast_stop,
-            no_quick_stop=not d.quick_stop,
+            no_quick_stop=not (d.quick_stop and not self.quick_stop_as_ramp),
             enable_operation=True,
             enable_ramp=True,
             enable_setpoint=True,
             fault_ack=reset,
-            jog=d.jog and on,
+            jog=jog and on,
             control_by_plc=d.remote,
         )
         self._sent = _Sent(on, True, reference, d.remote)
@@ -410,6 +482,7 @@ class WegProfile:
             if param:
                 self._mapped_word(param, word, changes, mapped)
         self._resolve_codes(changes, mapped)
+        mapped.values.update(self._own_values())
         if mapped.values:
             changes["values"] = dict(mapped.values)
         return changes
@@ -662,6 +735,8 @@ class WegProfile:
             "rated_current_a": self.options.rated_current_a,
             "rated_power_kw": self.options.rated_power_kw,
         }
+        if number == 202 and self.spec.reads_control_type:
+            self._set_control_type(raw)
         if name is None or configured[name] is not None or self.base is None:
             return
         value = float(scaled(number, raw))

@@ -647,7 +647,7 @@ class WegSim:
         remote = self._remote()
         run_src, _, _, jog_src = self._sources(remote)
         network = run_src == sp.SRC_RUN_NET
-        quick = network and self.net.quick_stop and self.spec.quick_stop
+        quick = network and self.net.quick_stop and self._executes_quick_stop()
         jog = jog_src == sp.SRC_JOG_NET and self.net.jog
         if not self._general_enabled(remote):
             m.coast()
@@ -664,6 +664,21 @@ class WegSim:
             m.command(True, 0.0)  # ramp down, then the output goes off
         else:
             m.command(False, 0.0)
+
+    def _executes_quick_stop(self) -> bool:
+        """P0684 bit 6 acts: the model has it and, on the CFW700, P0202 is a vector type.
+
+        CFW700 P0684 bit 6: "This function is not allowed with control types (P0202) V/f
+        or VVW": the simulated CFW700 ignores the bit there (the motor keeps the run/stop
+        bit's command). The CFW-11 manual only advises against it: it executes it. The
+        PROFIdrive OFF3 (P0967 bit 2, "not recommended" on both) is always executed.
+        """
+        if not self.spec.quick_stop:
+            return False
+        if self.data_profile is DataProfile.PROFIDRIVE:
+            return True
+        ramp_only = self.spec.quick_stop_as_ramp(self.values.get(202, 0))
+        return not (self.spec.quick_stop_ignored_ramp_only and ramp_only)
 
     def _second_ramp(self) -> bool:
         source = self.values[105]

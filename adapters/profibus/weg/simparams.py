@@ -18,6 +18,8 @@ from typing import Final
 
 from gateway.model import Device
 
+from .spec import CFW11_CONTROL_TYPES, CFW700_CONTROL_TYPES, DEFAULT_CONTROL_TYPE
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -120,6 +122,7 @@ def _motor_and_ramps() -> list[ParamSpec]:
 
 def _cfw11_like(device: Device) -> list[ParamSpec]:
     cfw11 = device is Device.CFW11
+    control_types = CFW11_CONTROL_TYPES if cfw11 else CFW700_CONTROL_TYPES
     specs = [
         ro(2),  # motor speed (4.2.5 example)
         ro(3),  # motor current (P0742 description)
@@ -128,7 +131,9 @@ def _cfw11_like(device: Device) -> list[ParamSpec]:
         ro(48),  # present alarm (Table 3.2 bit 7)
         ro(49),  # present fault (Table 3.2 bit 15)
         *_motor_and_ramps(),
-        rw(202, 0, 0, 6, cfg=True),  # control type (P0684 bit 6 note)
+        # control type (P0684 bit 6 note), the WEG programming manuals' codes (spec.py):
+        # the simulator starts in sensorless vector (docs/devices.md)
+        rw(202, DEFAULT_CONTROL_TYPE, 0, max(control_types), cfg=True),
         *_sources(),
         rw(313, 0, 0, 5, cfg=True),  # Table 3.3.1 / 4.1: default 0, CFG
         rw(404, 55, 0, 9999, cfg=True),  # motor rated power, 5.5 kW (our reading)

@@ -8,7 +8,7 @@ own (the CFW-11's translated from Portuguese where the CFW700 manual has no Engl
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
 from typing import Final
@@ -129,6 +129,25 @@ CFW320_ALARMS: Final[Mapping[int, str]] = MappingProxyType(
 )
 
 
+# P0202 "Type of control". The seeds name P0202 and its V/f and VVW types (CFW700 P0684
+# bit 6 note, CFW-11 P0684 bit 6 "Obs.", P0967 bit 2 notes) but not its value table: the
+# codes are those of the WEG programming manuals of the CFW-11 and CFW700 (docs/devices.md).
+_CONTROL_TYPES: Final = {
+    0: "V/f 60 Hz",
+    1: "V/f 50 Hz",
+    2: "V/f adjustable",
+    3: "sensorless vector",
+    4: "vector with encoder",
+    5: "VVW",
+}
+CFW11_CONTROL_TYPES: Final[Mapping[int, str]] = MappingProxyType(
+    {**_CONTROL_TYPES, 6: "PM vector with encoder", 7: "PM sensorless vector"}
+)
+CFW700_CONTROL_TYPES: Final[Mapping[int, str]] = MappingProxyType(dict(_CONTROL_TYPES))
+VECTOR_CONTROL_TYPES: Final[frozenset[int]] = frozenset({3, 4, 6, 7})
+DEFAULT_CONTROL_TYPE: Final = 3  # the simulators' P0202: sensorless vector
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """One model's Profibus DP facts."""
@@ -155,6 +174,26 @@ class ModelSpec:
     comm_action_default: int  # P0313 factory setting: 0 (CFW-11, CFW700), 1 (CFW320)
     interface_fault: int | None  # CFW-11/CFW700 A140/F240; CFW320 F032 (always a fault)
     default_ident: int  # placeholder: the GSD file's Ident_Number is not in the seeds
+    control_types: Mapping[int, str] = field(default_factory=dict)  # P0202 (none: not read)
+    quick_stop_ignored_ramp_only: bool = False  # the drive ignores bit 6 in V/f or VVW
+
+    @property
+    def reads_control_type(self) -> bool:
+        """True for the models whose quick stop depends on P0202 (CFW-11, CFW700)."""
+        return bool(self.control_types)
+
+    def quick_stop_as_ramp(self, control_type: int) -> bool:
+        """True when P0202 = ``control_type`` is not a vector mode (V/f, VVW or unknown).
+
+        CFW700 P0684 bit 6: "not allowed with control types (P0202) V/f or VVW"; CFW-11
+        P0684 bit 6 and both P0967 bit 2: not recommended there. A value outside the table
+        is taken as not vector (the ramp stop is the stop every control type allows).
+        """
+        return control_type not in VECTOR_CONTROL_TYPES or control_type not in self.control_types
+
+    def control_type_text(self, control_type: int) -> str:
+        text = self.control_types.get(control_type, "unknown control type")
+        return f"{self.pname(202)} = {control_type} ({text})"
 
     def pname(self, number: int) -> str:
         """A parameter's name as the manual writes it (P0003, or P003 on the CFW320)."""
@@ -213,6 +252,7 @@ CFW11: Final = ModelSpec(
     comm_action_default=0,
     interface_fault=240,
     default_ident=0x0C11,
+    control_types=CFW11_CONTROL_TYPES,
 )
 
 CFW700: Final = ModelSpec(
@@ -238,6 +278,8 @@ CFW700: Final = ModelSpec(
     comm_action_default=0,
     interface_fault=240,
     default_ident=0x0C70,
+    control_types=CFW700_CONTROL_TYPES,
+    quick_stop_ignored_ramp_only=True,  # P0684 bit 6: "not allowed" (CFW-11: "not recommended")
 )
 
 CFW320: Final = ModelSpec(

@@ -184,7 +184,8 @@ async def test_configured_scales_are_not_read() -> None:
     options = WegOptions(sync_rpm=1800.0, max_rpm=1800.0, verify_mapping=False)
     loop = Loop(Device.CFW11, options)
     assert (await loop.connect())["speed_base"] == "8192 = 1800 rpm synchronous (configured)"
-    assert loop.channel.writes == []
+    # the one record: P0202 (type of control, for the quick stop), never a scale parameter
+    assert loop.channel.writes == [(0, 47, bytes.fromhex("01 01 00 01 10 01 00 ca 00 00"))]
 
 
 async def test_profidrive_scale_follows_a_write_of_p0134() -> None:

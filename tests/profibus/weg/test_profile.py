@@ -174,12 +174,14 @@ def test_reverse_is_bit_2_cleared_with_a_positive_reference() -> None:
 def test_stop_coast_quick_stop_local() -> None:
     p = profile(Device.CFW11, SYNC)
     assert out(p, run=False)[0] == 0x0016  # ramp stop keeps general enable
-    assert out(p, run=True, coast_stop=True)[0] == 0x0015  # coast: general enable off
-    assert out(p, run=True, quick_stop=True)[0] == 0x0057  # bit 6
+    # coast: general enable off, and run off (issue 17 item 4: test_quick_stop.py)
+    assert out(p, run=True, coast_stop=True)[0] == 0x0014
+    assert out(p, run=True, quick_stop=True)[0] == 0x0056  # bit 6 with run off
+    assert out(p, run=False)[0] == 0x0016  # run seen off after the stop: run allowed again
     assert out(p, run=True, remote=False)[0] == 0x0007  # bit 4 = 0: local
     assert out(p, jog=True)[0] == 0x001E
     c = profile(Device.CFW320, SYNC)
-    assert out(c, run=True, quick_stop=True)[0] == 0x0017  # CFW320: bit 6 reserved
+    assert out(c, run=True, quick_stop=True)[0] == 0x0016  # CFW320: bit 6 reserved
 
 
 def test_no_speed_scale_sends_zero_reference() -> None:
