@@ -1,15 +1,17 @@
 """Operator tools: Zenoh clients for any running gateway (``--connect ENDPOINT``).
 
 ``watch`` (live table of drives, ``--once`` for scripts), ``cmd`` (a command as a
-query; exit 0 only when accepted), ``param`` (read/write through the params
-queryable; device error text and exit 1 on refusal) and ``health``.
-The client session connects only to the given endpoint, listens on nothing and
-does no multicast scouting.
+query; exit 0 only when accepted, the gateway's reason and exit 1 when refused), ``param``
+(read/write through the params queryable; device error text and exit 1 on refusal) and
+``health``. The client session connects only to the given endpoint, listens on nothing and
+does no multicast scouting. Every query carries the session's source info (its Zenoh id and
+a sequence number), so the gateway can tell this client from the others.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
@@ -86,18 +88,45 @@ def _use_config_file(path: str) -> str:
     return path
 
 
+_SEQUENCE = itertools.count(1)
+
+
+def source_info(s: zenoh.Session, key: str) -> zenoh.SourceInfo:
+    """This session's identity for a put or a query on ``key``: the id of a publisher it
+    declares there (the session's Zenoh id and an entity id; ``EntityGlobalId`` has no
+    constructor) and the next sequence number."""
+    publisher = s.declare_publisher(key)
+    return zenoh.SourceInfo(publisher.id, next(_SEQUENCE))
+
+
 def query(endpoint: str, key: str, payload: Any | None = None) -> Any:
-    """One query, its first reply as JSON; raises RuntimeError when nothing answers."""
+    """One query, its first reply as JSON (an error reply as ``{"error": text}``); raises
+    RuntimeError when nothing answers."""
     with session(endpoint) as s:
-        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT}
+        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT, "source_info": source_info(s, key)}
         if payload is not None:
             kwargs["payload"] = json.dumps(payload)
         for reply in s.get(key, **kwargs):
             if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_string())
+                return _json_or_text(reply.ok.payload.to_string())
             if reply.err is not None:
-                return {"error": reply.err.payload.to_string()}
+                return _error_body(reply.err.payload.to_string())
     raise RuntimeError(f"no answer on {key} from {endpoint}")
+
+
+def _json_or_text(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except ValueError:
+        return {"error": f"not JSON: {text!r}"}
+
+
+def _error_body(text: str) -> dict[str, Any]:
+    """An error reply: the gateway's own ``{"error": ...}`` body, or its text as the error."""
+    body = _json_or_text(text)
+    if isinstance(body, dict) and "error" in body:
+        return body
+    return {"error": text}
 
 
 def _print_json(doc: Any, out: TextIO = sys.stdout) -> None:
@@ -156,11 +185,19 @@ def cmd_cmd(args: argparse.Namespace) -> int:
     except RuntimeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    if answer.get("accepted") is True:
+    if isinstance(answer, dict) and answer.get("accepted") is True:
         print(f"{args.drive}: accepted {json.dumps(command)}")
         return 0
-    print(f"{args.drive}: refused: {answer.get('error', answer)}", file=sys.stderr)
+    print(f"{args.drive}: refused: {refusal_reason(answer)}", file=sys.stderr)
     return 1
+
+
+def refusal_reason(answer: Any) -> str:
+    """The gateway's reason for a refused command (``{"accepted": false, "error": ...}`` or
+    an error reply), else the answer as it came."""
+    if isinstance(answer, dict) and isinstance(answer.get("error"), str):
+        return str(answer["error"])
+    return json.dumps(answer)
 
 
 # ------------------------------------------------------------------ param
