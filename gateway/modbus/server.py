@@ -311,8 +311,16 @@ class GatewayRequestHandler(ServerRequestHandler):
         if refusal is None:
             try:
                 used: int = TransactionManager.callback_data(self, data, addr)
-            except ModbusIOException:
+            except ModbusIOException as exc:
                 refusal = ExceptionCode.ILLEGAL_DATA_VALUE  # a served function, malformed PDU
+                log.debug(
+                    "Modbus client %s, unit %d, function %d: exception 3, the PDU does not"
+                    " decode (%s)",
+                    self.client,
+                    header.unit,
+                    function_code,
+                    exc,
+                )
             else:
                 pdu = self.last_pdu
                 self.last_pdu = None
