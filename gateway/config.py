@@ -4,7 +4,8 @@ Layout (see config/site.example.toml for every key)::
 
     [gateway]            name, log_level, shutdown_timeout, tick
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
-    [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections
+    [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
+                         idle_timeout
     [buses.<name>]       adapter = "profibus" | "devicenet" | "module:Class",
                          plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -63,6 +64,7 @@ class ModbusSection:
     gateway_unit: int = 0
     frame_timeout: float = 5.0  # s for the rest of a begun frame to arrive
     max_connections: int = 100  # clients connected at once
+    idle_timeout: float = 60.0  # s with no complete request before a connection is closed; 0: never
 
 
 @dataclass(frozen=True, slots=True)
@@ -200,6 +202,7 @@ def _modbus_section(t: Table) -> ModbusSection:
         gateway_unit=t.integer("gateway_unit", d.gateway_unit, minimum=0, maximum=255),
         frame_timeout=_frame_timeout(t, d.frame_timeout),
         max_connections=t.integer("max_connections", d.max_connections, minimum=1, maximum=1000),
+        idle_timeout=t.number("idle_timeout", d.idle_timeout, minimum=0.0, maximum=86400.0),
     )
     t.finish()
     return section

@@ -39,11 +39,16 @@ def config_text(
     modbus_enabled: bool = False,
     frame_timeout: float | None = None,
     max_connections: int | None = None,
+    idle_timeout: float | None = None,
 ) -> str:
     allow_list = ", ".join(f'"{a}"' for a in allow)
     limits = "".join(
         f"{key} = {value}\n"
-        for key, value in (("frame_timeout", frame_timeout), ("max_connections", max_connections))
+        for key, value in (
+            ("frame_timeout", frame_timeout),
+            ("max_connections", max_connections),
+            ("idle_timeout", idle_timeout),
+        )
         if value is not None
     )
     return f"""
