@@ -12,6 +12,10 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
+from tests.support import plugins
+
+plugins.register()  # the test adapters' entry points (tests/support/plugins.py)
+
 pytest_plugins = ["pytester"]  # tests/gateway/test_leak_guard.py runs the guard on itself
 
 THREAD_GRACE = 2.0  # seconds a thread the test started may take to finish after it

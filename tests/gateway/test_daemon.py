@@ -17,9 +17,10 @@ from gateway.daemon import Backoff, Daemon
 from gateway.model import CommState
 from gateway.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
+from tests.support.plugins import pythonpath
 
 ROOT = Path(__file__).resolve().parents[2]
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 
 
 def config_text(
@@ -72,7 +73,7 @@ def notify_socket(tmp_path: Path):
 
 def start_daemon(cfg: Path, notify: Path, **env_extra: str) -> subprocess.Popen[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("WATCHDOG_")}
-    env.update(NOTIFY_SOCKET=str(notify), PYTHONPATH=str(ROOT), **env_extra)
+    env.update(NOTIFY_SOCKET=str(notify), PYTHONPATH=pythonpath(), **env_extra)
     return subprocess.Popen(
         [sys.executable, "-m", "gateway", "run", "--config", str(cfg)],
         env=env,
