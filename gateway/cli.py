@@ -49,12 +49,36 @@ def _print_config_errors(exc: ConfigErrors | ConfigError) -> None:
         print(f"error: {err}", file=sys.stderr)
 
 
-def _load_or_report(path: str | Path) -> Config | None:
+def front_end_problems(config: Config) -> list[ConfigError]:
+    """What a front end would refuse at start that can be known without opening
+    anything: the Zenoh session config (the file's or the one made from [zenoh]) as
+    Zenoh itself reads it. ``check-config`` and ``run`` both ask it."""
+    if not config.zenoh.enabled:
+        return []
     try:
-        return load(path)
+        from gateway.zenoh.session import zenoh_config
+    except ModuleNotFoundError:  # the Zenoh front end is not part of this build
+        return []
+    try:
+        zenoh_config(config.zenoh)
+    except ConfigError as exc:
+        return [exc]
+    return []
+
+
+def _load_or_report(path: str | Path) -> Config | None:
+    """The config, or None once every error is printed; ``check-config`` and ``run``
+    refuse exactly the same files."""
+    try:
+        config = load(path)
     except (ConfigErrors, ConfigError) as exc:
         _print_config_errors(exc)
         return None
+    problems = front_end_problems(config)
+    if problems:
+        _print_config_errors(ConfigErrors(problems))
+        return None
+    return config
 
 
 # ---------------------------------------------------------------- run
@@ -114,7 +138,13 @@ def add_check_config(sub: Any) -> None:
 
 
 def cmd_check_config(args: argparse.Namespace) -> int:
-    config = _load_or_report(args.file)
+    try:
+        config = _load_or_report(args.file)
+    except Exception as exc:  # a checker bug: still a message and status 2, never a traceback
+        print(
+            f"error: {args.file}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr
+        )
+        return 2
     if config is None:
         return 2
     print(f"{args.file}: ok, {len(config.drives)} drive(s) on {len(config.buses)} bus(es)")

@@ -124,6 +124,9 @@ class Config:
 
         cfg = self
         if zenoh_endpoint is not None:
+            problem = _endpoint_problem(zenoh_endpoint)
+            if problem:
+                raise ConfigError("--zenoh-endpoint", "", problem)
             cfg = replace(cfg, zenoh=replace(cfg.zenoh, listen=(zenoh_endpoint,)))
         if modbus_bind is not None:
             host, port = parse_host_port(modbus_bind, "--modbus-bind", "--modbus-bind")
@@ -156,14 +159,35 @@ def _gateway_section(t: Table) -> GatewaySection:
     return section
 
 
+ZENOH_PROTOCOLS = frozenset(
+    ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "serial", "vsock")
+)
+"""The link protocols a Zenoh endpoint may name (``proto/address[?config][#metadata]``)."""
+_HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+
+def _endpoint_problem(ep: str) -> str | None:
+    proto, sep, rest = ep.partition("/")
+    if not sep or not proto or not rest:
+        return f"{ep!r} is not a Zenoh endpoint (like tcp/127.0.0.1:7447)"
+    if proto not in ZENOH_PROTOCOLS:
+        known = ", ".join(sorted(ZENOH_PROTOCOLS))
+        return f"{ep!r}: {proto!r} is not a Zenoh link protocol ({known})"
+    address = rest.partition("#")[0].partition("?")[0]
+    if proto in _HOST_PORT_PROTOCOLS:
+        try:
+            parse_host_port(address, "", "")
+        except ConfigError:
+            return f"{ep!r}: {address!r} is not HOST:PORT (like tcp/127.0.0.1:7447)"
+    return None
+
+
 def _endpoint_list(t: Table, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
     endpoints: tuple[str, ...] = t.str_list(key, default)
     for i, ep in enumerate(endpoints):
-        proto, sep, rest = ep.partition("/")
-        if not sep or not proto or not rest:
-            t.errors.append(
-                t.error(f"{key}[{i}]", f"{ep!r} is not a Zenoh endpoint (like tcp/127.0.0.1:7447)")
-            )
+        problem = _endpoint_problem(ep)
+        if problem:
+            t.errors.append(t.error(f"{key}[{i}]", problem))
             return default
     return endpoints
 

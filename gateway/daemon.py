@@ -6,6 +6,11 @@ lazily. An adapter that crashes is logged with its traceback and restarted with
 back-off while its drives are offline; the rest of the gateway keeps running.
 SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
 restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
+
+Start-up: the front ends start first; a :class:`StartupError` from one of them before
+READY (a Modbus port in use or not allowed, a Zenoh endpoint that cannot be bound or
+parsed) is fatal: one line naming the cause and the fix, no READY, no bus touched, and
+:data:`EXIT_STARTUP` (docs/operations.md). Only once they serve are the buses started.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from typing import Any, Protocol
 from gateway import __version__
 from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
-from gateway.errors import ConfigError, ConfigErrors
+from gateway.errors import ConfigError, ConfigErrors, StartupError
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -39,6 +44,9 @@ FRONT_ENDS: dict[str, str] = {
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
+EXIT_STARTUP = 2
+"""Exit status when the gateway cannot start (as for a config error; the unit file's
+RestartPreventExitStatus=2 keeps systemd from restarting into the same error)."""
 
 
 class Backoff:
@@ -167,6 +175,8 @@ class Daemon:
         self._started_front_ends: list[str] = []
         self.ready = asyncio.Event()
         """Set when the daemon has reported READY (its front ends serve)."""
+        self.fatal: StartupError | ConfigError | None = None
+        """Why the gateway could not start (then it exits with EXIT_STARTUP)."""
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -221,16 +231,31 @@ class Daemon:
                 await start()
             except asyncio.CancelledError:
                 raise
+            except (StartupError, ConfigError) as exc:
+                if not self.ready.is_set():
+                    self._cannot_start(exc)
+                    return
+                error = exc
             except Exception as exc:
                 error = exc
             pause = backoff.after_crash(time.monotonic() - started)
-            if error is not None:  # logged with its traceback
+            if isinstance(error, StartupError | ConfigError):  # its one line says it all
+                log.error("%s crashed: %s; restarting in %.1f s", what, error, pause)
+            elif error is not None:  # logged with its traceback
                 log.error("%s crashed; restarting in %.1f s", what, pause, exc_info=error)
             else:
                 log.error("%s returned; restarting in %.1f s", what, pause)
             self.runtime.restarts[what] = self.runtime.restarts.get(what, 0) + 1
             on_crash()
             await asyncio.sleep(pause)
+
+    def _cannot_start(self, error: StartupError | ConfigError) -> None:
+        """Fatal at start-up: one line with the cause and the fix, then stop."""
+        if self.fatal is None:
+            self.fatal = error
+            log.error("drive-gateway cannot start: %s", error)
+            self.notifier.status(f"cannot start: {error}")
+        self._stop.set()
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
         async def start() -> None:
@@ -304,13 +329,16 @@ class Daemon:
             log.warning(
                 "no drives are configured in %s; serving the gateway only", self.config.file
             )
-        for bus in self.config.buses:
-            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
             self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
         not_serving = await self._front_ends_serving()
+        if self.fatal is not None:  # no bus touched, no READY
+            await self._cancel(self._tasks)
+            return EXIT_STARTUP
+        for bus in self.config.buses if not self._stop.is_set() else ():
+            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
         status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
         if not_serving:
             status += f"; not serving yet: {', '.join(not_serving)}"
