@@ -13,10 +13,10 @@ import pytest
 from gateway.cli import main
 from gateway.config import load
 from gateway.errors import ConfigErrors
-from gateway.json5check import MAX_DEPTH
 from tests.support.plugins import pythonpath
 
 ROOT = Path(__file__).resolve().parents[2]
+MAX_DEPTH = 64  # gateway.json5check.MAX_DEPTH
 
 
 def messages(tmp_path: Path, text: str) -> list[str]:
@@ -73,7 +73,9 @@ def test_every_bad_key_of_a_drive_and_of_the_sections_is_reported(tmp_path: Path
 
 
 def test_duplicates_name_every_party(tmp_path: Path) -> None:
-    drive = "[[buses.{bus}.drives]]\nid = '{id}'\ndevice = 'test'\naddress = {a}\nmodbus_unit = {u}\n"
+    drive = (
+        "[[buses.{bus}.drives]]\nid = '{id}'\ndevice = 'test'\naddress = {a}\nmodbus_unit = {u}\n"
+    )
     text = (
         "[buses.l]\nadapter = 'fake'\n"
         + drive.format(bus="l", id="cfw11", a=3, u=5)
@@ -104,13 +106,9 @@ def test_deeply_nested_toml_is_refused(tmp_path: Path) -> None:
     arrays = "x = " + "[" * 5000 + "]" * 5000 + "\n"
     assert messages(tmp_path, arrays) == ["site.toml: not valid TOML: nested too deep"]
     tables = "x = " + "{a = " * 40 + "1" + "}" * 40 + "\n"
-    assert messages(tmp_path, tables) == [
-        "site.toml: tables and arrays nest deeper than 32 levels"
-    ]
+    assert messages(tmp_path, tables) == ["site.toml: tables and arrays nest deeper than 32 levels"]
     dotted = "[" + ".".join(["a"] * 100) + "]\n"
-    assert messages(tmp_path, dotted) == [
-        "site.toml: tables and arrays nest deeper than 32 levels"
-    ]
+    assert messages(tmp_path, dotted) == ["site.toml: tables and arrays nest deeper than 32 levels"]
 
 
 def test_the_config_file_itself_must_be_a_bounded_regular_file(tmp_path: Path) -> None:
@@ -209,3 +207,16 @@ def test_check_config_reports_a_traceback_free_error_for_deep_toml(
     cfg.write_text("x = " + "[" * 100_000 + "]" * 100_000 + "\n")
     assert main(["check-config", str(cfg)]) == 2
     assert "nested too deep" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("adapter", [":x", ".x:y", "os:getcwd", "json:loads", "os", ""])
+def test_check_config_refuses_any_adapter_not_registered(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], adapter: str
+) -> None:
+    """Used to print a traceback (exit 1) or import the module named."""
+    cfg = tmp_path / "site.toml"
+    cfg.write_text(f"[buses.l]\nadapter = {adapter!r}\n")
+    assert main(["check-config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {cfg}: buses.l.adapter: ") and "Traceback" not in err
+    assert "is not an adapter name" in err or "unknown adapter" in err

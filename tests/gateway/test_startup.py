@@ -13,12 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from gateway.daemon import EXIT_STARTUP
-from gateway.modbus.server import bind_error
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.plugins import pythonpath
 
 ROOT = Path(__file__).resolve().parents[2]
+EXIT_STARTUP = 2  # gateway.daemon.EXIT_STARTUP
 WAIT = 120  # s, a bound only: the daemon exits as soon as the bind fails
 
 
@@ -152,6 +151,8 @@ def test_a_zenoh_endpoint_that_cannot_be_parsed_is_refused_by_check_and_run(
 
 
 def test_the_bind_errors_name_their_fix() -> None:
+    from gateway.modbus.server import bind_error
+
     denied = str(bind_error("0.0.0.0", 502, PermissionError(errno.EACCES, "Permission denied")))
     assert denied.startswith("modbus: cannot listen on 0.0.0.0:502: permission denied; ")
     assert "AmbientCapabilities=CAP_NET_BIND_SERVICE" in denied
