@@ -196,13 +196,17 @@ def load_adapter(name: str) -> AdapterClass:
         if point is None:
             raise _unknown(name)
         cls = _import(name, point.value)
+    _check_class_side(name, cls)
+    result: AdapterClass = cls
+    return result
+
+
+def _check_class_side(name: str, cls: object) -> None:
     missing = [a for a in _CLASS_SIDE if not hasattr(cls, a)]
     if not isinstance(cls, type) or missing:
         raise AdapterError(
             f"adapter {name!r} is not a drive adapter class (missing: {', '.join(missing)})"
         )
-    result: AdapterClass = cls
-    return result
 
 
 _CLASS_SIDE = ("devices", "address_range", "parse_bus_options", "parse_drive_options")

@@ -28,6 +28,7 @@ import stat
 import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -362,6 +363,16 @@ def _read(t: Table, reader: Callable[[Table], T], *, finish: bool = True) -> T |
     return result
 
 
+def _section(root: Table, key: str, reader: Callable[[Table], T]) -> T | None:
+    """One of the top-level sections, read with ``reader`` (None if it cannot be)."""
+    try:
+        table = root.table(key)
+    except ConfigError as exc:
+        root.errors.append(exc)
+        return None
+    return _read(table, reader)
+
+
 # ---------------------------------------------------------------- loading
 
 
@@ -369,22 +380,14 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     """Validate a parsed TOML document; raises ConfigErrors with every problem found."""
     root = Table(data, file)
     base = base or Path(file).resolve().parent
-    sections = {
-        "gateway": _gateway_section,
-        "zenoh": lambda t: _zenoh_section(t, base),
-        "modbus": _modbus_section,
-    }
-    read = {
-        key: _read(root, lambda r, k=key, f=reader: _read(r.table(k), f), finish=False)  # type: ignore[misc]
-        for key, reader in sections.items()
-    }
-    gateway, zenoh, modbus = read["gateway"], read["zenoh"], read["modbus"]
-    bus_tables = _read(root, lambda r: r.tables("buses"), finish=False) or {}
-    buses = [
-        bus
-        for n, bt in bus_tables.items()
-        if (bus := _read(bt, lambda t, n=n: _bus(n, t), finish=False))
-    ]
+    gateway = _section(root, "gateway", _gateway_section)
+    zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
+    modbus = _section(root, "modbus", _modbus_section)
+    buses: list[BusConfig] = []
+    for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
+        bus = _read(table, partial(_bus, name), finish=False)
+        if bus is not None:
+            buses.append(bus)
     _read(root, lambda r: None)  # unknown top-level keys
     drives = [d for b in buses for d in b.drives]
     places = [(repr(d.id), f"buses.{d.bus} address {d.address}") for d in drives]
