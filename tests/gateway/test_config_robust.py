@@ -220,3 +220,15 @@ def test_check_config_refuses_any_adapter_not_registered(
     err = capsys.readouterr().err
     assert err.startswith(f"error: {cfg}: buses.l.adapter: ") and "Traceback" not in err
     assert "is not an adapter name" in err or "unknown adapter" in err
+
+
+def test_the_cli_tools_check_their_zenoh_config_file_too(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``watch``/``cmd``/``param``/``health --zenoh-config`` gave Zenoh the file as it was."""
+    deep = tmp_path / "client.json5"
+    deep.write_text("{a: " + "[" * 50_000 + "]" * 50_000 + "}")
+    with pytest.raises(SystemExit) as exit_:
+        main(["health", "--zenoh-config", str(deep)])
+    assert exit_.value.code == 2
+    assert f"nested deeper than {MAX_DEPTH} levels" in capsys.readouterr().err
