@@ -354,13 +354,18 @@ def _read(t: Table, reader: Callable[[Table], T], *, finish: bool = True) -> T |
         result = reader(t)
         if finish:
             t.finish()
-    except ConfigErrors as exc:
-        t.errors.extend(exc.errors)
-        return None
-    except ConfigError as exc:
-        t.errors.append(exc)
+    except (ConfigErrors, ConfigError) as exc:
+        for error in exc.errors if isinstance(exc, ConfigErrors) else [exc]:
+            _add_once(t.errors, error)
         return None
     return result
+
+
+def _add_once(errors: list[ConfigError], error: ConfigError) -> None:
+    """One error per key: a check that fails on the default a bad value was replaced with
+    (``max_rpm`` bad, then "max_rpm is required") would only repeat the first."""
+    if not any(e.file == error.file and e.key == error.key for e in errors):
+        errors.append(error)
 
 
 def _section(root: Table, key: str, reader: Callable[[Table], T]) -> T | None:
@@ -378,7 +383,7 @@ def _section(root: Table, key: str, reader: Callable[[Table], T]) -> T | None:
 
 def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     """Validate a parsed TOML document; raises ConfigErrors with every problem found."""
-    root = Table(data, file)
+    root = Table(data, file, collect=True)
     base = base or Path(file).resolve().parent
     gateway = _section(root, "gateway", _gateway_section)
     zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))

@@ -5,10 +5,12 @@ its own sections. A table remembers which keys were read, and :meth:`Table.finis
 turns every key nobody read into an error (with the nearest known key as a hint):
 unknown keys are never ignored.
 
-Every error of a file is reported in one pass: a key that has a default and a bad
-value is recorded in :attr:`Table.errors` (one list shared by a document's tables)
-and the reader goes on with the default; a required key that is missing or bad
-raises, which ends that table (a section, a bus, a drive), not the document.
+Every error of a file is reported in one pass (``collect=True``, as the config
+loader reads a document): a key that has a default and a bad value is recorded in
+:attr:`Table.errors` (one list shared by a document's tables) and the reader goes
+on with the default; a required key that is missing or bad raises, which ends that
+table (a section, a bus, a drive), not the document. A table made without
+``collect`` raises at the first error (an adapter's own unit tests).
 """
 
 from __future__ import annotations
@@ -52,17 +54,20 @@ class Table:
         file: str,
         path: str = "",
         errors: list[ConfigError] | None = None,
+        *,
+        collect: bool = False,
     ) -> None:
         self.data = data
         self.file = file
         self.path = path
+        self.collect = collect
         self.errors: list[ConfigError] = [] if errors is None else errors
         """Errors recorded while reading on (shared with the tables read from this one)."""
         self._read: set[str] = set()
 
     def child(self, data: Mapping[str, Any], path: str) -> Table:
         """A table inside this one (its errors go to the same list)."""
-        return Table(data, self.file, path, self.errors)
+        return Table(data, self.file, path, self.errors, collect=self.collect)
 
     def _soft(self, read: Callable[..., Any], key: str, default: Any, **kw: Any) -> Any:
         """``read(key, default, **kw)``; a bad value of a key that has a default is
@@ -70,7 +75,7 @@ class Table:
         try:
             return read(key, default, **kw)
         except ConfigError as exc:
-            if default is REQUIRED:
+            if default is REQUIRED or not self.collect:
                 raise
             self.errors.append(exc)
             return default
@@ -296,7 +301,10 @@ class Table:
         )
 
     def finish(self) -> None:
-        """Raise, naming every key that nobody read."""
+        """Raise for the keys that nobody read: all of them (ConfigErrors) when
+        collecting, else the first (ConfigError)."""
         unknown = [self.unknown_key(k) for k in self.unread()]
-        if unknown:
+        if unknown and self.collect:
             raise ConfigErrors(unknown)
+        if unknown:
+            raise unknown[0]
