@@ -68,13 +68,20 @@ def front_end_problems(config: Config) -> list[ConfigError]:
 
 def _load_or_report(path: str | Path) -> Config | None:
     """The config, or None once every error is printed; ``check-config`` and ``run``
-    refuse exactly the same files."""
+    refuse exactly the same files, each with a message and never a traceback."""
     try:
         config = load(path)
     except (ConfigErrors, ConfigError) as exc:
         _print_config_errors(exc)
         return None
-    problems = front_end_problems(config)
+    except Exception as exc:  # a checker bug: still a message (and status 2), no traceback
+        print(f"error: {path}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return None
+    try:
+        problems = front_end_problems(config)
+    except Exception as exc:  # as above
+        print(f"error: {path}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return None
     if problems:
         _print_config_errors(ConfigErrors(problems))
         return None
@@ -138,13 +145,7 @@ def add_check_config(sub: Any) -> None:
 
 
 def cmd_check_config(args: argparse.Namespace) -> int:
-    try:
-        config = _load_or_report(args.file)
-    except Exception as exc:  # a checker bug: still a message and status 2, never a traceback
-        print(
-            f"error: {args.file}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr
-        )
-        return 2
+    config = _load_or_report(args.file)
     if config is None:
         return 2
     print(f"{args.file}: ok, {len(config.drives)} drive(s) on {len(config.buses)} bus(es)")
