@@ -184,9 +184,14 @@ class Daemon:
     def check_reload(self) -> None:
         """SIGHUP: no reload. The running config stays as it is; the file on disk is
         validated so the operator learns, before a restart, whether it would start."""
+        from gateway.cli import front_end_problems  # what `run` would refuse, as check-config
+
         file = self.config.file
         try:
             new = load(file)
+            problems = front_end_problems(new)
+            if problems:
+                raise ConfigErrors(problems)
         except (ConfigErrors, ConfigError) as exc:
             errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
             log.error(
