@@ -117,6 +117,10 @@ _BIND_FIXES = {
 }
 
 
+def _drop_bind_failure(record: logging.LogRecord) -> bool:
+    return not record.getMessage().startswith("Failed to start server")
+
+
 def bind_error(host: str, port: int, exc: OSError | None) -> ModbusBindError:
     """The one-line reason the server cannot listen on ``host:port``, with the fix."""
     code = exc.errno if exc is not None else None
@@ -453,10 +457,13 @@ class GatewayServer(ModbusTcpServer):
                 raise
 
         self.call_create = create_and_keep_the_error
+        pymodbus_log = logging.getLogger("pymodbus.logging")
+        pymodbus_log.addFilter(_drop_bind_failure)  # ModbusBindError says it, with the fix
         try:
             listening = await self.listen()
         finally:
             self.call_create = create
+            pymodbus_log.removeFilter(_drop_bind_failure)
         if not listening:
             raise bind_error(host, port, failure[0] if failure else None)
         sockets = getattr(self.transport, "sockets", None) or ()

@@ -73,6 +73,8 @@ def assert_fatal(out: subprocess.CompletedProcess[str], sent: list[str], cause: 
     assert len(fatal) == 1, out.stderr
     assert cause in fatal[0], fatal[0]
     assert "restarting" not in out.stderr and "not serving" not in out.stderr
+    problems = [ln for ln in out.stderr.splitlines() if " ERROR " in ln or " WARNING " in ln]
+    assert problems == [*[ln for ln in problems if "no drives" in ln], fatal[0]], out.stderr
     assert any(line.startswith("STATUS=cannot start: ") for line in sent), sent
     return fatal[0]
 
