@@ -20,9 +20,13 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TextIO
 
 import zenoh
+
+from gateway.config import read_zenoh_config_file
+from gateway.errors import ConfigError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "demo"
@@ -47,8 +51,8 @@ def client_config(endpoint: str, config_file: str | None = None) -> zenoh.Config
     With ``config_file`` (JSON5, e.g. with TLS certificates for a secured
     gateway) that file is the base and ``endpoint`` is added to connect to.
     """
-    if config_file is not None:
-        conf = zenoh.Config.from_file(config_file)
+    if config_file is not None:  # bounded and checked first (gateway.config)
+        conf = zenoh.Config.from_json5(read_zenoh_config_file(Path(config_file)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         return conf
@@ -84,6 +88,10 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _use_config_file(path: str) -> str:
+    try:
+        read_zenoh_config_file(Path(path))
+    except ConfigError as exc:  # argparse: "error: argument --zenoh-config: ...", exit 2
+        raise argparse.ArgumentTypeError(str(exc)) from None
     _CONFIG_FILE[0] = path
     return path
 

@@ -38,6 +38,7 @@ import asyncio
 import collections
 import contextlib
 import contextvars
+import errno
 import ipaddress
 import logging
 import socket
@@ -54,7 +55,7 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import SimDevice
 from pymodbus.transaction import TransactionManager
 
-from gateway.errors import GatewayError
+from gateway.errors import StartupError
 from gateway.modbus.limits import OVER_LIMIT_LOG_INTERVAL, ConnectionLimits, WarningRateLimit
 from gateway.modbus.mbap import HEADER_SIZE, MbapError, parse_header
 from gateway.modbus.regs import ExceptionCode
@@ -92,8 +93,45 @@ def keep_alive(sock: Any) -> None:
                 sock.setsockopt(socket.IPPROTO_TCP, option, value)
 
 
-class ModbusBindError(GatewayError, OSError):
-    """The server could not listen on ``modbus.bind``."""
+class ModbusBindError(StartupError, OSError):
+    """The server could not listen on ``modbus.bind``: the cause and the fix."""
+
+
+_BIND_FIXES = {
+    errno.EADDRINUSE: (
+        "address already in use",
+        "another drive-gateway instance (or another Modbus server) listens there: stop it, "
+        "or choose another address with --modbus-bind HOST:PORT or [modbus] bind",
+    ),
+    errno.EACCES: (
+        "permission denied",
+        "ports below 1024 need CAP_NET_BIND_SERVICE: under systemd uncomment the unit's "
+        "CapabilityBoundingSet=CAP_NET_BIND_SERVICE and AmbientCapabilities="
+        "CAP_NET_BIND_SERVICE lines (config/drive-gateway.service), or use a port above "
+        "1023 with --modbus-bind HOST:PORT",
+    ),
+    errno.EADDRNOTAVAIL: (
+        "this machine has no such address",
+        "choose one of its addresses (or 0.0.0.0) with --modbus-bind HOST:PORT or [modbus] bind",
+    ),
+}
+
+
+def _drop_bind_failure(record: logging.LogRecord) -> bool:
+    return not record.getMessage().startswith("Failed to start server")
+
+
+def bind_error(host: str, port: int, exc: OSError | None) -> ModbusBindError:
+    """The one-line reason the server cannot listen on ``host:port``, with the fix."""
+    code = exc.errno if exc is not None else None
+    cause, fix = _BIND_FIXES.get(
+        code or 0,
+        (
+            (exc.strerror or str(exc)).lower() if exc is not None else "listen failed",
+            "check the address with --modbus-bind HOST:PORT or [modbus] bind",
+        ),
+    )
+    return ModbusBindError("modbus", f"cannot listen on {host}:{port}: {cause}", fix)
 
 
 @dataclass
@@ -492,8 +530,26 @@ class GatewayServer(ModbusTcpServer):
     async def start(self) -> tuple[str, int]:
         """Listen; returns the bound address. Raises :class:`ModbusBindError`."""
         host, port = self.comm_params.source_address or ("", 0)
-        if not await self.listen():
-            raise ModbusBindError(f"cannot listen for Modbus TCP on {host}:{port}")
+        create = self.call_create  # pymodbus logs the OSError and drops it: keep it
+        failure: list[OSError] = []
+
+        async def create_and_keep_the_error() -> Any:
+            try:
+                return await create()
+            except OSError as exc:
+                failure.append(exc)
+                raise
+
+        self.call_create = create_and_keep_the_error
+        pymodbus_log = logging.getLogger("pymodbus.logging")
+        pymodbus_log.addFilter(_drop_bind_failure)  # ModbusBindError says it, with the fix
+        try:
+            listening = await self.listen()
+        finally:
+            self.call_create = create
+            pymodbus_log.removeFilter(_drop_bind_failure)
+        if not listening:
+            raise bind_error(host, port, failure[0] if failure else None)
         sockets = getattr(self.transport, "sockets", None) or ()
         if sockets:
             bound = sockets[0].getsockname()

@@ -19,6 +19,7 @@ import zenoh
 
 from gateway.zenoh.keys import KeyKind, KeySpace
 from gateway.zenoh.requests import MAX_PAYLOAD, Answer
+from gateway.zenoh.session import open_session
 
 log = logging.getLogger(__name__)
 
@@ -129,7 +130,7 @@ class ZenohLink:
         on_command: CommandSink,
         on_query: QuerySink,
     ) -> ZenohLink:
-        session = zenoh.open(config)
+        session = open_session(config)  # StartupError names the cause and the fix
         try:
             return cls(session, keys, drive_ids, on_command, on_query)
         except BaseException:

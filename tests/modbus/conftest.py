@@ -22,7 +22,7 @@ from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import free_port
 from tests.support.timing import scaled
 
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 TIMEOUT = scaled(20.0)
 INPUTS = 21  # registers in a drive's status block
 D1, D2, D4 = 1, 2, 4  # unit ids: d1 test drive, d2 MCD 600, d4 on line2 (d3 has none)

@@ -138,10 +138,10 @@ def test_drive_errors_name_the_drive_key() -> None:
         {"id": "d", "device": "test", "address": 9, "speed": 1},
     ]
     got = errors(adapter=ADAPTER, simulate=True, drives=drives)
-    assert got[0] == f"{FILE}: buses.profibus1.drives[0].address: 126 is above the maximum 125"
-    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[1].device: 'CFW-08' is not one of")
-    assert got[2] == f"{FILE}: buses.profibus1.drives[2].size: 99 is above the maximum 32"
-    assert got[3] == f"{FILE}: buses.profibus1.drives[3].speed: unknown key"
+    assert got[0] == f"{FILE}: buses.profibus1.drives[a].address: 126 is above the maximum 125"
+    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[b].device: 'CFW-08' is not one of")
+    assert got[2] == f"{FILE}: buses.profibus1.drives[c].size: 99 is above the maximum 32"
+    assert got[3] == f"{FILE}: buses.profibus1.drives[d].speed: unknown key"
 
 
 def test_duplicate_addresses_are_the_cores_error() -> None:
@@ -150,5 +150,5 @@ def test_duplicate_addresses_are_the_cores_error() -> None:
         {"id": "b", "device": "test", "address": 5},
     ]
     assert errors(adapter=ADAPTER, simulate=True, drives=drives) == [
-        f"{FILE}: buses.profibus1.drives: duplicate address 5"
+        f"{FILE}: buses.profibus1.drives: address 5 is used by a and b"
     ]
