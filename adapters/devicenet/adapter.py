@@ -22,7 +22,6 @@ from typing import Any, ClassVar
 
 from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
-    ASSEMBLY_SIZE,
     P070_COMM_ERROR,
     P070_TEXT,
     P081_IDLE,
@@ -55,6 +54,7 @@ from adapters.devicenet.cfw08_objects import (
     encode_attribute,
 )
 from adapters.devicenet.cip import CipClass
+from adapters.devicenet.eds import Eds
 from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import (
     ErrorResponse,
@@ -91,6 +91,7 @@ from adapters.devicenet.scanner import (
     TxFailed,
 )
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
+from adapters.devicenet.sim.objects import Identity
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import (
@@ -219,7 +220,7 @@ class DeviceNetAdapter:
         o = self.options
         return ScannerConfig(
             mac=o.mac,
-            vendor_id=0,
+            vendor_id=o.vendor_id,
             serial_number=SCANNER_SERIAL_BASE + o.mac,
             poll_interval=o.poll_interval,
             response_timeout=o.response_timeout,
@@ -237,14 +238,22 @@ class DeviceNetAdapter:
             o = d.opts
             identity = IdentityCheck()
             if o.check_identity:
-                identity = IdentityCheck(o.vendor_id, o.product_code, o.product_name or None)
+                identity = IdentityCheck(
+                    o.vendor_id,
+                    o.product_code,
+                    o.product_name or None,
+                    product_type=o.product_type,
+                    revision=o.revision,
+                )
             out.append(
                 NodeConfig(
                     mac=d.mac,
                     io=o.connection,
                     ack=o.ack,
-                    produced_size=ASSEMBLY_SIZE,  # every CFW-08 assembly (seed 4.1.8, table 11)
-                    consumed_size=ASSEMBLY_SIZE,
+                    # every CFW-08 assembly is 4 bytes (seed 4.1.8, table 11); an EDS's
+                    # sizes are checked against that when the config is read
+                    produced_size=o.io_sizes[0],
+                    consumed_size=o.io_sizes[1],
                     epr=self.options.expected_packet_rate,
                     identity=identity,
                 )
@@ -266,6 +275,8 @@ class DeviceNetAdapter:
                     weg_speed_scale=o.weg_speed_scale,
                     product_code=o.product_code if o.product_code is not None else 8,
                     dupmac_timeout=self.options.dupmac_timeout,
+                    identity=None if o.eds is None else sim_identity(o.eds),
+                    io_sizes=o.io_sizes,
                 )
             )
         return out
@@ -725,6 +736,16 @@ class DeviceNetAdapter:
         body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
         _success(await self._request(d, body))
 
+    def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
+        """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the
+        ``scaled`` engineering value of ``raw`` (EDS scaling); {} when the drive has no EDS
+        or the EDS does not name that parameter. The params services add these beside
+        the raw value."""
+        param = self._drive(drive_id).opts.params.get(number)
+        if param is None:
+            return {}
+        return {"name": param.name, "unit": param.units, "scaled": param.scale(int(raw))}
+
     # ------------------------------------------------------------ standard objects
 
     async def read_object(
@@ -804,6 +825,19 @@ class DeviceNetAdapter:
 
 
 # ---------------------------------------------------------------- helpers
+
+
+def sim_identity(eds: Eds) -> Identity:
+    """The simulated drive's Identity object from an EDS's [Device] (the serial number
+    stays the simulator's own)."""
+    dev = eds.device
+    return Identity(
+        vendor_id=dev.vendor_code,
+        product_type=dev.product_type,
+        product_code=dev.product_code,
+        revision=(dev.major_rev, dev.minor_rev),
+        product_name=dev.product_name,
+    )
 
 
 def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
