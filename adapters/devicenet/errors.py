@@ -133,5 +133,6 @@ class EdsError(ConfigError):
 
     def __init__(self, file: str, line: int, key: str, reason: str) -> None:
         self.line = line
-        where = f"line {line}: {key}" if line else key
-        super().__init__(file, where.strip(), reason)
+        self.eds_key = key
+        where = " ".join(p for p in (f"line {line}:" if line else "", key) if p)
+        super().__init__(file, where.removesuffix(":"), reason)
