@@ -65,7 +65,7 @@ def test_cfw08_test_file_golden() -> None:
 
 def test_scaling_formula() -> None:
     text = _eds(
-        "[Params]\nParam1 = 0, 0, \"\", 0, 0xC3, 2, \"T\", \"degC\", \"\", -100, 100, 0, "
+        '[Params]\nParam1 = 0, 0, "", 0, 0xC3, 2, "T", "degC", "", -100, 100, 0, '
         "3, 4, 2, 10, , , , , 1;\n"
     )
     # (raw + offset) * multiplier * base / (divisor * 10 ** decimals)
@@ -75,7 +75,7 @@ def test_scaling_formula() -> None:
 def test_syntax_details() -> None:
     doc = parse_document(
         '$ comment\n[a]\n  Key = 1, , "x $ not a comment" "y", 0x10 $ tail\n  ;\n'
-        "[B]\nEmpty = ;\nTwo=\"a\\\"b\";\n"
+        '[B]\nEmpty = ;\nTwo="a\\"b";\n'
     )
     assert doc.sections[0] == Section(
         "a", (Entry("Key", ("1", "", Quoted("x $ not a commenty"), "0x10")),)
@@ -89,7 +89,9 @@ def test_syntax_details() -> None:
 
 _key = st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,11}", fullmatch=True)
 _bare = st.from_regex(r"(0x[0-9A-F]{1,4}|-?[0-9]{1,5}|[0-9]{2}-[0-9]{2}-[0-9]{4}|)", fullmatch=True)
-_quoted = st.builds(Quoted, st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=20))
+_quoted = st.builds(
+    Quoted, st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=20)
+)
 _field = st.one_of(_bare, _quoted)
 
 
@@ -112,17 +114,15 @@ def test_document_round_trip(doc: Document) -> None:
 
 
 @given(
-    st.integers(0, 0xFFFF),
-    st.integers(0, 0xFFFF),
-    st.integers(0, 0x7F),
-    st.integers(0, 0xFF),
+    st.tuples(st.integers(0, 0xFFFF), st.integers(0, 0xFFFF)),
+    st.tuples(st.integers(0, 0x7F), st.integers(0, 0xFF)),
     st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=32),
-    st.integers(0, 64),
-    st.integers(0, 64),
+    st.tuples(st.integers(0, 64), st.integers(0, 64)),
 )
 def test_device_and_sizes_round_trip(
-    vendor: int, code: int, major: int, minor: int, name: str, size_in: int, size_out: int
+    ids: tuple[int, int], rev: tuple[int, int], name: str, sizes: tuple[int, int]
 ) -> None:
+    (vendor, code), (major, minor), (size_in, size_out) = ids, rev, sizes
     doc = Document(
         (
             Section("File", (Entry("Revision", ("1.0",)),)),
@@ -172,7 +172,10 @@ def _eds(extra: str = "", device: str = DEVICE) -> str:
 
 
 BAD = [
-    ("[File]\nRevision = 1.0\n", "t.eds: line 2: [File] Revision: no ';' ends the entry begun on line 2"),
+    (
+        "[File]\nRevision = 1.0\n",
+        "t.eds: line 2: [File] Revision: no ';' ends the entry begun on line 2",
+    ),
     ("Key = 1;\n", "t.eds: line 1: an entry before the first [section]"),
     ("[File\n", "t.eds: line 1: [File: section header without ']'"),
     ("[File]\n[File]\n", "t.eds: line 2: [File]: section appears twice"),
@@ -181,30 +184,58 @@ BAD = [
     ('[File]\nA = "abc;\n', "t.eds: line 2: [File] A: a quoted string does not end on its line"),
     ('[File]\nA = "a" b;\n', "t.eds: line 2: [File] A: 'b' after a quoted string (missing ',')"),
     ("[File]\n", "t.eds: [Device]: section missing"),
-    (_eds(device=DEVICE.replace("ProdCode = 8;\n", "")), "t.eds: line 3: [Device] ProdCode: key missing"),
-    (_eds(device=DEVICE.replace("853", "0x10000")),
-     "t.eds: line 4: [Device] VendCode: field 1 (VendCode) 65536 is outside 0..65535"),
-    (_eds(device=DEVICE.replace("= 2;", "= two;")),
-     "t.eds: line 5: [Device] ProdType: field 1 (ProdType) 'two' is not a number"),
-    (_eds(device=DEVICE.replace('"CFW-08"', "CFW-08")),
-     "t.eds: line 9: [Device] ProdName: field 1 (ProdName) must be a quoted string"),
-    (_eds("[IO_Info]\nPollInfo = 1, 1, 1;\n"), "t.eds: line 11: [IO_Info] PollInfo: names Input1, not defined"),
-    (_eds("[IO_Info]\nInput1 = 4, 0, 1, \"x\", 2, \"20 04 24\";\n"),
-     "t.eds: line 11: [IO_Info] Input1: the path has 3 bytes, its size field says 2"),
-    (_eds("[IO_Info]\nInput1 = 4, 0, 1, \"x\", 2, \"2G\";\n"),
-     "t.eds: line 11: [IO_Info] Input1: field 6 (path) '2G' is not hex bytes"),
-    (_eds("[Params]\nParam1 = 0, 0, \"\", 0, 0xC7, 2;\n"),
-     "t.eds: line 11: [Params] Param1: has 6 fields, 20 expected"),
-    (_eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",10,5,7,1,1,1,0,,,,,0;\n'),
-     "t.eds: line 11: [Params] Param1: min 10 is above max 5"),
-    (_eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",0,5,7,1,1,1,0,,,,,0;\n'),
-     "t.eds: line 11: [Params] Param1: default 7 is outside min..max"),
-    (_eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",-1,5,0,1,1,1,0,,,,,0;\n'),
-     "t.eds: line 11: [Params] Param1: field 10 (min) -1 is outside 0..65535"),
-    (_eds('[Params]\nParam1 = 0,0,"",0,0xC7,4,"n","u","h",0,5,0,1,1,1,0,,,,,0;\n'),
-     "t.eds: line 11: [Params] Param1: data type 0xC7 is 2 bytes, not 4"),
-    (_eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",0,5,0,1,0,1,0,,,,,0;\n'),
-     "t.eds: line 11: [Params] Param1: field 14 (divisor) is 0"),
+    (
+        _eds(device=DEVICE.replace("ProdCode = 8;\n", "")),
+        "t.eds: line 3: [Device] ProdCode: key missing",
+    ),
+    (
+        _eds(device=DEVICE.replace("853", "0x10000")),
+        "t.eds: line 4: [Device] VendCode: field 1 (VendCode) 65536 is outside 0..65535",
+    ),
+    (
+        _eds(device=DEVICE.replace("= 2;", "= two;")),
+        "t.eds: line 5: [Device] ProdType: field 1 (ProdType) 'two' is not a number",
+    ),
+    (
+        _eds(device=DEVICE.replace('"CFW-08"', "CFW-08")),
+        "t.eds: line 9: [Device] ProdName: field 1 (ProdName) must be a quoted string",
+    ),
+    (
+        _eds("[IO_Info]\nPollInfo = 1, 1, 1;\n"),
+        "t.eds: line 11: [IO_Info] PollInfo: names Input1, not defined",
+    ),
+    (
+        _eds('[IO_Info]\nInput1 = 4, 0, 1, "x", 2, "20 04 24";\n'),
+        "t.eds: line 11: [IO_Info] Input1: the path has 3 bytes, its size field says 2",
+    ),
+    (
+        _eds('[IO_Info]\nInput1 = 4, 0, 1, "x", 2, "2G";\n'),
+        "t.eds: line 11: [IO_Info] Input1: field 6 (path) '2G' is not hex bytes",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0, 0, "", 0, 0xC7, 2;\n'),
+        "t.eds: line 11: [Params] Param1: has 6 fields, 20 expected",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",10,5,7,1,1,1,0,,,,,0;\n'),
+        "t.eds: line 11: [Params] Param1: min 10 is above max 5",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",0,5,7,1,1,1,0,,,,,0;\n'),
+        "t.eds: line 11: [Params] Param1: default 7 is outside min..max",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",-1,5,0,1,1,1,0,,,,,0;\n'),
+        "t.eds: line 11: [Params] Param1: field 10 (min) -1 is outside 0..65535",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0,0,"",0,0xC7,4,"n","u","h",0,5,0,1,1,1,0,,,,,0;\n'),
+        "t.eds: line 11: [Params] Param1: data type 0xC7 is 2 bytes, not 4",
+    ),
+    (
+        _eds('[Params]\nParam1 = 0,0,"",0,0xC7,2,"n","u","h",0,5,0,1,0,1,0,,,,,0;\n'),
+        "t.eds: line 11: [Params] Param1: field 14 (divisor) is 0",
+    ),
 ]
 
 
@@ -226,7 +257,7 @@ def test_bad_bytes_and_missing_file(tmp_path: Path) -> None:
 
 
 def test_multi_line_entry_reports_its_first_line() -> None:
-    text = _eds("[Params]\nParam1 =\n 0,\n 0,\n \"\",\n 0, 0xC7, 9;\n")
+    text = _eds('[Params]\nParam1 =\n 0,\n 0,\n "",\n 0, 0xC7, 9;\n')
     with pytest.raises(EdsError) as info:
         parse_eds(text, "t.eds")
     assert info.value.line == 11
