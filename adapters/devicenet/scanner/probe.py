@@ -12,11 +12,17 @@ A sans-IO engine stepped with an injected clock, like :class:`Scanner`:
    acknowledged, 2.8), then Release of what was allocated. A node that does not answer
    the Allocate in ``timeout`` is absent; one that refuses it (owned by another master)
    is listed as present with the reason. ``window`` nodes are probed at once.
+
+Automatic Device Replacement (seed 6.1) uses the same probe from the running scanner
+(``claim=False``: the scanner already holds its MAC ID) on MAC 63, with an ``assign``
+function: when it names a MAC ID for the identity read, the node's MAC ID is set
+(DeviceNet object 03h attribute 1, seed table 9; effective after a reset, seed 4.1.5)
+and the node is reset (Identity Reset service); it then comes up at its new MAC ID.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -32,6 +38,8 @@ from adapters.devicenet.explicit import (
     GetAttributeSingle,
     ReleaseConnectionSet,
     Request,
+    Reset,
+    SetAttributeSingle,
     error_text,
 )
 from adapters.devicenet.fragment import (
@@ -45,6 +53,8 @@ from adapters.devicenet.ids import MAX_MAC, PredefinedMessage, match_predefined,
 from adapters.devicenet.objects import AllocationChoice, IdentityAttribute
 
 IDENTITY_CLASS = 1
+DEVICENET_CLASS = 3
+MAC_ID_ATTRIBUTE = 1  # seed table 9
 IDENTITY_READS = (
     IdentityAttribute.VENDOR_ID,
     IdentityAttribute.DEVICE_TYPE,
@@ -64,6 +74,7 @@ class ProbeConfig:
     timeout: float = 0.2  # s per Allocate / request / Release answer
     dupmac_timeout: float = 1.0  # fact sheet 2.3
     window: int = 4  # nodes probed at once
+    claim: bool = True  # run the Duplicate MAC ID check first (False: a running scanner)
 
     def __post_init__(self) -> None:
         if not 0 <= self.mac <= MAX_MAC:
@@ -84,6 +95,7 @@ class NodeInfo:
     serial_number: int | None = None
     product_name: str | None = None
     problem: str | None = None  # why the identity is incomplete (owned by another master...)
+    readdressed: int | None = None  # the MAC ID it was given (Automatic Device Replacement)
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +124,8 @@ ProbeAction = CanFrame | Progress | Refused | Finished
 class _Step(Enum):
     ALLOCATE = "allocate"
     READ = "read"
+    SET_MAC = "set MAC ID"
+    RESET = "reset"
     RELEASE = "release"
     DONE = "done"
 
@@ -127,21 +141,26 @@ class _Node:
     values: dict[int, bytes] = field(default_factory=dict)
     answered: bool = False
     problem: str | None = None
+    target: int | None = None
+    readdressed: int | None = None
     reassembler: ExplicitReassembler = field(default_factory=ExplicitReassembler)
 
 
 class LineProbe:
     """The scan as ``step(now, frame) -> actions``; ``next_deadline()`` says when to step."""
 
-    def __init__(self, config: ProbeConfig) -> None:
+    def __init__(
+        self, config: ProbeConfig, assign: Callable[[NodeInfo], int | None] | None = None
+    ) -> None:
         self.config = config
+        self.assign = assign
         self.macs = [m for m in config.macs if m != config.mac]
         self._queue = list(self.macs)
         self._active: dict[int, _Node] = {}
         self._found: dict[int, NodeInfo] = {}
         self._done = 0
-        self._checks_sent = 0
-        self._check_until: float | None = None
+        self._checks_sent = 0 if config.claim else 2
+        self._check_until: float | None = None if config.claim else 0.0
         self.refused: str | None = None
         self.finished = False
 
@@ -244,7 +263,15 @@ class LineProbe:
 
     def _read_next(self, now: float, node: _Node, out: list[ProbeAction]) -> None:
         if not node.reads:
-            self._release(now, node, out)
+            target = None
+            if self.assign is not None and node.problem is None:
+                target = self.assign(_node_info(node))
+            if target is None:
+                self._release(now, node, out)
+                return
+            node.step, node.target = _Step.SET_MAC, target
+            body = SetAttributeSingle(DEVICENET_CLASS, 1, MAC_ID_ATTRIBUTE, bytes((target,)))
+            self._send(now, node, PredefinedMessage.MASTER_EXPLICIT_REQUEST, body, out)
             return
         attribute = node.reads[0]
         node.reassembler.reset()
@@ -256,6 +283,9 @@ class LineProbe:
             self._finish(node, out)  # no answer: nobody at that MAC ID
         elif node.step is _Step.READ:
             node.problem = f"no answer to reading Identity attribute {node.reads[0]}"
+            self._release(now, node, out)
+        elif node.step in (_Step.SET_MAC, _Step.RESET):
+            node.problem = f"no answer to the {node.step.value} request"
             self._release(now, node, out)
         else:
             self._finish(node, out)  # the Release went unanswered: the node times it out
@@ -312,6 +342,21 @@ class LineProbe:
                 node.values[attribute] = body.encode_data()
             self._read_next(now, node, out)
             return
+        if node.step is _Step.SET_MAC:
+            if isinstance(body, ErrorResponse):
+                node.problem = f"setting MAC ID {node.target} refused: {error_text(body)}"
+                self._release(now, node, out)
+                return
+            node.step = _Step.RESET
+            body_reset = Reset(IDENTITY_CLASS, 1)
+            self._send(now, node, PredefinedMessage.MASTER_EXPLICIT_REQUEST, body_reset, out)
+            return
+        if node.step is _Step.RESET:
+            if isinstance(body, ErrorResponse):
+                node.problem = f"reset refused: {error_text(body)}"
+                self._release(now, node, out)
+                return
+            node.readdressed = node.target  # the reset drops its connections: no Release
         self._finish(node, out)
 
     def _finish(self, node: _Node, out: list[ProbeAction]) -> None:
@@ -363,6 +408,7 @@ def _node_info(node: _Node) -> NodeInfo:
         serial_number=uint(IdentityAttribute.SERIAL_NUMBER, CipType.UDINT),
         product_name=name,
         problem=node.problem,
+        readdressed=node.readdressed,
     )
 
 
