@@ -340,7 +340,7 @@ class Param:
     def scale(self, raw: int) -> float:
         """The engineering value of a raw value."""
         value = (raw + self.offset) * self.multiplier * self.base
-        return value / (self.divisor * 10**self.decimals)
+        return float(value) / float(self.divisor * 10**self.decimals)
 
 
 @dataclass(frozen=True, slots=True)
@@ -523,16 +523,16 @@ def _io_info(doc: Document, file: str) -> IoInfo:
                 r.integer(2, "default output", 0, 0xFFFF),
             )
         else:
-            kind, number = _numbered(low, ("input", "output"))
-            if kind is not None:
-                images[kind][number] = _io_entry(r, number)
-    for kind, conn in connections.items():
+            image, number = _numbered(low, ("input", "output"))
+            if image is not None:
+                images[image][number] = _io_entry(r, number)
+    for conn_type, conn in connections.items():
         for table, n, what in (
             (images["input"], conn.default_input, "Input"),
             (images["output"], conn.default_output, "Output"),
         ):
             if n and n not in table:
-                key = next(k for k, v in _CONNECTION_KEYS.items() if v is kind)
+                key = next(k for k, v in _CONNECTION_KEYS.items() if v is conn_type)
                 e = next(x for x in s.entries if x.key.lower() == key)
                 raise EdsError(file, e.line, f"[{s.name}] {e.key}", f"names {what}{n}, not defined")
     return IoInfo(default, connections, images["input"], images["output"])

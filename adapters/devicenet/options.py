@@ -24,8 +24,8 @@ from adapters.devicenet.cfw08 import (
     AssemblyPair,
     parameter_of,
 )
-from adapters.devicenet.eds import ConnectionType, Eds, EdsError, Param, load_eds
-from adapters.devicenet.errors import DeviceNetDecodeError
+from adapters.devicenet.eds import ConnectionType, Eds, Param, load_eds
+from adapters.devicenet.errors import DeviceNetDecodeError, EdsError
 from adapters.devicenet.link import REFUSED_INTERFACES
 from adapters.devicenet.scanner import IoKind
 from gateway.config import DriveConfig

@@ -270,8 +270,8 @@ class LineProbe:
                 self._release(now, node, out)
                 return
             node.step, node.target = _Step.SET_MAC, target
-            body = SetAttributeSingle(DEVICENET_CLASS, 1, MAC_ID_ATTRIBUTE, bytes((target,)))
-            self._send(now, node, PredefinedMessage.MASTER_EXPLICIT_REQUEST, body, out)
+            set_mac = SetAttributeSingle(DEVICENET_CLASS, 1, MAC_ID_ATTRIBUTE, bytes((target,)))
+            self._send(now, node, PredefinedMessage.MASTER_EXPLICIT_REQUEST, set_mac, out)
             return
         attribute = node.reads[0]
         node.reassembler.reset()
