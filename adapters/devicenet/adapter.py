@@ -54,7 +54,6 @@ from adapters.devicenet.cfw08_objects import (
     encode_attribute,
 )
 from adapters.devicenet.cip import CipClass
-from adapters.devicenet.eds import Eds
 from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import (
     ErrorResponse,
@@ -99,7 +98,7 @@ from adapters.devicenet.scanner.probe import (
     Progress,
 )
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
-from adapters.devicenet.sim.objects import Identity
+from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import (
@@ -935,19 +934,6 @@ def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
         and (not opts.product_name or info.product_name == opts.product_name)
         and (opts.product_type is None or info.product_type == opts.product_type)
         and revision_ok
-    )
-
-
-def sim_identity(eds: Eds) -> Identity:
-    """The simulated drive's Identity object from an EDS's [Device] (the serial number
-    stays the simulator's own)."""
-    dev = eds.device
-    return Identity(
-        vendor_id=dev.vendor_code,
-        product_type=dev.product_type,
-        product_code=dev.product_code,
-        revision=(dev.major_rev, dev.minor_rev),
-        product_name=dev.product_name,
     )
 
 

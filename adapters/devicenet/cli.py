@@ -23,6 +23,8 @@ from collections.abc import Callable
 from typing import Any
 
 from adapters.devicenet.cfw08 import DEFAULT_WEG_SPEED_SCALE, AssemblyPair
+from adapters.devicenet.eds import ConnectionType, Eds, load_eds
+from adapters.devicenet.errors import EdsError
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import REFUSED_INTERFACES, CanLink, LinkConfig, RxFrame
 from adapters.devicenet.options import SCANNER_VENDOR_ID
@@ -35,6 +37,7 @@ from adapters.devicenet.scanner.probe import (
     Refused,
 )
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
+from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
 
 log = logging.getLogger(__name__)
 
@@ -90,15 +93,39 @@ def add_sim(sub: Any) -> None:
         default=DEFAULT_WEG_SPEED_SCALE,
         help="100/150 counts at max rpm (default 8192)",
     )
+    p.add_argument(
+        "--eds",
+        type=_eds,
+        default=None,
+        help="an EDS file: the drives' identity and I/O sizes come from it",
+    )
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     p.set_defaults(handler=cmd_sim)
 
 
+def _eds(text: str) -> Eds:
+    try:
+        return load_eds(text)
+    except EdsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def node_configs(args: argparse.Namespace) -> list[SimNodeConfig]:
     p710 = AssemblyPair(args.assembly).p710
+    eds: Eds | None = getattr(args, "eds", None)
+    identity = None if eds is None else sim_identity(eds)
+    sizes = None
+    if eds is not None:
+        conn = eds.io.connections.get(ConnectionType.POLL)
+        inp = eds.io.inputs.get(conn.default_input) if conn is not None else None
+        out = eds.io.outputs.get(conn.default_output) if conn is not None else None
+        if inp is not None and out is not None:
+            sizes = (inp.size, out.size)
     return [
         SimNodeConfig(
+            identity=identity,
+            io_sizes=sizes,
             mac=mac,
             p710=p710,
             p313=args.p313,

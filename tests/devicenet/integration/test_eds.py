@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from adapters.devicenet.adapter import sim_identity
 from adapters.devicenet.eds import load_eds
 from adapters.devicenet.link import LinkConfig
 from adapters.devicenet.sim import SimNodeConfig
+from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
 from gateway.adapter import EventKind
 from gateway.model import CommState
 from tests.devicenet.integration.conftest import drive, rig

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import uuid
+from pathlib import Path
 
 import pytest
 
@@ -14,6 +15,7 @@ from adapters.devicenet.sim import SimNodeConfig, SimPhase, SimRunner
 from gateway.model import CommState
 from tests.devicenet.integration.conftest import drive, rig
 
+CFW08_EDS = Path(__file__).resolve().parents[3] / "config" / "eds" / "cfw08-test.eds"
 FAST = {"timeout": 0.1, "dupmac_timeout": 0.05, "window": 8}
 
 
@@ -75,3 +77,29 @@ def test_unused_channel_is_empty() -> None:
     line = LinkConfig("virtual", f"dn-{uuid.uuid4().hex[:10]}")
     nodes = asyncio.run(scan_line(line, ProbeConfig(macs=(1, 2), **FAST)))  # type: ignore[arg-type]
     assert nodes == ()
+
+
+def test_cli_scan_of_an_empty_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from gateway.cli import main
+
+    channel = f"dn-{uuid.uuid4().hex[:10]}"
+    argv = ["devicenet", "scan", "--interface", "virtual", "--channel", channel]
+    assert main([*argv, "--nodes", "1-2", "--timeout", "0.05", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert out.strip() == "[]"
+    assert "scanning MAC  2 (2/2)" in err
+
+
+def test_sim_cli_takes_an_eds() -> None:
+    import argparse
+
+    from adapters.devicenet.cli import add_sim, node_configs
+
+    parser = argparse.ArgumentParser()
+    add_sim(parser.add_subparsers())
+    args = parser.parse_args(["devicenet", "--nodes", "4", "--eds", str(CFW08_EDS)])
+    (config,) = node_configs(args)
+    assert config.identity is not None and config.identity.revision == (4, 6)
+    assert config.io_sizes == (4, 4)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["devicenet", "--nodes", "4", "--eds", "/nonexistent.eds"])
