@@ -32,7 +32,7 @@ class HeldAdapter(FakeAdapter):
         await super().run(hub)
 
 
-CONFIG = f"""
+CONFIG = """
 [zenoh]
 enabled = false
 [modbus]
