@@ -244,7 +244,7 @@ def build_line(
     """The simulated line of the command line's slaves and a config's Profibus drives."""
     from gateway.sim import FaultInjector
 
-    from .sim.devices import KINDS, make_device
+    from .sim.devices import KINDS, make_device, with_setup
     from .sim.echo import EchoSim
     from .sim.line import SimLine
     from .sim.slave import DpSlave
@@ -258,7 +258,8 @@ def build_line(
         line.add(DpSlave(spec.address, device))
     for drive in _profibus_drives(config):
         inner = replace(drive, options=drive.options.profile)
-        line.add(DpSlave(drive.address, make_device(drive.device, inner)))
+        sim = with_setup(make_device(drive.device, inner), drive.device, drive.options.setup)
+        line.add(DpSlave(drive.address, sim))
     return line
 
 

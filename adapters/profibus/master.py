@@ -240,6 +240,10 @@ class Master:
 
     # ------------------------------------------------------------------ views
 
+    def slave_params(self) -> tuple[SlaveParams, ...]:
+        """What each slave is sent at start-up (Set_Prm, Chk_Cfg), by address."""
+        return tuple(sl.params for sl in self._slaves.values())
+
     @property
     def addresses(self) -> tuple[int, ...]:
         return tuple(self._slaves)
@@ -588,7 +592,7 @@ class Master:
             text = f"Cfg_Fault: the slave refused the configuration {sent}; it has {has}"
         else:
             text = f"Cfg_Fault: the slave refused the configuration {sent} (Get_Cfg: {_show(t)})"
-        text += _slave_words(sl.last_diag)
+        text += _origin(sl.params) + _slave_words(sl.last_diag)
         self._fault(sl, FaultKind.CFG_FAULT, text, now)
 
     def _reply_data(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
@@ -746,11 +750,12 @@ class Master:
         p = sl.params
         text = (
             f"Prm_Fault: the slave refused the parameters (Ident_Number 0x{p.ident_number:04X}, "
-            f"{len(p.user_prm)} bytes of user parameters)"
+            f"{len(p.user_prm)} bytes of user parameters"
+            + (f": {p.user_prm.hex(' ').upper()})" if p.user_prm else ")")
         )
         if diag.ident_number != p.ident_number:
             text += f"; the slave reports Ident_Number 0x{diag.ident_number:04X}"
-        return text + _slave_words(diag)
+        return text + _origin(p) + _slave_words(diag)
 
     # ------------------------------------------------------------------ state changes
 
@@ -1101,6 +1106,11 @@ _REFUSALS: Final[dict[ResponseStatus, str]] = {
     ResponseStatus.UE: "the slave answered UE (user error)",
     ResponseStatus.RR: "the slave has no resources (RR)",
 }
+
+
+def _origin(p: SlaveParams) -> str:
+    """Where the bytes sent come from, when not from the profile (a GSD file and module)."""
+    return f"; sent as {p.origin} says" if p.origin else ""
 
 
 def _slave_words(diag: SlaveDiag | None) -> str:
