@@ -825,11 +825,11 @@ def default_user_prm(gsd: Gsd, chosen: Sequence[GsdModule]) -> tuple[bytearray, 
     data = bytearray(size)
     data[: len(gsd.user_prm_data)] = gsd.user_prm_data
     slots: list[_Slot] = []
-    _apply(gsd, data, 0, gsd.placements, slots, "station")
+    _apply(gsd, data, 0, gsd.placements, slots=slots, where="station")
     for m in chosen:
         base = len(data)
         data.extend(bytes(m.prm_len))
-        _apply(gsd, data, base, m.placements, slots, f"module {m.name!r}")
+        _apply(gsd, data, base, m.placements, slots=slots, where=f"module {m.name!r}")
     return data, slots
 
 
@@ -838,6 +838,7 @@ def _apply(
     data: bytearray,
     base: int,
     placements: Iterable[PrmPlacement],
+    *,
     slots: list[_Slot],
     where: str,
 ) -> None:
