@@ -170,6 +170,7 @@ class PrmPlacement:
     offset: int
     ref: int | None = None
     const: bytes = b""
+    line: int = field(default=0, compare=False)
 
 
 @dataclass(frozen=True)
@@ -275,7 +276,7 @@ def _logical_lines(text: str) -> Iterator[_Line]:
     """Comments removed, continuations joined; a line's number is its first physical line."""
     pending = ""
     start = 0
-    for number, raw in enumerate(text.splitlines(), 1):
+    for number, raw in enumerate(_LINE_BREAK.split(text), 1):  # not splitlines: 0x85 is text
         body = _strip_comment(raw).rstrip()
         if not pending:
             start = number
@@ -292,6 +293,7 @@ def _logical_lines(text: str) -> Iterator[_Line]:
         yield _Line(start, pending.strip(), "")
 
 
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _NUMBER = re.compile(r"^(0x[0-9a-f]+|-?\d+)$", re.IGNORECASE)
 _INDEXED = re.compile(r"^([a-z_0-9.]+)\s*\(\s*(-?\w+)\s*\)$", re.IGNORECASE)
 _STRING = re.compile(r'^"([^"]*)"\s*(.*)$', re.DOTALL)
@@ -440,10 +442,10 @@ def _placement(r: _Reader, line: _Line, state: _State) -> PrmPlacement | None:
     if not 0 <= offset < MAX_USER_PRM:
         raise r.error(line, line.key, f"offset {offset} is outside 0-{MAX_USER_PRM - 1}")
     if name == "ext_user_prm_data_const":
-        return PrmPlacement(offset, const=r.byte_list(line, line.value))
+        return PrmPlacement(offset, const=r.byte_list(line, line.value), line=line.number)
     ref = r.number(line, line.value)
     state.ref_lines.setdefault(ref, line.number)
-    return PrmPlacement(offset, ref=ref)
+    return PrmPlacement(offset, ref=ref, line=line.number)
 
 
 def _block_end(r: _Reader, lines: list[_Line], i: int, end: str) -> int:
@@ -636,7 +638,8 @@ def _validate(r: _Reader, gsd: Gsd, state: _State) -> None:
         size = len(p.const) if p.ref is None else _ext_size(gsd, p.ref)
         if p.offset + size > total:
             raise r.error(
-                0, "Ext_User_Prm_Data_Ref" if p.ref is not None else "Ext_User_Prm_Data_Const",
+                p.line,
+                "Ext_User_Prm_Data_Ref" if p.ref is not None else "Ext_User_Prm_Data_Const",
                 f"offset {p.offset} + {size} bytes is beyond User_Prm_Data_Len = {total}",
             )  # fmt: skip
 
