@@ -133,3 +133,17 @@ async def test_a_wrong_module_is_a_cfg_fault_whose_event_names_the_bytes_and_the
         f"sent as GSD {GSD_DIR / 'TEST_CFW700.gsd'}, module '4 words I/O' says"
     )
     assert line[4].device.refusal == ("modules ['4 words I/O'] do not fit the telegram (4, 4)")
+
+
+async def test_a_prm_fault_event_names_the_user_data_sent_and_where_it_came_from() -> None:
+    drive = {"id": "cfw700", "device": "CFW700", "address": 4, "user_prm": [1, 2]}
+    async with running([drive]) as (_adapter, hub):
+        with hub.subscribe_events() as events:
+            async with asyncio.timeout(10):
+                event = await events.get()
+                while event.kind is not EventKind.CONFIG:
+                    event = await events.get()
+    assert event.text == (
+        "Prm_Fault: the slave refused the parameters (Ident_Number 0x0C70, 2 bytes of user "
+        "parameters: 01 02); sent as user_prm of the drive's config says"
+    )
