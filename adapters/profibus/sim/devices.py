@@ -50,7 +50,8 @@ def with_setup(sim: SimDevice, device: Device, override: Any) -> SimDevice:
         return sim
     from .gsdsim import GsdSim
 
-    wrapped: SimDevice = GsdSim(sim, gsd, forward_prm=device in FORWARD_PRM)
+    modules = tuple(getattr(override, "modules", ()))
+    wrapped: SimDevice = GsdSim(sim, gsd, forward_prm=device in FORWARD_PRM, modules=modules)
     return wrapped
 
 

@@ -28,17 +28,29 @@ from adapters.profibus.gsd import (
 )
 
 
+SEARCH_DEPTH = 8  # modules tried in a row for Get_Cfg before the first Chk_Cfg
+
+
 class GsdSim:
     """A device simulator behind a GSD file's start-up checks (see the module docstring)."""
 
-    def __init__(self, device: Any, gsd: Gsd, *, forward_prm: bool = False) -> None:
+    def __init__(
+        self,
+        device: Any,
+        gsd: Gsd,
+        *,
+        forward_prm: bool = False,
+        modules: tuple[str, ...] = (),
+    ) -> None:
         self.device = device
         self.gsd = gsd
         self.ident_number = gsd.ident_number
         self.forward_prm = forward_prm  # the device reads the user data itself (MCD 600)
         ids = decode_identifiers(device.expected_cfg())
         self.sizes = (total_input_bytes(ids), total_output_bytes(ids))
-        self.modules: tuple[GsdModule, ...] | None = None  # as the last Chk_Cfg named them
+        own = tuple(m for m in (gsd.module(name) for name in modules) if m is not None)
+        # the slave's own modules (from its config), then as the last Chk_Cfg named them
+        self.modules: tuple[GsdModule, ...] | None = own if own and self._fits(own) else None
         self.user_prm: bytes = b""
         self.refusal = ""  # why the last Set_Prm or Chk_Cfg was refused
 
@@ -51,10 +63,33 @@ class GsdSim:
         return (ins, outs) == self.sizes
 
     def expected_cfg(self) -> bytes:
-        for m in self.gsd.modules:
-            if self._fits((m,)):
-                return m.config
+        """Get_Cfg: the modules last accepted, else the first row of the file's modules
+        that fits the telegram (a single module first), else the device's own bytes."""
+        if self.modules is not None:
+            return b"".join(m.config for m in self.modules)
+        row = self._first_row((), 1 if not self.gsd.modular else self._most())
+        if row is not None:
+            return b"".join(m.config for m in row)
         return bytes(self.device.expected_cfg())
+
+    def _most(self) -> int:
+        return min(self.gsd.get("max_module") or SEARCH_DEPTH, SEARCH_DEPTH)
+
+    def _first_row(self, row: tuple[GsdModule, ...], most: int) -> tuple[GsdModule, ...] | None:
+        """Depth-first over the modules in file order, never past the telegram's sizes."""
+        ins = sum(m.input_bytes for m in row)
+        outs = sum(m.output_bytes for m in row)
+        if row and (ins, outs) == self.sizes:
+            return row
+        if len(row) >= most or ins > self.sizes[0] or outs > self.sizes[1]:
+            return None
+        for m in self.gsd.modules:
+            if not m.input_bytes and not m.output_bytes:
+                continue  # an empty slot adds nothing: never a way forward
+            found = self._first_row((*row, m), most)
+            if found is not None:
+                return found
+        return None
 
     def check_cfg(self, cfg: bytes) -> bool:
         modules = match_modules(self.gsd, bytes(cfg))
