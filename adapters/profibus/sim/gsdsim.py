@@ -27,7 +27,6 @@ from adapters.profibus.gsd import (
     station_prm_len,
 )
 
-
 SEARCH_DEPTH = 8  # modules tried in a row for Get_Cfg before the first Chk_Cfg
 
 
