@@ -154,7 +154,42 @@ def parse_bus_options(t: Table) -> ProfibusOptions:
     for key, reason in bus_problems(options.bus_params()):
         raise t.error(key, reason)
     _check_addresses(t, options.master_address)
+    _check_gsd_bus(t, options)
     return options
+
+
+def _check_gsd_bus(t: Table, options: ProfibusOptions) -> None:
+    """Each drive's GSD must support the line's baud rate, and its MaxTsdr at that rate
+    must fit the line's max_tsdr (the master waits that long for a reply)."""
+    drives = t.data.get("drives", [])
+    if not isinstance(drives, list):
+        return
+    for i, drive in enumerate(drives):
+        name = drive.get("gsd") if isinstance(drive, Mapping) else None
+        if not isinstance(name, str):
+            continue
+        try:
+            gsd = load_gsd(_gsd_path(t, name))
+        except GsdError:
+            continue  # the drive's own keys report it
+        key = f"{t.key('drives')}[{i}].gsd"
+        if not gsd.supports(options.baudrate):
+            rates = ", ".join(str(b) for b, _ in gsd.baud_rates) or "none"
+            raise ConfigError(
+                t.file, key, f"{gsd.path} does not support {options.baudrate} baud "
+                f"(its *_supp keys: {rates})",
+            )  # fmt: skip
+        tsdr = gsd.max_tsdr(options.baudrate)
+        if tsdr is not None and tsdr > options.max_tsdr:
+            raise ConfigError(
+                t.file, key, f"{gsd.path} gives MaxTsdr = {tsdr} bit times at "
+                f"{options.baudrate} baud, above the line's max_tsdr = {options.max_tsdr}",
+            )  # fmt: skip
+
+
+def _gsd_path(t: Table, name: str) -> Path:
+    path = Path(name)
+    return path if path.is_absolute() else Path(t.file).parent / path
 
 
 def _port(t: Table, simulate: bool) -> str | None:
@@ -221,9 +256,7 @@ _NOT_WITH_GSD: Final = ("cfg", "user_prm", "ident_number")
 
 
 def _gsd_setup(t: Table) -> SetupOverride:
-    path = Path(t.string("gsd"))
-    if not path.is_absolute():
-        path = Path(t.file).parent / path
+    path = _gsd_path(t, t.string("gsd"))
     for key in _NOT_WITH_GSD:
         if t.has(key):
             t.raw(key)

@@ -121,3 +121,14 @@ def test_check_config_reports_the_difference(
     assert main(["check-config", str(site)]) == 2
     err = capsys.readouterr().err
     assert "gives 8 bytes in and 8 out; the drive's profile (words = 2" in err
+
+
+def test_the_lines_baud_rate_and_max_tsdr_must_suit_the_gsd() -> None:
+    drive = {"id": "d", "device": "CFW-11", "address": 3, "gsd": "TEST_CFW11.gsd"}
+    drive["module"] = "2 words I/O (P0922 = 1)"
+    table: dict[str, Any] = {"adapter": "profibus", "simulate": True, "drives": [drive]}
+    with pytest.raises((ConfigError, ConfigErrors), match=r"does not support 45450 baud"):
+        parse({"buses": {"pb": {**table, "baudrate": 45450}}}, CONFIG)
+    with pytest.raises((ConfigError, ConfigErrors), match=r"MaxTsdr = 50 bit times at 12000000"):
+        parse({"buses": {"pb": {**table, "baudrate": 12000000, "max_tsdr": 40}}}, CONFIG)
+    parse({"buses": {"pb": {**table, "baudrate": 9600}}}, CONFIG)
