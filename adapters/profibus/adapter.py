@@ -160,7 +160,9 @@ class ProfibusAdapter:
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
         profile_class = cls.profile_class(drive.device)
         profile_options = profile_class.parse_options(table, drive)
-        builtin = profile_class(replace(drive, options=profile_options)).setup()
+        builtin = None  # the profile's own setup: only to check a GSD module or cfg against
+        if table.has("gsd") or table.has("cfg"):
+            builtin = profile_class(replace(drive, options=profile_options)).setup()
         return opts.parse_drive_options(table, drive, profile_options, builtin)
 
     @classmethod
