@@ -305,3 +305,26 @@ def test_render_then_parse_gives_the_model_back(model: g.Gsd) -> None:
     assert g.parse(text, "r.gsd") == model
     again = g.parse(text.encode("iso-8859-1").decode("iso-8859-1"), "r.gsd")
     assert g.render(again) == text
+
+
+@given(gsd_models(), st.data())
+def test_the_user_data_built_from_a_model_is_what_a_slave_checking_it_accepts(
+    model: g.Gsd, data: st.DataObject
+) -> None:
+    module = data.draw(st.sampled_from(model.modules))
+    values: dict[str, int | str] = {}
+    for e in model.ext_user_prm:
+        if data.draw(st.booleans()):
+            values[e.name] = data.draw(
+                st.sampled_from(e.allowed) if e.allowed else st.integers(e.minimum, e.maximum)
+            )
+    names = [e.name.casefold() for e in model.ext_user_prm]
+    values = {k: v for k, v in values.items() if names.count(k.casefold()) == 1}
+    setup = g.build_setup(model, [module.name], values)
+    assert g.check_user_prm(model, (module,), setup.user_prm) is None
+    assert len(setup.user_prm) == g.station_prm_len(model) + module.prm_len
+    _, slots = g.default_user_prm(model, (module,))
+    for slot in slots:
+        if slot.ext.name in values:
+            assert slot.ext.get(setup.user_prm, slot.offset) == values[slot.ext.name]
+    assert setup.cfg == module.config and setup.ident_number == model.ident_number
