@@ -439,7 +439,24 @@ class ProfibusAdapter:
     def _on_fault(self, action: SlaveFault) -> None:
         drive = self._drive_at(action.address)
         if drive is not None:
-            self._event(drive, EventKind.CONFIG, action.text, fault=action.kind.value)
+            text = action.text + self._gsd_hint(drive, action.slave_cfg)
+            self._event(drive, EventKind.CONFIG, text, fault=action.kind.value)
+
+    def _gsd_hint(self, drive: _Drive, slave_cfg: bytes | None) -> str:
+        """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""
+        override = self._overrides.get(drive.id)
+        if override is None or override.gsd is None or slave_cfg is None:
+            return ""
+        from .gsd import match_modules
+
+        modules = match_modules(override.gsd, slave_cfg)
+        if modules is None:
+            return "; the slave's configuration is no module of the GSD"
+        names = ", ".join(repr(m.name) for m in modules)
+        return (
+            f"; the slave's configuration is GSD module {names}: configure that, "
+            "or program the drive for the one sent"
+        )
 
     def _on_inputs(self, action: InputsReceived) -> None:
         drive = self._drive_at(action.address)

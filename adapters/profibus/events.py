@@ -141,6 +141,7 @@ class SlaveFault:
     address: int
     kind: FaultKind
     text: str
+    slave_cfg: bytes | None = None  # Cfg_Fault: what Get_Cfg said the slave has
 
 
 @dataclass(frozen=True)

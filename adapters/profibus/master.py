@@ -587,13 +587,15 @@ class Master:
 
     def _reply_get_cfg(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         sent = describe_cfg(sl.params.cfg)
+        slave_cfg: bytes | None = None
         if isinstance(t, DataTelegram) and t.ssap == SlaveSap.GET_CFG:
-            has = describe_cfg(bytes(t.data))
+            slave_cfg = bytes(t.data)
+            has = describe_cfg(slave_cfg)
             text = f"Cfg_Fault: the slave refused the configuration {sent}; it has {has}"
         else:
             text = f"Cfg_Fault: the slave refused the configuration {sent} (Get_Cfg: {_show(t)})"
         text += _origin(sl.params) + _slave_words(sl.last_diag)
-        self._fault(sl, FaultKind.CFG_FAULT, text, now)
+        self._fault(sl, FaultKind.CFG_FAULT, text, now, slave_cfg)
 
     def _reply_data(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         """Data_Exchange reply (1.5 step 6): DL with inputs, E5 without, DH: diag waits."""
@@ -759,13 +761,15 @@ class Master:
 
     # ------------------------------------------------------------------ state changes
 
-    def _fault(self, sl: _Slave, kind: FaultKind, text: str, now: float) -> None:
+    def _fault(
+        self, sl: _Slave, kind: FaultKind, text: str, now: float, slave_cfg: bytes | None = None
+    ) -> None:
         changed = sl.fault != text
         sl.fault = text
         sl.retry_at = now + self.bus.fault_retry
         self._enter(sl, SlaveState.FAULT, now, text)
         if changed:
-            self._out.append(SlaveFault(sl.address, kind, text))
+            self._out.append(SlaveFault(sl.address, kind, text, slave_cfg))
 
     def _enter(self, sl: _Slave, new: SlaveState, now: float, reason: str = "") -> None:
         old = sl.state

@@ -130,7 +130,9 @@ async def test_a_wrong_module_is_a_cfg_fault_whose_event_names_the_bytes_and_the
     assert event.text == (
         "Cfg_Fault: the slave refused the configuration C0 C3 C3 (8 bytes in, 8 bytes out); "
         "it has C0 C1 C1 (4 bytes in, 4 bytes out); "
-        f"sent as GSD {GSD_DIR / 'TEST_CFW700.gsd'}, module '4 words I/O' says"
+        f"sent as GSD {GSD_DIR / 'TEST_CFW700.gsd'}, module '4 words I/O' says; "
+        "the slave's configuration is GSD module '2 words I/O': configure that, or program "
+        "the drive for the one sent"
     )
     refusing = line[4].device
     assert isinstance(refusing, GsdSim)
