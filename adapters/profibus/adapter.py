@@ -158,8 +158,12 @@ class ProfibusAdapter:
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
-        profile_options = cls.profile_class(drive.device).parse_options(table, drive)
-        return opts.parse_drive_options(table, drive, profile_options)
+        profile_class = cls.profile_class(drive.device)
+        profile_options = profile_class.parse_options(table, drive)
+        builtin = None  # the profile's own setup: only to check a GSD module or cfg against
+        if table.has("gsd") or table.has("cfg"):
+            builtin = profile_class(replace(drive, options=profile_options)).setup()
+        return opts.parse_drive_options(table, drive, profile_options, builtin)
 
     @classmethod
     def profile_class(cls, device: Device) -> Any:
@@ -179,11 +183,14 @@ class ProfibusAdapter:
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
+        self._overrides: dict[str, opts.SetupOverride] = {}
         for d in bus.drives:
             drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
+            if drive_opts is not None and drive_opts.setup is not None:
+                self._overrides[d.id] = drive_opts.setup
             inner = replace(d, options=drive_opts.profile if drive_opts else d.options)
             profile: DpProfile = self.profile_class(d.device)(inner)
-            setup = profile.setup()
+            setup = _overridden(profile.setup(), drive_opts.setup if drive_opts else None)
             drive = _Drive(config=inner, profile=profile, setup=setup)
             self._drives[d.id] = drive
             self._by_address[d.address] = drive
@@ -341,14 +348,21 @@ class ProfibusAdapter:
                 future.cancel()
 
     def _start_simulation(self) -> str:
-        from .sim.devices import SIM_DEVICES, make_device
+        from .sim.devices import SIM_DEVICES, make_device, with_setup
         from .sim.line import SimLine
         from .sim.port import SimPort
         from .sim.slave import DpSlave
 
         table = self.sim_devices if self.sim_devices is not None else SIM_DEVICES
         line = SimLine(
-            DpSlave(d.address, make_device(d.config.device, d.config, table))
+            DpSlave(
+                d.address,
+                with_setup(
+                    make_device(d.config.device, d.config, table),
+                    d.config.device,
+                    self._overrides.get(d.id),
+                ),
+            )
             for d in self._drives.values()
         )
         sim, path = SimPort.on_pty(line)
@@ -425,7 +439,24 @@ class ProfibusAdapter:
     def _on_fault(self, action: SlaveFault) -> None:
         drive = self._drive_at(action.address)
         if drive is not None:
-            self._event(drive, EventKind.CONFIG, action.text, fault=action.kind.value)
+            text = action.text + self._gsd_hint(drive, action.slave_cfg)
+            self._event(drive, EventKind.CONFIG, text, fault=action.kind.value)
+
+    def _gsd_hint(self, drive: _Drive, slave_cfg: bytes | None) -> str:
+        """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""
+        override = self._overrides.get(drive.id)
+        if override is None or override.gsd is None or slave_cfg is None:
+            return ""
+        from .gsd import match_modules
+
+        modules = match_modules(override.gsd, slave_cfg)
+        if modules is None:
+            return "; the slave's configuration is no module of the GSD"
+        names = ", ".join(repr(m.name) for m in modules)
+        return (
+            f"; the slave's configuration is GSD module {names}: configure that, "
+            "or program the drive for the one sent"
+        )
 
     def _on_inputs(self, action: InputsReceived) -> None:
         drive = self._drive_at(action.address)
@@ -656,6 +687,22 @@ def _ignore(data: bytes, now: float) -> None:
     return
 
 
+def _overridden(setup: SlaveSetup, override: opts.SetupOverride | None) -> SlaveSetup:
+    """The profile's setup with what a GSD file or explicit config keys give instead."""
+    if override is None:
+        return setup
+    changes: dict[str, Any] = {"origin": override.origin}
+    if override.ident_number is not None:
+        changes["ident_number"] = override.ident_number
+    if override.cfg is not None:
+        changes["cfg"] = override.cfg
+    if override.user_prm is not None:
+        changes["user_prm"] = override.user_prm
+    if override.dpv1 is not None:
+        changes["dpv1"] = override.dpv1
+    return replace(setup, **changes)
+
+
 def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlaveParams:
     return SlaveParams(
         address=address,
@@ -667,6 +714,7 @@ def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlavePara
         dpv1=setup.dpv1,
         group=setup.group,
         watchdog=watchdog or None,
+        origin=setup.origin,
     )
 
 

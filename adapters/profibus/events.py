@@ -141,6 +141,7 @@ class SlaveFault:
     address: int
     kind: FaultKind
     text: str
+    slave_cfg: bytes | None = None  # Cfg_Fault: what Get_Cfg said the slave has
 
 
 @dataclass(frozen=True)
@@ -203,6 +204,7 @@ class SlaveParams:
     dpv1: bool = True
     group: int = 0  # Group_Ident bits
     watchdog: float | None = 0.5  # s; None = watchdog off
+    origin: str = ""  # "GSD <file>, module '...'": named in Cfg_Fault / Prm_Fault events
 
     def set_prm(self, min_tsdr: int) -> SetPrm:
         """The Set_Prm PDU: locked to this master, watchdog, min TSDR, DP-V1 bytes (1.6)."""

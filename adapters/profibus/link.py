@@ -141,10 +141,7 @@ def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
     except termios.error:
         if not is_pty(port):
             raise
-        # a pty refuses some rates (EINVAL) but ignores the rate anyway
-        log.info("%s is a pty: baud rate %d not settable there, ignored", port, baudrate)
-        ser.baudrate = 9600
-        ser.open()
+        _open_pty_anyway(ser, port, baudrate)
     if port.startswith("socket://"):
         _no_delay(ser)
     try:
@@ -153,6 +150,23 @@ def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
         ser.close()
         raise
     return ser
+
+
+def _open_pty_anyway(ser: Any, port: str, baudrate: int) -> None:
+    """Open a pty that refused the 8E1 settings (EINVAL); it ignores rate and parity anyway.
+
+    A pty drops even parity (PARENB): asked for settings where only the parity differs from
+    what it has (a second open at the same rate), tcsetattr fails with EINVAL. So without
+    parity first, then also at 9600 (a rate every pty has). Retrying at 9600 with parity on
+    failed at 9600 itself: the intermittent ``(22, 'Invalid argument')`` (issue 20).
+    """
+    log.info("%s is a pty: 8E1 at %d baud not settable there, ignored", port, baudrate)
+    ser.parity = serial.PARITY_NONE
+    try:
+        ser.open()
+    except termios.error:
+        ser.baudrate = 9600
+        ser.open()
 
 
 def set_rs485(ser: Any, port: str, mode: Rs485) -> bool:

@@ -240,6 +240,10 @@ class Master:
 
     # ------------------------------------------------------------------ views
 
+    def slave_params(self) -> tuple[SlaveParams, ...]:
+        """What each slave is sent at start-up (Set_Prm, Chk_Cfg), by address."""
+        return tuple(sl.params for sl in self._slaves.values())
+
     @property
     def addresses(self) -> tuple[int, ...]:
         return tuple(self._slaves)
@@ -583,13 +587,15 @@ class Master:
 
     def _reply_get_cfg(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         sent = describe_cfg(sl.params.cfg)
+        slave_cfg: bytes | None = None
         if isinstance(t, DataTelegram) and t.ssap == SlaveSap.GET_CFG:
-            has = describe_cfg(bytes(t.data))
+            slave_cfg = bytes(t.data)
+            has = describe_cfg(slave_cfg)
             text = f"Cfg_Fault: the slave refused the configuration {sent}; it has {has}"
         else:
             text = f"Cfg_Fault: the slave refused the configuration {sent} (Get_Cfg: {_show(t)})"
-        text += _slave_words(sl.last_diag)
-        self._fault(sl, FaultKind.CFG_FAULT, text, now)
+        text += _origin(sl.params) + _slave_words(sl.last_diag)
+        self._fault(sl, FaultKind.CFG_FAULT, text, now, slave_cfg)
 
     def _reply_data(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         """Data_Exchange reply (1.5 step 6): DL with inputs, E5 without, DH: diag waits."""
@@ -746,21 +752,24 @@ class Master:
         p = sl.params
         text = (
             f"Prm_Fault: the slave refused the parameters (Ident_Number 0x{p.ident_number:04X}, "
-            f"{len(p.user_prm)} bytes of user parameters)"
+            f"{len(p.user_prm)} bytes of user parameters"
+            + (f": {p.user_prm.hex(' ').upper()})" if p.user_prm else ")")
         )
         if diag.ident_number != p.ident_number:
             text += f"; the slave reports Ident_Number 0x{diag.ident_number:04X}"
-        return text + _slave_words(diag)
+        return text + _origin(p) + _slave_words(diag)
 
     # ------------------------------------------------------------------ state changes
 
-    def _fault(self, sl: _Slave, kind: FaultKind, text: str, now: float) -> None:
+    def _fault(
+        self, sl: _Slave, kind: FaultKind, text: str, now: float, slave_cfg: bytes | None = None
+    ) -> None:
         changed = sl.fault != text
         sl.fault = text
         sl.retry_at = now + self.bus.fault_retry
         self._enter(sl, SlaveState.FAULT, now, text)
         if changed:
-            self._out.append(SlaveFault(sl.address, kind, text))
+            self._out.append(SlaveFault(sl.address, kind, text, slave_cfg))
 
     def _enter(self, sl: _Slave, new: SlaveState, now: float, reason: str = "") -> None:
         old = sl.state
@@ -1101,6 +1110,11 @@ _REFUSALS: Final[dict[ResponseStatus, str]] = {
     ResponseStatus.UE: "the slave answered UE (user error)",
     ResponseStatus.RR: "the slave has no resources (RR)",
 }
+
+
+def _origin(p: SlaveParams) -> str:
+    """Where the bytes sent come from, when not from the profile (a GSD file and module)."""
+    return f"; sent as {p.origin} says" if p.origin else ""
 
 
 def _slave_words(diag: SlaveDiag | None) -> str:

@@ -62,6 +62,7 @@ class SlaveSetup:
     output_len: int = 0  # bytes of the output telegram (master -> slave)
     dpv1: bool = True  # DP-V1 enabled in the Set_Prm DP-V1 status bytes
     group: int = 0  # Global_Control group bits
+    origin: str = ""  # where cfg/ident/user_prm come from when not built in (GSD file, module)
 
 
 @dataclass(frozen=True, slots=True)

@@ -278,3 +278,17 @@ async def test_the_driver_writes_the_next_request_before_handling_the_other_acti
         finally:
             driver.stop()
             link.close()
+
+
+@pytest.mark.parametrize("baudrate", [9600, 19200, 500000])
+def test_a_pty_opens_again_at_the_same_rate(baudrate: int) -> None:
+    """The intermittent ``(22, 'Invalid argument')`` of a second scan at 9600 (issue 20).
+
+    A pty drops even parity (PARENB); asked again for the same settings, only the parity
+    differs from what it has, and tcsetattr fails with EINVAL. The fallback used to retry
+    at 9600 with parity still on: at 9600 that is the same request, refused again.
+    """
+    with pty_pair() as (_, path):
+        for _ in range(3):
+            ser = open_port(path, baudrate)
+            ser.close()

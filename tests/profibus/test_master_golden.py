@@ -22,7 +22,7 @@ from adapters.profibus.master import (
     SlaveState,
     SlaveUp,
 )
-from adapters.profibus.scan import Scanner, status_request
+from adapters.profibus.scan import Scanner, SlaveInfo, status_request
 from adapters.profibus.timing import BusParams
 
 from .script import Script, h
@@ -156,8 +156,21 @@ def test_sync_and_freeze_go_out_after_the_slaves() -> None:
 
 def test_fdl_status_request_of_the_scan() -> None:
     assert status_request(5, 2) == h("10 05 02 49 50 16")  # 1.2 example
-    scanner = Scanner(BUS, [5])
+    scanner = Scanner(BUS, [5], identify=False)
     script = Script(scanner)  # type: ignore[arg-type]
     script.sent("10 05 02 49 50 16")
     script.answer("10 02 05 00 07 16")  # FC 00: a slave, OK
     assert scanner.done and set(scanner.found) == {5}
+
+
+def test_the_scan_reads_a_slaves_ident_number_and_configuration() -> None:
+    scanner = Scanner(BUS, [5])
+    script = Script(scanner)  # type: ignore[arg-type]
+    script.sent("10 05 02 49 50 16")
+    script.answer("10 02 05 00 07 16")  # a slave
+    script.sent(FIRST_DIAG)  # 1.8: Slave_Diag, read-only
+    script.answer(DIAG_FRESH)  # Ident_Number 0x80B5, no master (FF)
+    script.sent("68 05 05 68 85 82 6D 3B 3E ED 16")  # 1.7: Get_Cfg to SAP 59
+    script.answer("68 06 06 68 82 85 08 3E 3B F1 79 16")  # F1
+    assert scanner.done and scanner.probed == 1
+    assert scanner.slaves[5] == SlaveInfo(0x80B5, 0xFF, b"\xf1")
