@@ -59,7 +59,7 @@ def test_a_gsd_gives_ident_cfg_and_user_data() -> None:
     [
         (
             {"gsd": "TEST_CFW700.gsd", "module": "4 words I/O"},
-            "buses.pb.drives[0].module: GSD {dir}/TEST_CFW700.gsd, module '4 words I/O' gives "
+            "buses.pb.drives[d].module: GSD {dir}/TEST_CFW700.gsd, module '4 words I/O' gives "
             "8 bytes in and 8 out; the drive's profile (words = 2, P0922 (CFW320: P751) = 1) "
             "has 4 in and 4 out",
         ),
@@ -86,18 +86,18 @@ def test_a_gsd_gives_ident_cfg_and_user_data() -> None:
             "(MCD 600 mode = 'parameter') has 10 in and 7 out",
         ),
         ({"cfg": [0xF3]}, "cfg = [0xF3] gives 8 bytes in and 8 out"),
-        ({"cfg": [0x40]}, "buses.pb.drives[0].cfg: not Chk_Cfg identifiers"),
-        ({"module": "2 words I/O"}, "buses.pb.drives[0].module: needs gsd"),
+        ({"cfg": [0x40]}, "buses.pb.drives[d].cfg: not Chk_Cfg identifiers"),
+        ({"module": "2 words I/O"}, "buses.pb.drives[d].module: needs gsd"),
         ({"gsd": "TEST_CFW700.gsd"}, "module: is required with gsd (the modules of"),
         (
             {"gsd": "TEST_CFW700.gsd", "module": "2 words I/O", "cfg": [0xF1]},
-            "buses.pb.drives[0].cfg: the GSD file gives it",
+            "buses.pb.drives[d].cfg: the GSD file gives it",
         ),
         (
             {"gsd": "TEST_CFW700.gsd", "module": "2 words I/O", "prm": {"Test: word limit": 40000}},
-            "buses.pb.drives[0].prm.Test: word limit: 40000 is outside its range 0-30000",
+            "buses.pb.drives[d].prm.Test: word limit: 40000 is outside its range 0-30000",
         ),
-        ({"gsd": "none.gsd", "module": "x"}, "buses.pb.drives[0].gsd: {dir}/none.gsd: cannot read"),
+        ({"gsd": "none.gsd", "module": "x"}, "buses.pb.drives[d].gsd: {dir}/none.gsd: cannot read"),
         (
             {"gsd": "TEST_CFW700.gsd", "module": "2 words I/O", "modules": ["x"]},
             "give module (one) or modules (a list), not both",
