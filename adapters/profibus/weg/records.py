@@ -3,8 +3,9 @@
 Record 47 (CFW-11 4.2.4, CFW700 5.2.4, CFW320 5.2.4): DS_Write(slot 0, index 47, request),
 then DS_Read(slot 0, index 47, 240) repeated while the drive answers "response not
 available" (Error_Code_1 C3h), several parameters per request. Record 48 (CFW-11 4.2.6,
-CFW700 5.2.5, CFW320 5.2.4): a read is DS_Write of the 2-byte number then DS_Read (240 bytes asked, as
-in the 4.2.3 telegrams) of the 2-byte value; a change is one DS_Write of number and value. Values are raw 16-bit words.
+CFW700 5.2.5, CFW320 5.2.4): a read is DS_Write of the 2-byte number then DS_Read
+(240 bytes asked, as in the 4.2.3 telegrams) of the 2-byte value; a change is one DS_Write
+of number and value. Values are raw 16-bit words.
 
 Refusals raise :class:`gateway.errors.ParameterError` with the drive's own text and code:
 the record 47 error number (Table 4.2 / 5.2) or the DP-V1 Error_Code_1 (4.2.3 / 5.2.3).
