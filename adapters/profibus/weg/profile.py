@@ -22,7 +22,13 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from adapters.profibus.cfg import CompactId, IoDirection
 from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
-from adapters.profibus.profile import DiagEvent, EventSink, RecordChannel, SlaveSetup
+from adapters.profibus.profile import (
+    AddressRange,
+    DiagEvent,
+    EventSink,
+    RecordChannel,
+    SlaveSetup,
+)
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedScale
@@ -116,6 +122,13 @@ class WegProfile:
 
     device: ClassVar[Device]
     spec: ClassVar[ModelSpec]
+    addresses: ClassVar[AddressRange]  # from the spec, set for each subclass
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        spec = cls.__dict__.get("spec")
+        if spec is not None:
+            cls.addresses = AddressRange(*spec.address_range, spec.address_source)
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:

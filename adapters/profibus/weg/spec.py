@@ -160,6 +160,7 @@ class ModelSpec:
     pnu_digits: int  # how the manual writes numbers: P0680 (4) or P680 (3)
     address_param: int  # CFW-11/CFW700 P0918; CFW320 P750
     address_range: tuple[int, int]  # CFW-11 P0918 1-125; CFW700 P0918 1-126; CFW320 P750 1-126
+    address_source: str  # where the manual gives the range
     address_needs_power_cycle: bool  # CFW-11 P0918 note; the others: when not exchanging
     telegram_param: int  # CFW-11/CFW700 P0922; CFW320 P751
     max_words: int  # CFW-11/CFW700 10 (P0922 1-9); CFW320 6 (P751 1-5)
@@ -241,6 +242,7 @@ CFW11: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 125),
+    address_source="CFW-11 manual 2.3.2 and P0918 (section 3): 1 a 125",
     address_needs_power_cycle=True,
     telegram_param=922,
     max_words=10,
@@ -267,6 +269,7 @@ CFW700: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 126),
+    address_source="CFW700 manual P0918 (section 4): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=922,
     max_words=10,
@@ -294,6 +297,7 @@ CFW320: Final = ModelSpec(
     pnu_digits=3,
     address_param=750,
     address_range=(1, 126),
+    address_source="CFW320 manual 3.2 and P750 (section 4.2): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=751,
     max_words=6,
