@@ -267,8 +267,16 @@ async def test_run_reverse_stop_by_modbus(gw: Gateway, model: Model) -> None:
 async def test_parameters_through_zenoh(gw: Gateway, model: Model) -> None:
     ok, read = await gw.param(model.id, 100)
     assert ok and read["value"] == RAMP_P0100, read  # written at connect (startup_params)
+    # the manual's table names it and scales it (P0750 / P746: "5.0 s is sent as 50")
+    code = "P100" if model.device == "CFW320" else "P0100"
+    assert (read["code"], read["name"], read["unit"]) == (code, "Acceleration time", "s"), read
+    assert read["scaled"] == RAMP_P0100 / 10, read
     ok, answer = await gw.param(model.id, 101, {"value": 7})  # 0.7 s
-    assert ok, answer
+    assert ok and (answer["value"], answer["scaled"], answer["name"]) == (
+        7,
+        0.7,
+        "Deceleration time",
+    ), answer
     ok, read = await gw.param(model.id, 101)
     assert ok and read["value"] == 7, read
     assert drive(gw, model).values[101] == 7

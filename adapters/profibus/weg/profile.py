@@ -35,6 +35,7 @@ from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedS
 
 from . import words as w
 from .options import WegOptions, parse_options
+from .paramtable import PARAM_TABLES
 from .records import RecordParams
 from .spec import SIGNED, DataProfile, ModelSpec, scaled
 
@@ -203,7 +204,10 @@ class WegProfile:
         scale = None if self.base is None else self.base.scale()
         # alarm texts of the model's manual (CFW-11 section 5, CFW700 6, CFW320 7)
         return Capabilities(
-            speed_scale=scale, unsupported=unsupported, alarm_texts=self.spec.alarms
+            speed_scale=scale,
+            unsupported=unsupported,
+            alarm_texts=self.spec.alarms,
+            params=PARAM_TABLES[self.spec.device],  # the manual's parameter table
         )
 
     # ------------------------------------------------------------------ connect
