@@ -97,7 +97,7 @@ class ParamInfo:
         """``raw`` in the parameter's unit (an int when nothing scales it)."""
         if not self.decimals and self.multiplier == 1.0 and not self.offset:
             return raw
-        value = (raw + self.offset) * self.multiplier / 10**self.decimals
+        value = (raw + self.offset) * self.multiplier / float(10**self.decimals)
         return round(value, self.decimals) if self.multiplier == 1.0 else value
 
 

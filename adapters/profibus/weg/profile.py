@@ -127,9 +127,10 @@ class WegProfile:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        spec = cls.__dict__.get("spec")
+        spec: ModelSpec | None = cls.__dict__.get("spec")
         if spec is not None:
-            cls.addresses = AddressRange(*spec.address_range, spec.address_source)
+            low, high = spec.address_range
+            cls.addresses = AddressRange(low, high, spec.address_source)
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:

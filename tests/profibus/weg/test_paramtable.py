@@ -39,7 +39,7 @@ def test_the_manuals_examples() -> None:
     assert (cfw320[751].minimum, cfw320[751].maximum) == (1, 5)  # Table 4.7
 
 
-@pytest.mark.parametrize("device", sorted(PARAM_TABLES, key=lambda d: d.value))
+@pytest.mark.parametrize("device", [Device.CFW11, Device.CFW700, Device.CFW320])
 def test_addresses_and_telegrams_agree_with_the_spec(device: Device) -> None:
     spec, table = SPECS[device], PARAM_TABLES[device]
     address = table[spec.address_param]
@@ -49,7 +49,7 @@ def test_addresses_and_telegrams_agree_with_the_spec(device: Device) -> None:
     assert NOT_IN_SEEDS[device] <= set(table)
 
 
-@pytest.mark.parametrize("device", sorted(PARAM_TABLES, key=lambda d: d.value))
+@pytest.mark.parametrize("device", [Device.CFW11, Device.CFW700, Device.CFW320])
 def test_the_simulator_knows_every_parameter_of_the_table_within_its_range(
     device: Device,
 ) -> None:
