@@ -2,8 +2,11 @@
 
 The core never imports an adapter: the daemon and the config loader find an
 adapter class through :data:`ADAPTERS` (name -> "module:Class") and import it
-lazily. A bus table may also name a class directly as ``"module:Class"``
-(test adapters, site plugins).
+lazily. A third-party adapter is an installed distribution that declares an
+entry point in the group :data:`ENTRY_POINT_GROUP` (``drive_gateway.adapters``);
+its name cannot shadow one of the project's. A config file names an adapter by
+its registered name only: a ``"module:Class"`` path in a config is refused and
+never imported (a config file must not choose code to run, docs/decisions.md).
 
 An adapter owns the schema of its bus table and of its drives' extra keys
 (``parse_bus_options`` / ``parse_drive_options``), runs against the hub until
@@ -13,7 +16,10 @@ parameter reads and writes, and reports its bus diagnostics.
 
 from __future__ import annotations
 
+import difflib
 import importlib
+import importlib.metadata
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -34,6 +40,11 @@ ADAPTERS: dict[str, str] = {
     "devicenet": "adapters.devicenet.adapter:DeviceNetAdapter",
 }
 """Adapter name (the ``adapter`` key of a bus table) -> "module:Class"."""
+
+ENTRY_POINT_GROUP = "drive_gateway.adapters"
+"""Where installed third-party adapters declare themselves (name = "module:Class")."""
+
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
 
 
 class EventKind(Enum):
@@ -189,19 +200,69 @@ class AdapterClass(Protocol):
     def __call__(self, bus: BusConfig) -> DriveAdapter: ...
 
 
-def load_adapter(name: str) -> AdapterClass:
-    """Import the adapter class for a registry name or a "module:Class" path."""
-    target = ADAPTERS.get(name, name)
-    if ":" not in target:
-        known = ", ".join(sorted(ADAPTERS))
-        raise AdapterError(f"unknown adapter {name!r} (known: {known}, or 'module:Class')")
+def _installed() -> dict[str, importlib.metadata.EntryPoint]:
+    """Adapters declared by installed distributions (the project's own names win)."""
+    try:
+        points = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    except Exception:  # broken metadata of some distribution: no third-party adapters
+        return {}
+    return {ep.name: ep for ep in points if ep.name not in ADAPTERS}
+
+
+def adapter_names() -> list[str]:
+    """Every name a bus table may give as its ``adapter``."""
+    return sorted({*ADAPTERS, *_installed()})
+
+
+def _unknown(name: str) -> AdapterError:
+    known = adapter_names()
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    if ":" in name or "." in name:
+        return AdapterError(
+            f"{name!r} is not an adapter name: a config names a registered adapter "
+            f"({', '.join(known)}), never a module; a third-party adapter is installed "
+            f"as an entry point in the group {ENTRY_POINT_GROUP!r}{hint}"
+        )
+    return AdapterError(f"unknown adapter {name!r} (known: {', '.join(known)}){hint}")
+
+
+def _import(name: str, target: str) -> Any:
     module_name, _, class_name = target.partition(":")
     try:
         module = importlib.import_module(module_name)
-    except ImportError as exc:
+    except Exception as exc:  # an adapter that cannot be imported, for whatever reason
         raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
     cls = getattr(module, class_name, None)
     if cls is None:
         raise AdapterError(f"adapter {name!r}: {module_name} has no {class_name}")
+    return cls
+
+
+def load_adapter(name: str) -> AdapterClass:
+    """The adapter class registered as ``name`` (the project's table, then installed
+    entry points); raises :class:`AdapterError` naming the reason. Nothing is imported
+    for a name that is not registered."""
+    if not _NAME.fullmatch(name):
+        raise _unknown(name)
+    if name in ADAPTERS:
+        cls = _import(name, ADAPTERS[name])
+    else:
+        point = _installed().get(name)
+        if point is None:
+            raise _unknown(name)
+        cls = _import(name, point.value)
+    _check_class_side(name, cls)
     result: AdapterClass = cls
     return result
+
+
+def _check_class_side(name: str, cls: object) -> None:
+    missing = [a for a in _CLASS_SIDE if not hasattr(cls, a)]
+    if not isinstance(cls, type) or missing:
+        raise AdapterError(
+            f"adapter {name!r} is not a drive adapter class (missing: {', '.join(missing)})"
+        )
+
+
+_CLASS_SIDE = ("devices", "address_range", "parse_bus_options", "parse_drive_options")

@@ -1,15 +1,17 @@
 """Operator tools: Zenoh clients for any running gateway (``--connect ENDPOINT``).
 
 ``watch`` (live table of drives, ``--once`` for scripts), ``cmd`` (a command as a
-query; exit 0 only when accepted), ``param`` (read/write through the params
-queryable; device error text and exit 1 on refusal) and ``health``.
-The client session connects only to the given endpoint, listens on nothing and
-does no multicast scouting.
+query; exit 0 only when accepted, the gateway's reason and exit 1 when refused), ``param``
+(read/write through the params queryable; device error text and exit 1 on refusal) and
+``health``. The client session connects only to the given endpoint, listens on nothing and
+does no multicast scouting. Every query carries the session's source info (its Zenoh id and
+a sequence number), so the gateway can tell this client from the others.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
@@ -18,9 +20,13 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TextIO
 
 import zenoh
+
+from gateway.config import read_zenoh_config_file
+from gateway.errors import ConfigError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "demo"
@@ -45,8 +51,8 @@ def client_config(endpoint: str, config_file: str | None = None) -> zenoh.Config
     With ``config_file`` (JSON5, e.g. with TLS certificates for a secured
     gateway) that file is the base and ``endpoint`` is added to connect to.
     """
-    if config_file is not None:
-        conf = zenoh.Config.from_file(config_file)
+    if config_file is not None:  # bounded and checked first (gateway.config)
+        conf = zenoh.Config.from_json5(read_zenoh_config_file(Path(config_file)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         return conf
@@ -82,22 +88,53 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _use_config_file(path: str) -> str:
+    try:
+        read_zenoh_config_file(Path(path))
+    except ConfigError as exc:  # argparse: "error: argument --zenoh-config: ...", exit 2
+        raise argparse.ArgumentTypeError(str(exc)) from None
     _CONFIG_FILE[0] = path
     return path
 
 
+_SEQUENCE = itertools.count(1)
+
+
+def source_info(s: zenoh.Session, key: str) -> zenoh.SourceInfo:
+    """This session's identity for a put or a query on ``key``: the id of a publisher it
+    declares there (the session's Zenoh id and an entity id; ``EntityGlobalId`` has no
+    constructor) and the next sequence number."""
+    publisher = s.declare_publisher(key)
+    return zenoh.SourceInfo(publisher.id, next(_SEQUENCE))
+
+
 def query(endpoint: str, key: str, payload: Any | None = None) -> Any:
-    """One query, its first reply as JSON; raises RuntimeError when nothing answers."""
+    """One query, its first reply as JSON (an error reply as ``{"error": text}``); raises
+    RuntimeError when nothing answers."""
     with session(endpoint) as s:
-        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT}
+        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT, "source_info": source_info(s, key)}
         if payload is not None:
             kwargs["payload"] = json.dumps(payload)
         for reply in s.get(key, **kwargs):
             if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_string())
+                return _json_or_text(reply.ok.payload.to_string())
             if reply.err is not None:
-                return {"error": reply.err.payload.to_string()}
+                return _error_body(reply.err.payload.to_string())
     raise RuntimeError(f"no answer on {key} from {endpoint}")
+
+
+def _json_or_text(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except ValueError:
+        return {"error": f"not JSON: {text!r}"}
+
+
+def _error_body(text: str) -> dict[str, Any]:
+    """An error reply: the gateway's own ``{"error": ...}`` body, or its text as the error."""
+    body = _json_or_text(text)
+    if isinstance(body, dict) and "error" in body:
+        return body
+    return {"error": text}
 
 
 def _print_json(doc: Any, out: TextIO = sys.stdout) -> None:
@@ -156,11 +193,19 @@ def cmd_cmd(args: argparse.Namespace) -> int:
     except RuntimeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    if answer.get("accepted") is True:
+    if isinstance(answer, dict) and answer.get("accepted") is True:
         print(f"{args.drive}: accepted {json.dumps(command)}")
         return 0
-    print(f"{args.drive}: refused: {answer.get('error', answer)}", file=sys.stderr)
+    print(f"{args.drive}: refused: {refusal_reason(answer)}", file=sys.stderr)
     return 1
+
+
+def refusal_reason(answer: Any) -> str:
+    """The gateway's reason for a refused command (``{"accepted": false, "error": ...}`` or
+    an error reply), else the answer as it came."""
+    if isinstance(answer, dict) and isinstance(answer.get("error"), str):
+        return str(answer["error"])
+    return json.dumps(answer)
 
 
 # ------------------------------------------------------------------ param

@@ -11,6 +11,11 @@ for every adapter's optional ``claimed`` event (its line held) as for the front 
 ``ready``, so a refused start never reports READY.
 SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
 restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
+
+Start-up: the front ends start first; a :class:`StartupError` from one of them before
+READY (a Modbus port in use or not allowed, a Zenoh endpoint that cannot be bound or
+parsed) is fatal: one line naming the cause and the fix, no READY, no bus touched, and
+:data:`EXIT_STARTUP` (docs/operations.md). Only once they serve are the buses started.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from typing import Any, Protocol
 from gateway import __version__
 from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
-from gateway.errors import ConfigError, ConfigErrors, LineHeld
+from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -45,6 +50,9 @@ RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a cra
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
 EXIT_LINE_HELD = 75  # EX_TEMPFAIL (sysexits.h): another master holds a line; it may be freed
+EXIT_STARTUP = 2
+"""Exit status when the gateway cannot start (as for a config error; the unit file's
+RestartPreventExitStatus=2 keeps systemd from restarting into the same error)."""
 
 
 class Backoff:
@@ -174,6 +182,8 @@ class Daemon:
         self.ready = asyncio.Event()
         """Set when the daemon has reported READY (its front ends serve)."""
         self.exit_status = 0
+        self.fatal: StartupError | ConfigError | None = None
+        """Why the gateway could not start (then it exits with EXIT_STARTUP)."""
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -181,9 +191,14 @@ class Daemon:
     def check_reload(self) -> None:
         """SIGHUP: no reload. The running config stays as it is; the file on disk is
         validated so the operator learns, before a restart, whether it would start."""
+        from gateway.cli import front_end_problems  # what `run` would refuse, as check-config
+
         file = self.config.file
         try:
             new = load(file)
+            problems = front_end_problems(new)
+            if problems:
+                raise ConfigErrors(problems)
         except (ConfigErrors, ConfigError) as exc:
             errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
             log.error(
@@ -235,12 +250,19 @@ class Daemon:
                     on_crash()
                     return
                 error = exc
+            except (StartupError, ConfigError) as exc:
+                if not self.ready.is_set():
+                    self._cannot_start(exc)
+                    return
+                error = exc
             except Exception as exc:
                 error = exc
             first = False
             pause = backoff.after_crash(time.monotonic() - started)
             if isinstance(error, LineHeld):  # its text says it all: one line
                 log.error("%s: %s; retrying in %.1f s", what, error, pause)
+            elif isinstance(error, StartupError | ConfigError):  # its one line says it all
+                log.error("%s crashed: %s; restarting in %.1f s", what, error, pause)
             elif error is not None:  # logged with its traceback
                 log.error("%s crashed; restarting in %.1f s", what, pause, exc_info=error)
             else:
@@ -255,6 +277,14 @@ class Daemon:
             "%s: %s; drive-gateway does not start (exit status %d)", what, error, EXIT_LINE_HELD
         )
         self.exit_status = EXIT_LINE_HELD
+        self._stop.set()
+
+    def _cannot_start(self, error: StartupError | ConfigError) -> None:
+        """Fatal at start-up: one line with the cause and the fix, then stop."""
+        if self.fatal is None:
+            self.fatal = error
+            log.error("drive-gateway cannot start: %s", error)
+            self.notifier.status(f"cannot start: {error}")
         self._stop.set()
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
@@ -329,15 +359,17 @@ class Daemon:
             log.warning(
                 "no drives are configured in %s; serving the gateway only", self.config.file
             )
-        for bus in self.config.buses:
-            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
             self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
-        not_serving, unclaimed = await asyncio.gather(
-            self._front_ends_serving(), self._lines_claimed()
-        )
+        not_serving = await self._front_ends_serving()
+        if self.fatal is not None:  # no bus touched, no READY
+            await self._cancel(self._tasks)
+            return EXIT_STARTUP
+        for bus in self.config.buses if not self._stop.is_set() else ():
+            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
+        unclaimed = await self._lines_claimed()
         status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
         if not_serving:
             status += f"; not serving yet: {', '.join(not_serving)}"

@@ -140,18 +140,35 @@ class StateSubscription:
         self.close()
 
 
+NEVER_DROPPED = frozenset({EventKind.FAULT, EventKind.TRIP, EventKind.SAFETY, EventKind.COMM})
+"""Event kinds a subscription never drops: a fault or trip, a safety action, a comm change."""
+
+
 class EventSubscription:
-    """Bounded queue of events; the oldest are dropped (and counted) when full."""
+    """A bounded queue of events, in order.
+
+    When ``limit`` events wait, a new one is dropped and counted, unless its kind is
+    in :data:`NEVER_DROPPED` (those are always queued: the drives make them, not the
+    network). The next event queued after a drop carries ``dropped``: how many were
+    lost before it (docs/zenoh-keys.md, "Session and delivery").
+    """
 
     def __init__(self, hub: Hub, limit: int = EVENT_QUEUE_LIMIT) -> None:
         self._hub = hub
-        self._queue: collections.deque[Event] = collections.deque(maxlen=limit)
+        self._limit = limit
+        self._queue: collections.deque[Event] = collections.deque()
         self._ready = asyncio.Event()
-        self.dropped = 0
+        self.dropped = 0  # in all
+        self._lost = 0  # since the last event queued
 
     def _offer(self, event: Event) -> None:
-        if len(self._queue) == self._queue.maxlen:
+        if len(self._queue) >= self._limit and event.kind not in NEVER_DROPPED:
             self.dropped += 1
+            self._lost += 1
+            return
+        if self._lost:
+            event = replace(event, data={**event.data, "dropped": self._lost})
+            self._lost = 0
         self._queue.append(event)
         self._ready.set()
 

@@ -173,7 +173,7 @@ class ProfibusAdapter:
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
         profile_class = cls.profile_class(drive.device)
         addresses = getattr(profile_class, "addresses", DEFAULT_ADDRESSES)
-        refusal = addresses.refusal(drive.id, drive.device.value, drive.address)
+        refusal = addresses.refusal(drive.device.value, drive.address)
         if refusal is not None:
             raise table.error("address", refusal)
         profile_options = profile_class.parse_options(table, drive)

@@ -81,15 +81,16 @@ class AddressRange:
     high: int
     source: str
 
-    def refusal(self, drive_id: str, device: str, address: int) -> str | None:
-        """None when ``address`` is usable, else the reason, naming the drive and range."""
+    def refusal(self, device: str, address: int) -> str | None:
+        """None when ``address`` is usable, else the reason, naming the range and its source
+        (the config error's key names the drive: ``drives[<id>].address``)."""
         low, high = max(self.low, DP_STATIONS[0]), min(self.high, DP_STATIONS[1])
         if low <= address <= high:
             return None
-        text = f"drive {drive_id!r}: {address} is outside the {device} range {self.low}-{self.high}"
+        text = f"{address} is outside the {device} range {self.low}-{self.high}"
         if self.low <= address <= self.high:
             text = (
-                f"drive {drive_id!r}: {address} is in the {device} range {self.low}-{self.high} "
+                f"{address} is in the {device} range {self.low}-{self.high} "
                 f"but {SET_SLAVE_ADD_DEFAULT} is the Set_Slave_Add default address, never in "
                 f"data exchange"
             )

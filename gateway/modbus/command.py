@@ -68,7 +68,10 @@ class CommandWord:
     @classmethod
     def from_register(cls, raw: int) -> CommandWord:
         if not 0 <= raw <= 0xFFFF:
-            raise WriteRefused(ExceptionCode.ILLEGAL_DATA_VALUE, f"{raw} is not a register value")
+            raise WriteRefused(
+                ExceptionCode.ILLEGAL_DATA_VALUE,
+                f"command word: {raw} is not a register value (limit 0-65535)",
+            )
         if raw & ~DEFINED_MASK:
             raise WriteRefused(
                 ExceptionCode.ILLEGAL_DATA_VALUE,

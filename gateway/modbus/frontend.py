@@ -288,6 +288,7 @@ class ModbusFrontEnd:
             limits=ConnectionLimits(
                 frame_timeout=self.section.frame_timeout,
                 max_connections=self.section.max_connections,
+                idle_timeout=self.section.idle_timeout,
             ),
             on_peer=self.shared.memory.peer,
         )

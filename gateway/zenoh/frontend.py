@@ -64,7 +64,7 @@ from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
-from gateway.zenoh.link import ANONYMOUS, Incoming, ZenohLink
+from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
 from gateway.zenoh.requests import (
     Answer,
     BadRequest,
@@ -77,6 +77,7 @@ from gateway.zenoh.requests import (
     param_result,
     parse_command,
     parse_param_request,
+    too_large,
 )
 from gateway.zenoh.session import zenoh_config
 from gateway.zenoh.worker import Worker, WorkerStopped
@@ -90,6 +91,11 @@ PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a clien
 CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
 HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
 SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
+HANDOVER_LIMIT = 1024
+"""Puts and queries handed from Zenoh's threads to the loop and not yet taken; beyond
+it they are dropped (and counted in ``overflow``): a flood queues without a bound nowhere."""
+PARAM_REQUEST_LIMIT = 64
+"""Parameter requests under way at once; one more is refused as busy."""
 _ONLINE = CommState.ONLINE  # a module constant: an Enum class attribute is slow to look up
 DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
@@ -155,6 +161,9 @@ class ZenohFrontEnd:
             drive_id: collections.deque(maxlen=DEFER_LIMIT) for drive_id in self._drive_ids
         }
         self._wake = asyncio.Event()
+        self._handover_lock = threading.Lock()
+        self._handover_waiting = 0  # puts and queries handed to the loop, not yet taken
+        self.overflow = 0  # puts and queries dropped: HANDOVER_LIMIT were waiting
         self._pending: set[_Pending] = set()
         self._requests: set[asyncio.Task[None]] = set()
         self._handlers: dict[KeyKind, Callable[[_Pending], None]] = {
@@ -301,16 +310,29 @@ class ZenohFrontEnd:
     # ------------------------------------------------------------ Zenoh threads
 
     def _to_loop(self, callback: Callable[..., None], *args: Any) -> bool:
+        """Hand a put or query over to the loop; False when it is not taken: the
+        gateway is gone, or :data:`HANDOVER_LIMIT` are already waiting for the loop
+        (nothing the network sends queues without a bound; the overflow is counted)."""
         loop = self._loop
         if loop is None:
             return False
+        with self._handover_lock:
+            if self._handover_waiting >= HANDOVER_LIMIT:
+                self.overflow += 1
+                return False
+            self._handover_waiting += 1
         try:
-            loop.call_soon_threadsafe(callback, *args)
+            loop.call_soon_threadsafe(self._taken, callback, args)
         except RuntimeError:  # the loop is closed: the gateway is gone
             return False
         return True
 
-    def _command_from_zenoh(self, key: str, payload: bytes, client: str) -> None:
+    def _taken(self, callback: Callable[..., None], args: tuple[Any, ...]) -> None:
+        with self._handover_lock:
+            self._handover_waiting -= 1
+        callback(*args)
+
+    def _command_from_zenoh(self, key: str, payload: Payload, client: str) -> None:
         self._to_loop(self._on_command_put, key, payload, client)
 
     def _query_from_zenoh(self, incoming: Incoming) -> None:
@@ -474,7 +496,7 @@ class ZenohFrontEnd:
 
     # ------------------------------------------------------------ commands (loop)
 
-    def _on_command_put(self, key: str, payload: bytes, client: str = ANONYMOUS) -> None:
+    def _on_command_put(self, key: str, payload: Payload, client: str = ANONYMOUS) -> None:
         if not self._serving:
             return
         parsed = self.keys.parse(key)
@@ -484,13 +506,15 @@ class ZenohFrontEnd:
         self._apply_command(parsed.drive_id, payload, client)  # the hub logs a refusal
 
     def _apply_command(
-        self, drive_id: str, payload: bytes | None, client: str = ANONYMOUS
+        self, drive_id: str, payload: Payload, client: str = ANONYMOUS
     ) -> dict[str, Any]:
         """Parse and submit a command; refusals are reported on the drive's events key
         (and logged by the hub, rate-limited per client and reason)."""
         if drive_id not in self._drive_ids:
             return command_refused(f"no drive {drive_id!r}")
         try:
+            if isinstance(payload, Oversize):
+                raise CommandRejected(too_large(payload.size))
             cmd = parse_command(payload)
         except CommandRejected as exc:
             self.hub.event(
@@ -566,8 +590,14 @@ class ZenohFrontEnd:
         if not is_concrete(incoming.key) or parsed is None:
             self._refuse(pending, "a parameter query names one drive and one parameter")
             return
+        if len(self._requests) >= PARAM_REQUEST_LIMIT:
+            self._refuse(pending, f"busy: {PARAM_REQUEST_LIMIT} parameter requests are under way")
+            return
         try:
-            req = parse_param_request(parsed.rest, incoming.payload)
+            payload = incoming.payload
+            if isinstance(payload, Oversize):
+                raise BadRequest(too_large(payload.size))
+            req = parse_param_request(parsed.rest, payload)
         except BadRequest as exc:
             self._refuse(pending, exc.text)
             return

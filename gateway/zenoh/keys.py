@@ -323,8 +323,23 @@ def render_markdown() -> str:
         "session, declarations, BLOCK puts of states (through a latest-per-drive slot: a "
         "newer state replaces one not yet sent), events and diagnostics, query replies and "
         "liveliness tokens. Events are put in order with CongestionControl.BLOCK.",
+        "- Events wait for the I/O thread in a queue of 1000. When it is full (a flood of "
+        "refused commands faster than the network takes them), a new event is dropped and "
+        "counted, and the next event put carries `dropped`: how many were lost before it. "
+        "A fault, a trip, a safety action and a comm change are never dropped. The log "
+        "writes a refusal repeated by the same client for the same reason once per 10 s, "
+        "with the count.",
         "- Zenoh callbacks only copy the key and payload and hand them to the event loop; "
-        "every query gets exactly one reply (an error reply if the gateway stops first).",
+        "every query gets exactly one reply (an error reply if the gateway stops first). "
+        "At most 1024 puts and queries wait for the loop; more are dropped (a query "
+        "dropped gets no reply) rather than queued without a bound.",
+        "- A command or parameter payload over 4096 bytes is refused before it is copied "
+        "or parsed (`payload of N bytes is over the limit of 4096 bytes`); JSON nested "
+        "too deeply to parse is refused like any other bad command. At most 64 parameter "
+        "requests are under way at once; one more is refused as busy.",
+        "- Shared memory is off in the gateway's session (Zenoh turns it on by default, and "
+        "then same-host clients' large payloads map 16 MB segments in the gateway that "
+        "are never given back), unless `zenoh.config_file` sets `transport.shared_memory`.",
         "",
     ]
     return "\n".join(out)

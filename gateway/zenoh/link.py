@@ -18,13 +18,32 @@ from typing import Any
 import zenoh
 
 from gateway.zenoh.keys import KeyKind, KeySpace
-from gateway.zenoh.requests import Answer
+from gateway.zenoh.requests import MAX_PAYLOAD, Answer
+from gateway.zenoh.session import open_session
 
 log = logging.getLogger(__name__)
 
 JSON = zenoh.Encoding.APPLICATION_JSON
 BLOCK = zenoh.CongestionControl.BLOCK
 DROP = zenoh.CongestionControl.DROP
+
+
+@dataclass(frozen=True, slots=True)
+class Oversize:
+    """A payload over :data:`MAX_PAYLOAD`, not copied out of Zenoh: only its size."""
+
+    size: int
+
+
+Payload = bytes | Oversize | None
+
+
+def _payload(zbytes: Any) -> Payload:
+    """Copy a payload out of Zenoh, unless it is over the limit (then only its size)."""
+    if zbytes is None:
+        return None
+    size = len(zbytes)
+    return Oversize(size) if size > MAX_PAYLOAD else zbytes.to_bytes()
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,7 +56,7 @@ class Incoming:
 
     kind: KeyKind
     key: str
-    payload: bytes | None
+    payload: Payload
     query: Any  # zenoh.Query: replied to and dropped on the I/O thread
     targets: tuple[str, ...] = ()
     client: str = ""  # the querier's session id (client_of)
@@ -59,7 +78,7 @@ def client_of(source_info: Any) -> str:
     return str(source_info.source_id.zid)
 
 
-CommandSink = Callable[[str, bytes, str], None]
+CommandSink = Callable[[str, Payload, str], None]
 QuerySink = Callable[[Incoming], None]
 
 
@@ -111,7 +130,7 @@ class ZenohLink:
         on_command: CommandSink,
         on_query: QuerySink,
     ) -> ZenohLink:
-        session = zenoh.open(config)
+        session = open_session(config)  # StartupError names the cause and the fix
         try:
             return cls(session, keys, drive_ids, on_command, on_query)
         except BaseException:
@@ -130,7 +149,7 @@ class ZenohLink:
         if sample.kind != zenoh.SampleKind.PUT:  # PyO3 enums: compare by value, not identity
             return
         self._on_command(
-            str(sample.key_expr), sample.payload.to_bytes(), client_of(sample.source_info)
+            str(sample.key_expr), _payload(sample.payload), client_of(sample.source_info)
         )
 
     def _query(self, kind: KeyKind, query: zenoh.Query) -> None:
@@ -141,7 +160,7 @@ class ZenohLink:
             if kind is KeyKind.STATE:
                 asked = query.key_expr
                 targets = tuple(d for d, k in self._state_keys.items() if asked.intersects(k))
-            body = None if payload is None else payload.to_bytes()
+            body = _payload(payload)
             client = client_of(query.source_info)
             self._on_query(Incoming(kind, key, body, query, targets, client))
         except Exception:

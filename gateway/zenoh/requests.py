@@ -101,12 +101,26 @@ def encode_state(state: DriveState) -> bytes:
 _STATUS_TEXT = {m: m.label for m in DriveStatus}
 
 
+MAX_PAYLOAD = 4096
+"""Bytes: a command or parameter payload above this is refused before it is copied
+or parsed (a command is under 200 bytes; docs/zenoh-keys.md)."""
+
+
+def too_large(size: int) -> str:
+    """The refusal of a payload of ``size`` bytes over :data:`MAX_PAYLOAD`."""
+    return f"payload of {size} bytes is over the limit of {MAX_PAYLOAD} bytes"
+
+
 def decode_json(payload: bytes) -> Any:
     """Parse a JSON payload; raises ValueError with a short reason."""
+    if len(payload) > MAX_PAYLOAD:
+        raise ValueError(too_large(len(payload)))
     try:
         return json.loads(payload.decode("utf-8"))
     except UnicodeDecodeError:
         raise ValueError("payload is not UTF-8") from None
+    except RecursionError:
+        raise ValueError("invalid JSON: nested too deeply") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"invalid JSON: {exc.msg} at position {exc.pos}") from None
 

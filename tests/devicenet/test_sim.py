@@ -449,6 +449,57 @@ def test_fault_reset_takes_the_node_offline_for_a_moment(master: Master) -> None
     assert master.node.phase is SimPhase.ONLINE and master.node.allocation == 0
 
 
+def phase(n: Cfw08Node) -> SimPhase:
+    """The node's phase, read through a call (it changes under mypy's eyes)."""
+    return n.phase
+
+
+def test_keypad_reset_clears_the_fault_through_the_same_reset(master: Master) -> None:
+    """The keypad's reset, behind the master's back: offline for a moment (seed 3.4), then
+    back with its commands cleared; the master's run bit, sent again, runs the drive."""
+    master.allocate()
+    run = Out21(run_fwd=True, net_ctrl=True, net_ref=True, speed_rpm=900).encode()
+    master.frame(POLL, run)
+    master.node.inject_fault(21, master.now)
+    assert master.node.keypad_reset(master.now) == []
+    assert phase(master.node) is SimPhase.RESETTING and master.node.drive.fault_code is None
+    assert master.node.keypad_reset(master.now) == []  # nothing more to reset
+    master.advance(0.8)
+    assert phase(master.node) is SimPhase.ONLINE and master.node.drive.motor.speed == 0.0
+    assert not master.node.drive.run_fwd  # cleared by the restart
+    master.allocate()
+    for _ in range(10):
+        master.frame(POLL, run)
+        master.advance(0.05)
+    assert master.node.drive.motor.speed > 0.0  # the held run bit, sent again, runs it
+
+
+def test_auto_reset_after_p206_seconds(master: Master) -> None:
+    master.node.drive.params[206] = 2
+    master.allocate(epr_ms=1000)
+    master.node.inject_fault(21, master.now)
+    fault_at = master.now
+    assert master.node.auto_reset_due() == pytest.approx(fault_at + 2.0)
+    assert master.node.next_deadline() == pytest.approx(fault_at + 2.0)
+    master.advance(1.9, step=0.05)
+    assert master.node.drive.fault_code == 21 and master.node.phase is SimPhase.ONLINE
+    master.advance(0.2, step=0.05)
+    assert master.node.drive.fault_code is None and master.node.phase is SimPhase.RESETTING
+    assert any("auto-reset of E21" in n for n in master.node.figures.notes)
+    off = Master(node())  # P206 = 0: no auto-reset
+    off.node.inject_fault(21, off.now)
+    off.advance(5.0, step=0.1)
+    assert off.node.drive.fault_code == 21 and off.node.auto_reset_due() is None
+
+
+def test_power_cycle_clears_a_fault() -> None:
+    master = Master(node())
+    master.node.inject_fault(21, master.now)
+    master.node.power_off()
+    master.node.power_on(master.now)
+    assert master.node.drive.fault_code is None
+
+
 def test_identity_reset_service(master: Master) -> None:
     master.allocate()
     assert master.ask(Reset(1, 1)) == SuccessResponse(0x05)

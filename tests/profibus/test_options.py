@@ -141,12 +141,12 @@ def test_drive_errors_name_the_drive_key() -> None:
     ]
     got = errors(adapter=ADAPTER, simulate=True, drives=drives)
     assert got[0] == (
-        f"{FILE}: buses.profibus1.drives[0].address: drive 'a': 126 is outside the test range "
+        f"{FILE}: buses.profibus1.drives[a].address: 126 is outside the test range "
         "0-125 (DP station addresses, fact sheet 1.2); use 0-125"
     )
-    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[1].device: 'CFW-08' is not one of")
-    assert got[2] == f"{FILE}: buses.profibus1.drives[2].size: 99 is above the maximum 32"
-    assert got[3] == f"{FILE}: buses.profibus1.drives[3].speed: unknown key"
+    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[b].device: 'CFW-08' is not one of")
+    assert got[2] == f"{FILE}: buses.profibus1.drives[c].size: 99 is above the maximum 32"
+    assert got[3] == f"{FILE}: buses.profibus1.drives[d].speed: unknown key"
 
 
 @pytest.mark.parametrize(
@@ -172,9 +172,7 @@ def test_each_device_takes_the_addresses_its_manual_gives(
     for address in bad:
         drives = [{"id": "pump-3", "device": device, "address": address}]
         [got] = errors(adapter="profibus", simulate=True, drives=drives)
-        assert got.startswith(
-            f"{FILE}: buses.profibus1.drives[0].address: drive 'pump-3': {address} is "
-        ), got
+        assert got.startswith(f"{FILE}: buses.profibus1.drives[pump-3].address: {address} is "), got
         assert source in got and got.endswith("; use 1-125"), got
     [over] = errors(
         adapter="profibus", simulate=True, drives=[{"id": "x", "device": device, "address": 126}]
@@ -189,7 +187,7 @@ def test_duplicate_addresses_are_the_cores_error() -> None:
         {"id": "b", "device": "test", "address": 5},
     ]
     assert errors(adapter=ADAPTER, simulate=True, drives=drives) == [
-        f"{FILE}: buses.profibus1.drives: duplicate address 5"
+        f"{FILE}: buses.profibus1.drives: address 5 is used by a and b"
     ]
 
 
@@ -203,5 +201,5 @@ def test_check_config_names_the_drive_and_the_manuals_range(
     )
     assert main(["check-config", str(site)]) == 2
     err = capsys.readouterr().err
-    assert "drive 'conveyor': 126 is outside the CFW-11 range 1-125" in err
+    assert "drives[conveyor].address: 126 is outside the CFW-11 range 1-125" in err
     assert "P0918" in err

@@ -1,6 +1,6 @@
 """A test adapter: drives simulated in-process on the shared motor physics.
 
-Used by the daemon tests (``adapter = "tests.support.fake_adapter:FakeAdapter"``)
+Used by the daemon tests (``adapter = "fake"``, registered by tests/support/plugins.py)
 and by the northbound tests. It behaves like a real adapter towards the hub:
 comm goes connecting -> online, commands are followed with ramps, fault reset
 is taken as an edge, parameters are served from a table.

@@ -140,6 +140,9 @@ class Inbox(Generic[T]):
 class Client:
     """One Zenoh session connected to the gateway under test."""
 
+    _id: Any = None  # a declared entity's id: puts and queries carry it (identified)
+    _sn = 0
+
     def __init__(
         self,
         endpoint: str,
@@ -152,8 +155,6 @@ class Client:
         self.session = zenoh.open(client_config(endpoint, listen, rcvbuf))
         # identified: puts and queries carry a source info with this session's id, so
         # the gateway tells this client from others (safety rule 3); else anonymous
-        self._id: Any = None
-        self._sn = 0
         if identified:
             self._id = self.session.declare_publisher(f"_client/{self.session.zid()}").id
 

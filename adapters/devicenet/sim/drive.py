@@ -102,13 +102,15 @@ class SimDrive:
     # ------------------------------------------------------------ life cycle
 
     def power_up(self) -> None:
-        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands cleared."""
+        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands and any
+        fault cleared (the simulator's faults have no condition that outlives a restart)."""
         self.pair = AssemblyPair.from_p710(self.params[P710]) or AssemblyPair.BASIC
         # The pair in force changes only here: a P710 written while powered waits for the
         # next reset or power cycle (config p710_stored: one written and not yet reset).
         if self._p710_unapplied is not None:
             self.params[P710], self._p710_unapplied = self._p710_unapplied, None
         self._clear_commands()
+        self.fault_code = None
         self.comm_error = None
         self.idle = True
         self.motor.coast()

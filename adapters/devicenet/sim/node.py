@@ -60,7 +60,7 @@ from adapters.devicenet.sim.drive import E37_TIMEOUT, SimDrive, SimDriveConfig
 from adapters.devicenet.sim.objects import Identity
 from gateway.sim import FaultInjector
 
-P700, P701, P703 = 700, 701, 703
+P206, P700, P701, P703 = 206, 700, 701, 703
 P700_DEVICENET = 2  # seed 4.1.4: 2 = DeviceNet
 AC = AllocationChoice
 IO_BITS = AC.POLL | AC.COS | AC.CYCLIC
@@ -167,6 +167,7 @@ class Cfw08Node:
         self.master = NO_MASTER
         self.connections: dict[int, SimConnection] = {}
         self._reset_requested = False
+        self._fault_at: float | None = None  # when the present fault began (P206 auto-reset)
         self._reassembler = ExplicitReassembler()
         self._sender: ExplicitSender | None = None
         self._cos_last = 0.0
@@ -203,8 +204,27 @@ class Cfw08Node:
         self.drive.motor.coast()
         self.drive.motor.speed = 0.0
 
-    def inject_fault(self, code: int) -> None:
+    def inject_fault(self, code: int, now: float | None = None) -> None:
+        """The drive trips with error ``code`` (at ``now``, default the last step)."""
         self.drive.trip(code)
+        self._fault_at = self._now if now is None else now
+
+    def keypad_reset(self, now: float) -> list[CanFrame]:
+        """The keypad's reset of a faulted drive, behind the network's back: the same reset
+        as the network's (seed 3.4: offline for a moment, then it starts again with its
+        commands cleared). Nothing happens without a fault."""
+        if self.phase in _SILENT or not self.drive.fault_reset():
+            return []
+        self._go_resetting(now)
+        return []
+
+    def auto_reset_due(self) -> float | None:
+        """When the present fault resets by itself: P206 s after it began (0 = off; the
+        CFW-08 user manual's auto-reset, not in the seed)."""
+        seconds = self.drive.params.get(P206, 0)
+        if self.drive.fault_code is None or self._fault_at is None or seconds <= 0:
+            return None
+        return self._fault_at + seconds
 
     def force_owner(self, master_mac: int, now: float) -> None:
         """Tests: the node is already allocated (explicit + poll) by another master."""
@@ -253,6 +273,8 @@ class Cfw08Node:
         if phase is not SimPhase.ONLINE:
             return None
         times = [d for c in self.connections.values() if (d := c.inactivity_deadline())]
+        if (auto := self.auto_reset_due()) is not None:
+            times.append(auto)
         cos = self.connections[ConnectionInstance.COS_CYCLIC]
         if cos.established and cos.epr_ms:
             times.append(self._cos_last + cos.epr_ms / 1000.0)
@@ -603,6 +625,11 @@ class Cfw08Node:
             self._online_timers(now, out)
 
     def _online_timers(self, now: float, out: list[CanFrame]) -> None:
+        auto = self.auto_reset_due()
+        if auto is not None and now >= auto:
+            self.figures.notes.append(f"auto-reset of E{self.drive.fault_code:02d} (P206)")
+            self.keypad_reset(now)
+            return
         for conn in self.connections.values():
             deadline = conn.inactivity_deadline()
             if deadline is not None and now > deadline:

@@ -264,6 +264,7 @@ class WegSim:
         self.comm = specs.COMM_OFFLINE  # "initialized in the offline state" (A139 note)
         self.clear = False
         self.fault = 0
+        self._fault_at = now
         self.alarm = 0
         self.net = NetCommand(remote=self.values[220] != sp.SRC_LOCREM_NET_LOC)
         self.panel = Panel()
@@ -353,13 +354,24 @@ class WegSim:
         return b""  # the manuals define no device-related diagnosis
 
     def tick(self, now: float) -> None:
-        """Advance the motor to ``now`` under the commands in force."""
-        dt = now - self._time
-        if dt <= 0:
+        """Advance the motor to ``now`` under the commands in force (an auto-reset due on
+        the way happens at its own time)."""
+        if now <= self._time:
             return
-        self._time = now
         if self.faults.fault_code is not None and not self.fault:
             self._trip(self.faults.fault_code)
+        due = self.auto_reset_due()
+        if due is not None and due <= now:
+            self._advance_to(due)
+            log.info("%s: auto-reset of F%03d (P0206)", self.spec.device, self.fault)
+            self._reset_fault()
+        self._advance_to(now)
+
+    def _advance_to(self, when: float) -> None:
+        dt = when - self._time
+        if dt <= 0:
+            return
+        self._time = when
         self._drive_motor()
         self.motor.advance(dt)
         self._after_motion()
@@ -379,6 +391,22 @@ class WegSim:
         self.tick(now)
         self.faults.trip(code)
         self._trip(code)
+
+    def keypad_reset(self, now: float) -> None:
+        """The HMI's reset key: the fault clears behind the network's back. The run command
+        in force (P0684 bit 0 is a level) applies again at once, as after any reset."""
+        self.tick(now)
+        if self.fault:
+            log.info("%s: F%03d reset at the HMI", self.spec.device, self.fault)
+        self._reset_fault()
+
+    def auto_reset_due(self) -> float | None:
+        """When the present fault resets by itself: P0206 seconds after the trip (0 = off;
+        the programming manuals' auto-reset, docs/devices.md)."""
+        seconds = self.values.get(206, 0)
+        if not self.fault or seconds <= 0:
+            return None
+        return self._fault_at + seconds
 
     def inject_alarm(self, code: int) -> None:
         self.alarm = code
@@ -402,6 +430,7 @@ class WegSim:
         if self.fault:
             return  # one fault at a time (P0944: at most 1)
         self.fault = code
+        self._fault_at = self._time
         self.motor.coast()
         self.pd_stop = None
 

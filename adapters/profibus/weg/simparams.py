@@ -114,6 +114,9 @@ def _motor_and_ramps() -> list[ParamSpec]:
         rw(401, 100, 0, 60000, cfg=True),  # motor rated current, 10.0 A
         rw(402, 1750, 0, 18000, cfg=True),  # motor rated speed, rpm
         rw(403, 60, 0, 300, cfg=True),  # motor rated frequency, Hz
+        # auto-reset time, s, 0 = off: the programming manuals' P0206 / P206 (not among the
+        # seeds; range 0-255 s as there, the simulator resets any fault: docs/devices.md)
+        rw(206, 0, 0, 255),
     ]
 
 
