@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "param": "gateway.cli_tools:add_param",
     "health": "gateway.cli_tools:add_health",
     "profibus": "adapters.profibus.cli:add_profibus",
+    "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.simcli:add_sim",
 }
 """Subcommand -> "module:function(subparsers)"; a module not in this build is skipped."""

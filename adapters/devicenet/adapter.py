@@ -22,7 +22,6 @@ from typing import Any, ClassVar
 
 from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
-    ASSEMBLY_SIZE,
     P070_COMM_ERROR,
     P070_TEXT,
     P081_IDLE,
@@ -65,7 +64,7 @@ from adapters.devicenet.explicit import (
 )
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, LinkEvent, RxBad, RxError, RxFrame
-from adapters.devicenet.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus, parse_drive
 from adapters.devicenet.scanner import (
     Action,
     BadFrame,
@@ -90,7 +89,16 @@ from adapters.devicenet.scanner import (
     Send,
     TxFailed,
 )
+from adapters.devicenet.scanner.probe import (
+    Finished,
+    LineProbe,
+    NodeInfo,
+    ProbeAction,
+    ProbeConfig,
+    Progress,
+)
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
+from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import (
@@ -112,6 +120,7 @@ LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SIM_START_BOUND = 2.0  # s
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
 SIM_DEFAULT_MAX_RPM = 1800.0
+ADR_INTERVAL = 1.0  # s between two looks at MAC 63 while an adr drive is missing
 IDLE = "idle"
 
 REPORT_EVENTS: dict[ReportKind, EventKind] = {
@@ -201,6 +210,9 @@ class DeviceNetAdapter:
         self._hub: HubPort | None = None
         self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self._adr: LineProbe | None = None
+        self._adr_next = 0.0
+        self._missing_since: dict[int, float] = {}
         self.claimed = asyncio.Event()
         """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
@@ -219,7 +231,7 @@ class DeviceNetAdapter:
         o = self.options
         return ScannerConfig(
             mac=o.mac,
-            vendor_id=0,
+            vendor_id=o.vendor_id,
             serial_number=SCANNER_SERIAL_BASE + o.mac,
             poll_interval=o.poll_interval,
             response_timeout=o.response_timeout,
@@ -237,14 +249,22 @@ class DeviceNetAdapter:
             o = d.opts
             identity = IdentityCheck()
             if o.check_identity:
-                identity = IdentityCheck(o.vendor_id, o.product_code, o.product_name or None)
+                identity = IdentityCheck(
+                    o.vendor_id,
+                    o.product_code,
+                    o.product_name or None,
+                    product_type=o.product_type,
+                    revision=o.revision,
+                )
             out.append(
                 NodeConfig(
                     mac=d.mac,
                     io=o.connection,
                     ack=o.ack,
-                    produced_size=ASSEMBLY_SIZE,  # every CFW-08 assembly (seed 4.1.8, table 11)
-                    consumed_size=ASSEMBLY_SIZE,
+                    # every CFW-08 assembly is 4 bytes (seed 4.1.8, table 11); an EDS's
+                    # sizes are checked against that when the config is read
+                    produced_size=o.io_sizes[0],
+                    consumed_size=o.io_sizes[1],
                     epr=self.options.expected_packet_rate,
                     identity=identity,
                 )
@@ -266,6 +286,8 @@ class DeviceNetAdapter:
                     weg_speed_scale=o.weg_speed_scale,
                     product_code=o.product_code if o.product_code is not None else 8,
                     dupmac_timeout=self.options.dupmac_timeout,
+                    identity=None if o.eds is None else sim_identity(o.eds),
+                    io_sizes=o.io_sizes,
                 )
             )
         return out
@@ -330,13 +352,19 @@ class DeviceNetAdapter:
             deadline = engine.next_deadline()
             if deadline is None or now >= deadline:
                 self._act(now, engine.step(now))
+            self._tick_adr(now, engine)
             self._flush(now)
             deadline = engine.next_deadline()
             wake = next_refresh if deadline is None else min(deadline, next_refresh)
+            adr = self._adr.next_deadline() if self._adr is not None else None
+            if adr is not None:
+                wake = min(wake, adr)
             events = await link.receive(max(wake - self.clock(), 0.0))
             now = self.clock()
             for event in events:
                 self._act(now, engine.step(now, _event(event)))
+                if self._adr is not None and isinstance(event, RxFrame):
+                    self._adr_actions(now, self._adr.step(now, event.frame))
             self._flush(now)
 
     async def _leave(self, link: CanLink, engine: Scanner) -> None:
@@ -463,6 +491,83 @@ class DeviceNetAdapter:
         targets = [self.drives[action.mac]] if action.mac in self.drives else self.drives.values()
         for d in targets:
             hub.event(d.id, kind, action.text, **action.data)
+
+    # ------------------------------------------------------------ Automatic Device Replacement
+
+    def _adr_drives(self, engine: Scanner) -> list[_Drive]:
+        """Drives with ``adr = true`` (none while a configured drive holds MAC 63)."""
+        if ADR_MAC in self.drives or not engine.online:
+            return []
+        return [d for d in self.drives.values() if d.opts.adr]
+
+    def _tick_adr(self, now: float, engine: Scanner) -> None:
+        """Seed 6.1: while an ``adr`` drive is missing, look at MAC 63 for a drive with its
+        identity (every ``ADR_INTERVAL``); one found is re-addressed and reset, then comes
+        up at the missing drive's MAC ID and is reprogrammed at connect (startup_params)."""
+        drives = self._adr_drives(engine)
+        for d in drives:
+            if engine.nodes[d.mac].phase is Phase.ONLINE:
+                self._missing_since.pop(d.mac, None)
+            else:
+                self._missing_since.setdefault(d.mac, now)
+        if self._adr is None:
+            if not self._missing(now) or now < self._adr_next:
+                return
+            o = self.options
+            config = ProbeConfig(
+                mac=o.mac, macs=(ADR_MAC,), timeout=o.explicit_timeout, claim=False, window=1
+            )
+            self._adr = LineProbe(config, self._adr_target)
+        self._adr_actions(now, self._adr.step(now))
+
+    def _missing(self, now: float) -> list[_Drive]:
+        """``adr`` drives missing long enough to be replaced (not merely slow to start)."""
+        after = 2 * (self.options.explicit_timeout + self.options.dupmac_timeout)
+        return [
+            self.drives[mac] for mac, since in self._missing_since.items() if now - since >= after
+        ]
+
+    def _adr_target(self, info: NodeInfo) -> int | None:
+        now = self.clock()
+        matches = [d for d in self._missing(now) if _same_identity(d.opts, info)]
+        if len(matches) == 1:
+            return matches[0].mac
+        if len(matches) > 1:
+            names = ", ".join(d.id for d in matches)
+            text = (
+                f"ADR: the drive at MAC {ADR_MAC} (serial {info.serial_number}) matches "
+                f"several missing drives ({names}): not re-addressed"
+            )
+            for d in matches:
+                self._hub_port().event(d.id, EventKind.CONFIG, text)
+        return None
+
+    def _adr_actions(self, now: float, actions: list[ProbeAction]) -> None:
+        for action in actions:
+            if isinstance(action, CanFrame):
+                self._outbox.append(action)
+            elif isinstance(action, Finished):
+                self._adr = None
+                self._adr_next = now + ADR_INTERVAL
+            elif isinstance(action, Progress) and action.found is not None:
+                self._adr_found(action.found)
+
+    def _adr_found(self, info: NodeInfo) -> None:
+        target = info.readdressed
+        d = self.drives.get(target) if target is not None else None
+        if d is None:
+            if info.problem is not None:
+                log.info("DeviceNet %s: ADR at MAC %d: %s", self.name, ADR_MAC, info.problem)
+            return
+        self._missing_since.pop(d.mac, None)
+        self._hub_port().event(
+            d.id,
+            EventKind.CONFIG,
+            f"ADR: a drive with the identity of {d.id} (serial {info.serial_number}) appeared "
+            f"at MAC {ADR_MAC}: set to MAC {d.mac} and reset (seed 6.1); it is reprogrammed "
+            "when it connects (startup_params)",
+            serial_number=info.serial_number,
+        )
 
     # ------------------------------------------------------------ outputs
 
@@ -725,6 +830,16 @@ class DeviceNetAdapter:
         body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
         _success(await self._request(d, body))
 
+    def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
+        """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the
+        ``scaled`` engineering value of ``raw`` (EDS scaling); {} when the drive has no EDS
+        or the EDS does not name that parameter. The params services add these beside
+        the raw value."""
+        param = self._drive(drive_id).opts.params.get(number)
+        if param is None:
+            return {}
+        return {"name": param.name, "unit": param.units, "scaled": param.scale(int(raw))}
+
     # ------------------------------------------------------------ standard objects
 
     async def read_object(
@@ -804,6 +919,22 @@ class DeviceNetAdapter:
 
 
 # ---------------------------------------------------------------- helpers
+
+
+def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
+    """The node at MAC 63 shows what this drive's config (or EDS) expects of it."""
+    revision_ok = opts.revision is None or (
+        info.revision is not None
+        and info.revision[0] == opts.revision[0]
+        and info.revision[1] >= opts.revision[1]
+    )
+    return (
+        info.vendor_id == opts.vendor_id
+        and (opts.product_code is None or info.product_code == opts.product_code)
+        and (not opts.product_name or info.product_name == opts.product_name)
+        and (opts.product_type is None or info.product_type == opts.product_type)
+        and revision_ok
+    )
 
 
 def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:

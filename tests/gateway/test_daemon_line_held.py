@@ -32,13 +32,13 @@ class HeldAdapter(FakeAdapter):
         await super().run(hub)
 
 
-CONFIG = f"""
+CONFIG = """
 [zenoh]
 enabled = false
 [modbus]
 enabled = false
 [buses.line1]
-adapter = "{__name__}:HeldAdapter"
+adapter = "held"  # tests/support/site: an entry point
 [[buses.line1.drives]]
 id = "d1"
 device = "test"

@@ -11,6 +11,7 @@ connections' paths (seed tables 13-14), inactivity at 4 x EPR (2.9) with the P31
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
@@ -23,7 +24,7 @@ from adapters.devicenet.cip import (
     Service,
     StatusPair,
 )
-from adapters.devicenet.dupmac import WEG_VENDOR_ID, DupMacCheck, DupMacKind
+from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
 from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError, InvalidCanId
 from adapters.devicenet.explicit import (
     AllocateConnectionSet,
@@ -88,6 +89,10 @@ class SimNodeConfig:
     weg_speed_scale: int = 8192
     product_code: int = 8
     serial_number: int | None = None  # default 0x08000000 + MAC
+    identity: Identity | None = None  # vendor, type, code, revision, name (e.g. from an EDS)
+    # The I/O connections' produced/consumed size attributes (e.g. from an EDS);
+    # None: the assembly's 4 bytes (seed table 11).
+    io_sizes: tuple[int, int] | None = None
     dupmac_timeout: float = 1.0
     epr_tick: float = 0.01  # s: EPR is rounded up to this tick
     reset_offline: float = 0.5  # s offline after a reset
@@ -154,7 +159,8 @@ class Cfw08Node:
                 undervoltage=config.undervoltage,
             )
         )
-        self.identity = Identity(product_code=config.product_code, serial_number=config.serial)
+        base = config.identity or Identity(product_code=config.product_code)
+        self.identity = dataclasses.replace(base, serial_number=config.serial)
         self.store: dict[tuple[int, int], int] = {}
         self.faults = FaultInjector(seed=config.seed)
         self.figures = SimFigures()
@@ -328,7 +334,8 @@ class Cfw08Node:
             out.append(self._dupmac(DupMacKind.RESPONSE))  # 2.3 step 5
 
     def _dupmac(self, kind: DupMacKind) -> CanFrame:
-        return DupMacCheck(self.mac, kind, 0, WEG_VENDOR_ID, self.config.serial).to_frame()
+        vendor = self.identity.vendor_id
+        return DupMacCheck(self.mac, kind, 0, vendor, self.config.serial).to_frame()
 
     # ------------------------------------------------------------ unconnected port (2.5)
 
@@ -424,6 +431,7 @@ class Cfw08Node:
         poll_id = predefined_can_id(PredefinedMessage.SLAVE_POLL_RESPONSE, self.mac)
         cos_id = predefined_can_id(PredefinedMessage.SLAVE_COS_CYCLIC, self.mac)
         command_id = predefined_can_id(PredefinedMessage.MASTER_POLL_COMMAND, self.mac)
+        sizes = self.config.io_sizes or (ASSEMBLY_SIZE, ASSEMBLY_SIZE)
 
         def io(instance: int, produced_id: int) -> SimConnection:
             return SimConnection(
@@ -431,8 +439,8 @@ class Cfw08Node:
                 self._clock,
                 produced_id=produced_id,
                 consumed_id=command_id,
-                produced_size=ASSEMBLY_SIZE,
-                consumed_size=ASSEMBLY_SIZE,
+                produced_size=sizes[0],
+                consumed_size=sizes[1],
                 produced_path=assembly_path(pair.input_instance),
                 consumed_path=assembly_path(pair.output_instance),
                 epr_tick_ms=tick,
