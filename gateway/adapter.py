@@ -20,9 +20,10 @@ import difflib
 import importlib
 import importlib.metadata
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 from gateway.errors import AdapterError
@@ -79,6 +80,53 @@ class Event:
 
 
 @dataclass(frozen=True, slots=True)
+class ParamInfo:
+    """What a device's manual (or its EDS) says of one parameter.
+
+    The front ends name a raw value and put it in its unit with it; the core never needs the
+    adapter for that. ``code`` is the number as the manual writes it ("P0100", "P100"; empty:
+    ``P<number>``). The value in its unit is ``(raw + offset) * multiplier / 10**decimals``:
+    a WEG table gives only ``decimals`` ("P0100 = 5.0 s is sent as 50"); an EDS may also give
+    a multiplier and an offset. ``minimum``/``maximum`` are in the unit, None when not given.
+    """
+
+    number: int
+    name: str
+    unit: str = ""
+    decimals: int = 0
+    minimum: float | None = None
+    maximum: float | None = None
+    code: str = ""
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+    @property
+    def label(self) -> str:
+        return self.code or f"P{self.number}"
+
+    def scaled(self, raw: ParamValue) -> ParamValue:
+        """``raw`` in the parameter's unit (an int when nothing scales it)."""
+        if not self.decimals and self.multiplier == 1.0 and not self.offset:
+            return raw
+        value = (raw + self.offset) * self.multiplier / float(10**self.decimals)
+        return round(value, self.decimals) if self.multiplier == 1.0 else value
+
+
+ParamTable = Mapping[int, ParamInfo]
+"""Parameter number -> :class:`ParamInfo`, as a drive's adapter declares it (capabilities)."""
+
+
+def param_table(infos: Iterable[ParamInfo]) -> ParamTable:
+    """A read-only table keyed by number (a number given twice is a data error)."""
+    table: dict[int, ParamInfo] = {}
+    for info in infos:
+        if info.number in table:
+            raise ValueError(f"parameter {info.number} listed twice")
+        table[info.number] = info
+    return MappingProxyType(table)
+
+
+@dataclass(frozen=True, slots=True)
 class Capabilities:
     """What a drive can be commanded to do, as its adapter knows it.
 
@@ -89,12 +137,15 @@ class Capabilities:
     ``reverse_refused``: None when the drive can turn in reverse; else the reason a
     command asking for reverse (a negative ``speed_rpm`` or ``speed_pct``, or
     ``direction`` reverse) is refused.
+    ``params``: what the drive's manual (or EDS) says of its parameters, by number: the
+    lookup the front ends name parameter values with (empty: numbers and raw values only).
     """
 
     speed_scale: SpeedScale | None = None
     unsupported: Mapping[str, str] = field(default_factory=dict)
     alarm_texts: Mapping[int, str] = field(default_factory=dict)
     reverse_refused: str | None = None
+    params: ParamTable = field(default_factory=dict)
 
 
 class HubPort(Protocol):

@@ -217,13 +217,34 @@ def add_param(sub: Any) -> None:
     p.add_argument("drive")
     ops = p.add_subparsers(dest="op", required=True)
     r = ops.add_parser("read")
-    r.add_argument("number", type=int)
+    r.add_argument("number", type=param_number, help="100 or P0100")
     r.add_argument("--subindex", type=int, default=0)
     w = ops.add_parser("write")
-    w.add_argument("number", type=int)
+    w.add_argument("number", type=param_number, help="100 or P0100")
     w.add_argument("value", type=float)
     w.add_argument("--subindex", type=int, default=0)
     p.set_defaults(handler=cmd_param)
+
+
+def param_number(text: str) -> int:
+    """A parameter number as the manuals write it ("P0100", "p100") or bare ("100")."""
+    digits = text[1:] if text[:1] in ("P", "p") else text
+    if not digits.isascii() or not digits.isdigit():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a parameter number (100 or P0100)")
+    return int(digits)
+
+
+def param_line(answer: dict[str, Any], number: int) -> str:
+    """``P0100 Acceleration time = 2.0 s`` where the drive's table knows the parameter,
+    else ``P100 = 20`` (the raw value)."""
+    sub = answer.get("subindex", 0)
+    code = answer.get("code") or f"P{answer.get('number', number)}"
+    if sub:
+        code += f".{sub}"
+    if "name" not in answer:
+        return f"{code} = {answer.get('value')}"
+    unit = f" {answer['unit']}" if answer.get("unit") else ""
+    return f"{code} {answer['name']} = {answer.get('scaled', answer.get('value'))}{unit}"
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -242,10 +263,7 @@ def cmd_param(args: argparse.Namespace) -> int:
     if "error" in answer:
         print(f"{args.drive} P{args.number}: {answer['error']}", file=sys.stderr)
         return 1
-    print(
-        f"{args.drive} P{answer.get('number', args.number)}.{answer.get('subindex', 0)} = "
-        f"{answer.get('value')}"
-    )
+    print(param_line(answer, args.number))
     return 0
 
 

@@ -16,8 +16,8 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 from adapters.devicenet import objects
@@ -54,6 +54,7 @@ from adapters.devicenet.cfw08_objects import (
     encode_attribute,
 )
 from adapters.devicenet.cip import CipClass
+from adapters.devicenet.eds import Param
 from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import (
     ErrorResponse,
@@ -99,7 +100,15 @@ from adapters.devicenet.scanner.probe import (
 )
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
 from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
-from gateway.adapter import EventKind, HubPort, ParamValue
+from gateway.adapter import (
+    Capabilities,
+    EventKind,
+    HubPort,
+    ParamInfo,
+    ParamTable,
+    ParamValue,
+    param_table,
+)
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import (
     AdapterError,
@@ -169,6 +178,25 @@ class _Drive:
     @property
     def values(self) -> dict[str, int]:
         return {**self.io_values, **self.params}
+
+
+def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
+    """The EDS parameters (P number -> ParamN) as the drive's parameter table: name, units,
+    limits and the EDS scaling ((raw + offset) x multiplier x base / divisor / 10^decimals)."""
+    return param_table(
+        ParamInfo(
+            number=number,
+            name=p.name,
+            unit=p.units,
+            decimals=p.decimals,
+            minimum=None if p.minimum is None else p.scale(p.minimum),
+            maximum=None if p.maximum is None else p.scale(p.maximum),
+            code=f"P{number}",
+            multiplier=p.multiplier * p.base / p.divisor,
+            offset=p.offset,
+        )
+        for number, p in sorted(params.items())
+    )
 
 
 class DeviceNetAdapter:
@@ -299,7 +327,7 @@ class DeviceNetAdapter:
         for d in self.drives.values():
             hub.update(d.id, comm=CommState.OFFLINE)
             if d.settings is not None:
-                hub.set_capabilities(d.id, capabilities(d.settings))
+                hub.set_capabilities(d.id, self._capabilities(d, d.settings))
         o = self.options
         link = CanLink(LinkConfig(o.interface, o.channel, o.bitrate))
         engine = Scanner(self.scanner_config(), self.node_configs())
@@ -745,7 +773,7 @@ class DeviceNetAdapter:
         if not 1 <= rpm <= SPEED_REF_MAX_RPM:
             raise NotConfigured(f"P{number} = {rpm} is not a usable maximum speed (rpm)")
         d.settings = _settings(d.opts, float(rpm))
-        self._hub_port().set_capabilities(d.id, capabilities(d.settings))
+        self._hub_port().set_capabilities(d.id, self._capabilities(d, d.settings))
 
     async def _read_status(self, d: _Drive, numbers: tuple[int, ...] = (P070, P081)) -> None:
         """P070 and P081 (seed 4.1.1, 4.1.2) into the values, with an event on change."""
@@ -829,6 +857,12 @@ class DeviceNetAdapter:
             raise ParameterError(f"P{number}: {value} does not fit a 16-bit parameter") from None
         body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
         _success(await self._request(d, body))
+
+    @staticmethod
+    def _capabilities(d: _Drive, settings: ProfileSettings) -> Capabilities:
+        """The profile's capabilities with the parameter table of the drive's EDS (the
+        lookup the front ends name parameter values with, gateway.adapter.ParamInfo)."""
+        return replace(capabilities(settings), params=eds_param_table(d.opts.params))
 
     def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
         """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the

@@ -61,13 +61,24 @@ from .master import (
     SlaveUp,
 )
 from .portlock import PortHeld
-from .profile import PROFILES, DpProfile, RecordAccessError, SlaveSetup
+from .profile import (
+    DP_STATIONS,
+    PROFILES,
+    SET_SLAVE_ADD_DEFAULT,
+    AddressRange,
+    DpProfile,
+    RecordAccessError,
+    SlaveSetup,
+)
 
 if TYPE_CHECKING:
     from .sim.line import SimLine
     from .sim.port import SimPort
 
 log = logging.getLogger(__name__)
+
+DEFAULT_ADDRESSES: Final = AddressRange(*DP_STATIONS, "DP station addresses, fact sheet 1.2")
+"""For a profile that declares no ``addresses`` of its own (a test device)."""
 
 REOPEN_BACKOFF: Final = (0.5, 10.0)  # s, first and longest pause before reopening the port
 CONNECT_BACKOFF: Final = (2.0, 60.0)  # s, between on_connect attempts of a drive
@@ -146,7 +157,9 @@ class ProfibusAdapter:
     devices: ClassVar[frozenset[Device]] = frozenset(
         {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
     )
-    address_range: ClassVar[tuple[int, int]] = (0, 125)
+    # 0-126 in the core's check: a device's own range (its profile's ``addresses``, from its
+    # manual) and the DP stations 0-125 are checked in parse_drive_options, naming the drive
+    address_range: ClassVar[tuple[int, int]] = (0, SET_SLAVE_ADD_DEFAULT)
     profiles: ClassVar[Mapping[Device, str]] = PROFILES
     sim_devices: ClassVar[Mapping[Device, str] | None] = None  # None: sim.devices.SIM_DEVICES
 
@@ -159,6 +172,10 @@ class ProfibusAdapter:
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
         profile_class = cls.profile_class(drive.device)
+        addresses = getattr(profile_class, "addresses", DEFAULT_ADDRESSES)
+        refusal = addresses.refusal(drive.device.value, drive.address)
+        if refusal is not None:
+            raise table.error("address", refusal)
         profile_options = profile_class.parse_options(table, drive)
         builtin = None  # the profile's own setup: only to check a GSD module or cfg against
         if table.has("gsd") or table.has("cfg"):

@@ -612,18 +612,19 @@ class ZenohFrontEnd:
 
     async def _serve_param(self, pending: _Pending, drive_id: str, req: ParamRequest) -> None:
         key = pending.incoming.key
+        info = self.hub.capabilities(drive_id).params.get(req.number)
         try:
             if req.value is not None:
                 await asyncio.wait_for(
                     self.hub.write_param(drive_id, req.number, req.value, req.subindex),
                     PARAM_TIMEOUT,
                 )
-                body = param_result(req, req.value)
+                body = param_result(req, req.value, info)
             else:
                 value = await asyncio.wait_for(
                     self.hub.read_param(drive_id, req.number, req.subindex), PARAM_TIMEOUT
                 )
-                body = param_result(req, value)
+                body = param_result(req, value, info)
         except asyncio.CancelledError:
             self._refuse(pending, "the gateway is shutting down")
             raise

@@ -77,12 +77,16 @@ KEYS: tuple[KeySpec, ...] = (
         "{prefix}/drives/{id}/params/{number}[/{subindex}]",
         (Role.QUERYABLE,),
         'query payload: none (read) or `{"value": V}` (write)',
-        'reply: `{"number": N, "subindex": S, "value": V}`; '
+        'reply: `{"number": N, "subindex": S, "value": V}` plus, where the drive\'s '
+        'parameter table knows it, `"code"`, `"name"`, `"unit"`, `"scaled"`; '
         'error reply: `{"error": "device text", "code": C}`',
         'A query without payload reads the parameter; with `{"value": V}` it writes it '
         "(only the drive's `writable_params`). Device and gateway refusals come back as an "
         "error reply (`Reply.err`) carrying the device's own text and code, never as a "
-        "timeout. Subindex defaults to 0. The key must name one drive and one parameter.",
+        "timeout. Subindex defaults to 0. The key must name one drive and one parameter. "
+        "`value` is the raw word; `scaled` is it in `unit` (P0100 = 20 is 2.0 s), with the "
+        "parameter's `code` as the manual writes it and its `name` (docs/devices.md lists the "
+        "tables).",
     ),
     KeySpec(
         KeyKind.EVENTS,

@@ -15,7 +15,7 @@ from typing import Any
 
 import orjson
 
-from gateway.adapter import ParamValue
+from gateway.adapter import ParamInfo, ParamValue
 from gateway.errors import CommandRejected, GatewayError, ParameterError
 from gateway.model import (
     DriveCommand,
@@ -201,8 +201,16 @@ def _write_value(payload: bytes | None) -> ParamValue | None:
     return value
 
 
-def param_result(req: ParamRequest, value: ParamValue) -> dict[str, Any]:
-    return {"number": req.number, "subindex": req.subindex, "value": value}
+def param_result(
+    req: ParamRequest, value: ParamValue, info: ParamInfo | None = None
+) -> dict[str, Any]:
+    """The reply: number, subindex and raw value, and where the drive's parameter table
+    knows the parameter, its ``code`` as the manual writes it, ``name``, ``unit`` and the
+    value in that unit (``scaled``)."""
+    body: dict[str, Any] = {"number": req.number, "subindex": req.subindex, "value": value}
+    if info is not None:
+        body.update(code=info.label, name=info.name, unit=info.unit, scaled=info.scaled(value))
+    return body
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:

@@ -93,6 +93,24 @@ def test_load_errors_say_what_is_wrong(name: str, message: str) -> None:
     assert str(err.value) == message
 
 
+def test_param_info_scales_and_names() -> None:
+    from gateway.adapter import ParamInfo, param_table
+
+    accel = ParamInfo(100, "Acceleration time", "s", 1, 0.0, 999.0, code="P0100")
+    assert (accel.label, accel.scaled(20), accel.scaled(85)) == ("P0100", 2.0, 8.5)
+    assert ParamInfo(3, "Motor current", "A", 1).label == "P3"
+    assert ParamInfo(23, "Software version", "", 2).scaled(500) == 5.0
+    assert ParamInfo(227, "Run/stop").scaled(4) == 4  # an int stays an int
+    # what an EDS may give besides decimal places: multiplier and offset
+    assert ParamInfo(5, "Temperature", "C", 0, multiplier=0.5, offset=-10).scaled(50) == 20.0
+    table = param_table([accel])
+    assert table[100] is accel and 101 not in table
+    with pytest.raises(ValueError, match="listed twice"):
+        param_table([accel, accel])
+    with pytest.raises(TypeError):
+        table[101] = accel  # type: ignore[index]
+
+
 def test_a_module_path_in_a_config_is_never_imported(tmp_path: Path) -> None:
     """``check-config`` run from a folder holding evilmod.py used to import (run) it."""
     marker = tmp_path / "ran"

@@ -22,13 +22,20 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from adapters.profibus.cfg import CompactId, IoDirection
 from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
-from adapters.profibus.profile import DiagEvent, EventSink, RecordChannel, SlaveSetup
+from adapters.profibus.profile import (
+    AddressRange,
+    DiagEvent,
+    EventSink,
+    RecordChannel,
+    SlaveSetup,
+)
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedScale
 
 from . import words as w
 from .options import WegOptions, parse_options
+from .paramtable import PARAM_TABLES
 from .records import RecordParams
 from .spec import SIGNED, DataProfile, ModelSpec, scaled
 
@@ -40,6 +47,11 @@ log = logging.getLogger(__name__)
 
 MAX_13BIT_PCT: Final = 100.0 * w.WORD_MAX / w.SPEED_13BIT_BASE  # 4 x base, saturating (P681)
 MAX_PROFIDRIVE_PCT: Final = 100.0  # the drive limits the speed to P0134 = 4000h
+
+# P0680 bits the model has no field for, published as ``DriveState.values`` entries (0/1)
+# where the model's status word has the bit (docs/devices.md): CFW320 Table 4.2 bit 2 "Fire
+# mode", CFW-11 Table 3.2 bit 14 "PID automatic" (reserved on the CFW700).
+STATUS_VALUES: Final = (("fire_mode", "fire_mode"), ("pid_automatic", "automatic"))
 
 
 class DriveProgrammingMismatch(GatewayError):
@@ -111,6 +123,14 @@ class WegProfile:
 
     device: ClassVar[Device]
     spec: ClassVar[ModelSpec]
+    addresses: ClassVar[AddressRange]  # from the spec, set for each subclass
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        spec: ModelSpec | None = cls.__dict__.get("spec")
+        if spec is not None:
+            low, high = spec.address_range
+            cls.addresses = AddressRange(low, high, spec.address_source)
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
@@ -148,6 +168,7 @@ class WegProfile:
         self._reported_type: int | None = None  # the last P0202 taken
         self._event: EventSink | None = None
         self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
+        self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
 
     # ------------------------------------------------------------------ setup
 
@@ -184,7 +205,10 @@ class WegProfile:
         scale = None if self.base is None else self.base.scale()
         # alarm texts of the model's manual (CFW-11 section 5, CFW700 6, CFW320 7)
         return Capabilities(
-            speed_scale=scale, unsupported=unsupported, alarm_texts=self.spec.alarms
+            speed_scale=scale,
+            unsupported=unsupported,
+            alarm_texts=self.spec.alarms,
+            params=PARAM_TABLES[self.spec.device],  # the manual's parameter table
         )
 
     # ------------------------------------------------------------------ connect
@@ -193,6 +217,8 @@ class WegProfile:
         """Write ``startup_params``, check the drive's programming, read the scales."""
         for number, value in self.options.startup_params:
             await self._startup_param(channel, event, number, value)
+        if self.spec.reads_data_profile:
+            await self._check_data_profile(channel)
         if self.options.verify_mapping:
             await self._verify_programming(channel)
         await self._read_ratings(channel)
@@ -255,6 +281,21 @@ class WegProfile:
             raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
         if back != raw:
             raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
+
+    async def _check_data_profile(self, channel: RecordChannel) -> None:
+        """P741 against the configured data profile (CFW320 Table 4.6 note: the control,
+        status, speed reference and motor speed words depend on it): a mismatch would be
+        misread, so the drive is not brought online."""
+        want = self.options.data_profile
+        got = await self.params.read(channel, 741)
+        if got == want.p0741:
+            return
+        names = {p.p0741: p.value for p in DataProfile}
+        raise DriveProgrammingMismatch(
+            f"{self.spec.pname(741)} = {got} ({names.get(got, 'unknown data profile')}), "
+            f"the config's data_profile is {want.value} ({self.spec.pname(741)} = {want.p0741}): "
+            "its words would be misread"
+        )
 
     def _expected_programming(self) -> list[tuple[int, int]]:
         """(parameter, expected raw value) that the config implies about the drive."""
@@ -483,6 +524,7 @@ class WegProfile:
                 self._mapped_word(param, word, changes, mapped)
         self._resolve_codes(changes, mapped)
         mapped.values.update(self._own_values())
+        mapped.values.update(self._status_values)
         if mapped.values:
             changes["values"] = dict(mapped.values)
         return changes
@@ -509,6 +551,9 @@ class WegProfile:
     def _manufacturer_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
         """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403)."""
         st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
+        self._status_values = {
+            key: int(getattr(st, bit)) for key, bit in STATUS_VALUES if self._has_status_bit(bit)
+        }
         self._speed_fields(speed, changes)
         if self.spec.device is Device.CFW320:
             commanded = st.run_command  # CFW320 bit 1 "Run command"
@@ -536,6 +581,9 @@ class WegProfile:
             remote=st.remote,
             alarm=st.alarm,
         )
+
+    def _has_status_bit(self, bit: str) -> bool:
+        return any(name == bit for name, _ in self.spec.status_bits)
 
     def _profidrive_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
         """P0968 ZSW1 (Table 3.9 / 4.8) and NIST (4000h = P0134)."""

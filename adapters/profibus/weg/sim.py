@@ -173,6 +173,10 @@ class WegSim:
         self.pinned: dict[int, int] = {}
         self.undervoltage = False
         self.config_mode = False
+        # P0680 bits the simulator does not compute: set by a test or the fault-injection API
+        self.fire_mode = False  # CFW320 Table 4.2 bit 2
+        self.pid_automatic = False  # CFW-11 Table 3.2 bit 14
+        self.record_read_lengths: list[tuple[int, int]] = []  # (index, length) of each DS_Read
         self.saved: dict[int, int] = {}  # CFW320: values before cyclic writes (not saved)
         self._power_up(now)
 
@@ -734,6 +738,8 @@ class WegSim:
         run_cmd = self._run_command(self._remote())
         status = w.ManufacturerStatus(
             run_command=run_cmd and not self.fault,
+            fire_mode=self.fire_mode,
+            automatic=self.pid_automatic,
             quick_stop_active=self.motor.quick_stopping,
             second_ramp=self._second_ramp(),
             config_mode=self.config_mode,
@@ -830,6 +836,7 @@ class WegSim:
 
     def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
         self.tick(now)
+        self.record_read_lengths = [*self.record_read_lengths[-15:], (index, length)]
         if slot != 0:
             raise access_error(E_SLOT)
         if index == pd.PARAMETER_INDEX:

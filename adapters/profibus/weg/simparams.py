@@ -204,6 +204,10 @@ def _cfw320() -> list[ParamSpec]:
         signed_rw(696),
         signed_rw(697),
         ro(740),
+        # data profile: the CFW320 manual names P741 (Table 4.6 note, 6.2 step 3) without its
+        # table; the CFW-11/CFW700 coding (0 = PROFIdrive, 1 = manufacturer, factory 1) is
+        # taken (docs/devices.md). The simulator's words stay the manufacturer's either way.
+        rw(741, 1, 0, 1),
         *(rw(n, 0, 0, 1199) for n in range(742, 750)),  # P742-P749, 0 to 1199
         rw(750, 1, 1, 126),  # address, 1 to 126, factory setting 1
         rw(751, 1, 1, 5),  # telegram, Table 4.7: 1-5, factory setting 1

@@ -20,7 +20,11 @@ from .words import BitTable
 
 
 class DataProfile(Enum):
-    """P0741 "Perfil de Dados Profibus" (CFW-11 Table 3.6, CFW700 Table 4.6)."""
+    """P0741 "Perfil de Dados Profibus" (CFW-11 Table 3.6, CFW700 Table 4.6).
+
+    The CFW320 manual names P741 (Table 4.6 note, 6.2 step 3) without its values: the same
+    coding is taken (docs/devices.md).
+    """
 
     PROFIDRIVE = "profidrive"  # P0741 = 0
     MANUFACTURER = "manufacturer"  # P0741 = 1 (factory setting)
@@ -156,12 +160,13 @@ class ModelSpec:
     pnu_digits: int  # how the manual writes numbers: P0680 (4) or P680 (3)
     address_param: int  # CFW-11/CFW700 P0918; CFW320 P750
     address_range: tuple[int, int]  # CFW-11 P0918 1-125; CFW700 P0918 1-126; CFW320 P750 1-126
+    address_source: str  # where the manual gives the range
     address_needs_power_cycle: bool  # CFW-11 P0918 note; the others: when not exchanging
     telegram_param: int  # CFW-11/CFW700 P0922; CFW320 P751
     max_words: int  # CFW-11/CFW700 10 (P0922 1-9); CFW320 6 (P751 1-5)
     read_map_first: int  # P0742 (input words 3..)
     write_map_first: int  # CFW-11/CFW700 P0750; CFW320 P746 (output words 3..)
-    profiles: frozenset[DataProfile]  # CFW320: no P0741 in its manual
+    profiles: frozenset[DataProfile]  # CFW320: its manual documents only the manufacturer's
     frame20: bool  # PROFIdrive frame type 20 with P0760-P0763 (CFW-11 Table 3.6 only)
     quick_stop: bool  # P0684 bit 6 (reserved on the CFW320)
     control_bits: BitTable
@@ -176,6 +181,9 @@ class ModelSpec:
     default_ident: int  # placeholder: the GSD file's Ident_Number is not in the seeds
     control_types: Mapping[int, str] = field(default_factory=dict)  # P0202 (none: not read)
     quick_stop_ignored_ramp_only: bool = False  # the drive ignores bit 6 in V/f or VVW
+    # read P741 at connect whatever verify_mapping says: the CFW320's words "depend on the
+    # parameter P741" (Table 4.6 note) and the gateway speaks only its manufacturer's words
+    reads_data_profile: bool = False
 
     @property
     def reads_control_type(self) -> bool:
@@ -234,6 +242,7 @@ CFW11: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 125),
+    address_source="CFW-11 manual 2.3.2 and P0918 (section 3): 1 a 125",
     address_needs_power_cycle=True,
     telegram_param=922,
     max_words=10,
@@ -260,6 +269,7 @@ CFW700: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 126),
+    address_source="CFW700 manual P0918 (section 4): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=922,
     max_words=10,
@@ -287,6 +297,7 @@ CFW320: Final = ModelSpec(
     pnu_digits=3,
     address_param=750,
     address_range=(1, 126),
+    address_source="CFW320 manual 3.2 and P750 (section 4.2): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=751,
     max_words=6,
@@ -305,6 +316,7 @@ CFW320: Final = ModelSpec(
     comm_action_default=1,
     interface_fault=32,
     default_ident=0x0C32,
+    reads_data_profile=True,
 )
 
 SPECS: Final[Mapping[Device, ModelSpec]] = MappingProxyType(

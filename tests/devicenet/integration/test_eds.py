@@ -38,6 +38,14 @@ async def test_drive_and_simulator_from_one_eds(can_line: LinkConfig) -> None:
         info = r.adapter.param_info("d5", 100, raw)
         assert info == {"name": "Acceleration time", "unit": "s", "scaled": raw / 10}
         assert r.adapter.param_info("d5", 222, 0) == {}
+        # the same through the drive's capabilities, the lookup the front ends use
+        table = r.hub.capabilities("d5").params
+        assert (table[100].label, table[100].name, table[100].unit) == (
+            "P100",
+            "Acceleration time",
+            "s",
+        )
+        assert table[100].scaled(raw) == raw / 10 and 222 not in table
 
 
 async def test_simulator_identity_follows_its_eds(can_line: LinkConfig, tmp_path: Path) -> None:
