@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CFW08_EDS = ROOT / "config" / "eds" / "cfw08-test.eds"
 BUS = "[buses.dn]\nadapter = 'devicenet'\n"
 DRIVE = "[[buses.dn.drives]]\nid = 'd'\ndevice = 'CFW-08'\naddress = 5\nmax_rpm = 1800\n"
-D = "buses.dn.drives[0]"
+D = "buses.dn.drives[d]"
 
 
 def write(tmp_path: Path, text: str, eds: str | None = None) -> Path:
