@@ -38,6 +38,7 @@ from adapters.devicenet.scanner.probe import (
 )
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
 from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
+from gateway.errors import GatewayError
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +196,7 @@ def add_devicenet(sub: Any) -> None:
     scan.set_defaults(handler=cmd_scan)
 
 
-class ScanRefused(Exception):
+class ScanRefused(GatewayError):
     """The scan tool's MAC ID is answered: a scanner runs on this line."""
 
 

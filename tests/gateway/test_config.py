@@ -83,7 +83,7 @@ BROKEN = [
     ("[zenoh]\nconfig_file = 'nope.json5'\n", "site.toml: zenoh.config_file: 'nope.json5' does not exist"),
     ("[modbus]\nbind = 'localhost'\n", "site.toml: modbus.bind: 'localhost' is not HOST:PORT"),
     ("[modbus]\nallow = ['10.0.0.300/8']\n", "site.toml: modbus.allow[0]: '10.0.0.300/8' is not an address or CIDR network"),
-    ("[buses.l]\nadapter = 'canbus'\n", "site.toml: buses.l.adapter: unknown adapter 'canbus' (known: devicenet, echo-profibus, fake, profibus)"),
+    ("[buses.l]\nadapter = 'canbus'\n", "site.toml: buses.l.adapter: unknown adapter 'canbus' (known: devicenet, echo-profibus, fake, held, profibus)"),
     ("[buses.l]\ncycle = 1\n", "site.toml: buses.l.adapter: is required"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'CFW-11'\naddress = 1\n",
      "site.toml: buses.l.drives[a].device: 'CFW-11' is not one of 'MCD 600', 'test'"),
