@@ -36,8 +36,8 @@ class Scanner:
 
     ``step(now, event) -> [Transmit]`` until :attr:`done`. Each address gets
     ``1 + retries`` tries, each waited for from the time the driver confirms it was written
-    (:class:`Written`, as in the master); :attr:`found` maps the addresses that answered to the station
-    type in their reply's FC (fact sheet 1.3).
+    (:class:`Written`, as in the master); :attr:`found` maps the addresses that answered
+    to the station type in their reply's FC (fact sheet 1.3).
     """
 
     def __init__(self, bus: BusParams, addresses: Iterable[int], now: float = 0.0) -> None:

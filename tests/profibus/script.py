@@ -23,6 +23,7 @@ class Script:
         self.transmits: list[Transmit] = []
         self._waiting: list[Transmit] = []
         self.write_lag = 0.0  # how late the driver writes (a loop callback run late)
+        self.written: list[float] = []  # when each telegram was written (Written.at)
 
     def _collect(self, actions: list[Action]) -> None:
         for a in actions:
@@ -48,6 +49,7 @@ class Script:
             self.now = max(self.now, deadline)
         t = self._waiting.pop(0)
         at = max(self.now, t.not_before) + self.write_lag
+        self.written.append(at)
         self._collect(self.master.step(at, Written(at)))  # the driver confirms the write
         self.now = at + self.master.bus.tx_time(len(t.data))
         if wire is not None:
