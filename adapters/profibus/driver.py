@@ -16,6 +16,10 @@ the port itself (``select`` with a sub-millisecond timeout) instead of a loop ti
 cannot sleep less than a millisecond: bytes arriving meanwhile are read and stepped at once,
 so a stray reply restarts the idle time before the next request is decided (1.1). At most
 :data:`MAX_SHORT_WAITS` such waits per step, so the rest of the loop always gets its turn.
+
+A reply deadline whose timer fires late (the process was not scheduled) is judged once more
+that much later (:meth:`LineDriver._postpone`): what could not run meanwhile includes the
+simulated slaves of ``simulate = true``, which share the loop.
 """
 
 from __future__ import annotations
@@ -35,6 +39,9 @@ log = logging.getLogger(__name__)
 
 SPIN_LIMIT: Final = 0.001  # s: shorter waits are spent watching the port, longer ones slept
 MAX_SHORT_WAITS: Final = 8  # short waits in one step before the loop gets its turn back
+LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
+MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
+MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
 _TELEGRAMS: Final = (DataTelegram, ShortAck, TokenTelegram)
 
 
@@ -67,6 +74,9 @@ class LineDriver:
         self._delayed: asyncio.TimerHandle | None = None
         self._stepping = False
         self._queued: deque[Event | None] = deque()
+        self._postponed_for: float | None = None
+        self._postpones = 0
+        self.postponed = 0  # reply deadlines judged later because their timer ran late
         self._stopped = False
         link.on_data = self._on_data
 
@@ -167,9 +177,33 @@ class LineDriver:
         self._timer = self.loop.call_at(deadline, self._on_timer)
 
     def _on_timer(self) -> None:
+        armed = self._timer_at
         self._timer = None
         self._timer_at = None
+        if armed is not None and self._postpone(armed):
+            return
         self._step(None)
+
+    def _postpone(self, armed: float) -> bool:
+        """A reply deadline whose timer ran late (the loop did not run meanwhile) is judged
+        as much later, at most :data:`MAX_POSTPONES` times: a slave simulated on the same
+        loop, and the pty between, could not answer while the loop stood still. (On a real
+        line the reply is in the port by then and read first: the loop runs its I/O
+        callbacks before its timers.)"""
+        deadline = self.engine.next_deadline()
+        awaiting = getattr(self.engine, "awaiting_reply", None)
+        if deadline is None or not callable(awaiting) or not awaiting():
+            return False
+        if deadline != self._postponed_for:
+            self._postponed_for, self._postpones = deadline, 0
+        lag = self.loop.time() - max(armed, deadline)
+        if lag <= LATE_TIMER or self._postpones >= MAX_POSTPONES:
+            return False
+        self._postpones += 1
+        self.postponed += 1
+        self._timer_at = self.loop.time() + min(lag, MAX_POSTPONE)
+        self._timer = self.loop.call_at(self._timer_at, self._on_timer)
+        return True
 
     # ------------------------------------------------------------------ receiving
 

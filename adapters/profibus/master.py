@@ -439,6 +439,10 @@ class Master:
         times = [base, *(j.deadline for j in self._jobs.values())]
         return max(line_free, min(times))
 
+    def awaiting_reply(self) -> bool:
+        """A request is on the line (confirmed written) and its reply deadline runs."""
+        return self._pending is not None and self._pending.written
+
     def _take(self) -> list[Action]:
         out, self._out = self._out, []
         return out

@@ -56,6 +56,9 @@ class Scanner:
         probe = self._probe
         return probe.deadline if probe is not None and probe.written else None
 
+    def awaiting_reply(self) -> bool:
+        return self._probe is not None and self._probe.written
+
     def step(self, now: float, event: Event | None = None) -> list[Transmit]:
         out: list[Transmit] = []
         probe = self._probe
