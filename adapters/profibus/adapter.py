@@ -44,6 +44,7 @@ from .driver import LineDriver
 from .link import OPEN_ERRORS, SerialLink, open_link
 from .master import (
     DiagnosisRead,
+    FaultKind,
     InputsReceived,
     LineMode,
     LineNoise,
@@ -80,6 +81,10 @@ CONNECTING_STATES: Final = frozenset(
         SlaveState.FAULT,
     }
 )
+
+FAULT_EVENTS: Final[Mapping[FaultKind, EventKind]] = {
+    FaultKind.DPV1_UNANSWERED: EventKind.BUS,  # the line's trouble; data exchange goes on
+}
 
 DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "fault": EventKind.FAULT,
@@ -402,12 +407,13 @@ class ProfibusAdapter:
         drive.profile.on_comm_lost()
         if self._hub is not None:
             self._hub.update(drive.id, comm=CommState.OFFLINE, running=False)
-            self._event(drive, EventKind.COMM, f"left data exchange: {reason}")
+            self._event(drive, EventKind.COMM, f"left data exchange: {reason}", reason=reason)
 
     def _on_fault(self, action: SlaveFault) -> None:
         drive = self._drive_at(action.address)
         if drive is not None:
-            self._event(drive, EventKind.CONFIG, action.text, fault=action.kind.value)
+            kind = FAULT_EVENTS.get(action.kind, EventKind.CONFIG)
+            self._event(drive, kind, action.text, fault=action.kind.value)
 
     def _on_inputs(self, action: InputsReceived) -> None:
         drive = self._drive_at(action.address)
