@@ -157,6 +157,10 @@ class DpSlave:
             self.mode = SlaveMode.WAIT_PRM
             self.master = None
 
+    def stood_still(self, seconds: float) -> None:
+        """The simulator's process stood still ``seconds``: the watchdog does not count it."""
+        self.last_contact += seconds
+
     def power_cycle(self, now: float, off_time: float = 0.0) -> None:
         """Power off for ``off_time`` s (silent), then back in Wait_Prm (parameters kept)."""
         self.device.power_cycle(now)
