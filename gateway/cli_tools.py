@@ -14,6 +14,7 @@ import argparse
 import itertools
 import json
 import os
+import re
 import sys
 import threading
 import time
@@ -269,7 +270,8 @@ def cmd_param(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------ watch
 
-COLUMNS = ("id", "device", "comm", "status", "speed", "current", "fault", "age")
+COLUMNS = ("id", "device", "comm", "status", "speed", "current", "fault", "age", "last comm event")
+_TRANSITION = re.compile(r"comm \w+ -> \w+")  # the hub's own comm events: no reason in them
 
 
 @dataclass
@@ -279,6 +281,7 @@ class Board:
     states: dict[str, dict[str, Any]] = field(default_factory=dict)
     received: dict[str, float] = field(default_factory=dict)
     alive: set[str] = field(default_factory=set)
+    comm_events: dict[str, tuple[str, float]] = field(default_factory=dict)  # text, received
     lock: threading.Lock = field(default_factory=threading.Lock)
     changed: threading.Event = field(default_factory=threading.Event)
 
@@ -286,6 +289,15 @@ class Board:
         with self.lock:
             self.states[doc["id"]] = doc
             self.received[doc["id"]] = time.monotonic()
+        self.changed.set()
+
+    def on_event(self, doc: dict[str, Any]) -> None:
+        """Keep a drive's last comm event that says why (left data exchange: the reason)."""
+        text = doc.get("text")
+        if doc.get("kind") != "comm" or not isinstance(text, str) or _TRANSITION.fullmatch(text):
+            return
+        with self.lock:
+            self.comm_events[str(doc.get("drive"))] = (text, time.monotonic())
         self.changed.set()
 
     def on_alive(self, drive_id: str, alive: bool) -> None:
@@ -312,6 +324,10 @@ class Board:
         if d["id"] not in self.alive and comm == "online":
             comm = "gone"
         age = f"{now - self.received.get(d['id'], now):.1f}s"
+        why = "-"
+        if d["id"] in self.comm_events:
+            text, at = self.comm_events[d["id"]]
+            why = f"{text} ({now - at:.0f}s ago)"
         return (
             d["id"],
             str(d.get("device")),
@@ -321,6 +337,7 @@ class Board:
             current,
             fault,
             age,
+            why,
         )
 
 
@@ -351,6 +368,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
         with suppress(ValueError, KeyError):
             board.on_state(json.loads(sample.payload.to_string()))
 
+    def on_event(sample: zenoh.Sample) -> None:
+        with suppress(ValueError, KeyError):
+            board.on_event(json.loads(sample.payload.to_string()))
+
     def on_token(sample: zenoh.Sample) -> None:
         drive = _key_drive(str(sample.key_expr), prefix)
         if drive is not None:
@@ -358,6 +379,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
     with session(args.connect) as s:
         sub_states = s.declare_subscriber(f"{prefix}/drives/*/state", on_sample)
+        sub_events = s.declare_subscriber(f"{prefix}/drives/*/events", on_event)
         sub_alive = s.liveliness().declare_subscriber(f"{prefix}/drives/*", on_token, history=True)
         try:
             if args.once:
@@ -373,6 +395,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             return 0
         finally:
             sub_states.undeclare()
+            sub_events.undeclare()
             sub_alive.undeclare()
 
 

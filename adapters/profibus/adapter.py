@@ -47,6 +47,7 @@ from .driver import LineDriver
 from .link import OPEN_ERRORS, SerialLink, open_link
 from .master import (
     DiagnosisRead,
+    FaultKind,
     InputsReceived,
     LineMode,
     LineNoise,
@@ -95,6 +96,10 @@ CONNECTING_STATES: Final = frozenset(
         SlaveState.FAULT,
     }
 )
+
+FAULT_EVENTS: Final[Mapping[FaultKind, EventKind]] = {
+    FaultKind.DPV1_UNANSWERED: EventKind.BUS,  # the line's trouble; data exchange goes on
+}
 
 DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "fault": EventKind.FAULT,
@@ -451,13 +456,14 @@ class ProfibusAdapter:
         drive.profile.on_comm_lost()
         if self._hub is not None:
             self._hub.update(drive.id, comm=CommState.OFFLINE, running=False)
-            self._event(drive, EventKind.COMM, f"left data exchange: {reason}")
+            self._event(drive, EventKind.COMM, f"left data exchange: {reason}", reason=reason)
 
     def _on_fault(self, action: SlaveFault) -> None:
         drive = self._drive_at(action.address)
         if drive is not None:
+            kind = FAULT_EVENTS.get(action.kind, EventKind.CONFIG)
             text = action.text + self._gsd_hint(drive, action.slave_cfg)
-            self._event(drive, EventKind.CONFIG, text, fault=action.kind.value)
+            self._event(drive, kind, text, fault=action.kind.value)
 
     def _gsd_hint(self, drive: _Drive, slave_cfg: bytes | None) -> str:
         """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""

@@ -38,10 +38,12 @@ import contextlib
 import errno
 import logging
 import os
+import select
 import socket
 import stat
 import termios
 import threading
+import time
 from collections.abc import Callable
 from enum import Enum
 from typing import Any, Final, TypeVar
@@ -294,8 +296,30 @@ class SerialLink:
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
 
-    def _polled(self) -> None:
-        self._poll = None
+    def wait_readable(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s (sub-millisecond: a driver's wait for TSYN) until bytes
+        can be read; a port without a file descriptor is only waited out."""
+        if timeout <= 0 or self._closed:
+            return False
+        if self._fd is None:
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                pass
+            return False
+        try:
+            readable, _, _ = select.select([self._fd], [], [], timeout)
+        except (OSError, ValueError):
+            return False
+        return bool(readable)
+
+    def read_now(self) -> None:
+        """Read what has arrived now (as the reader callback would) and hand it on."""
+        if self._fd is None:
+            self._polled_once()
+        else:
+            self._readable()
+
+    def _polled_once(self) -> None:
         if self._closed:
             return
         try:
@@ -307,6 +331,10 @@ class SerialLink:
         if data:
             self.bytes_in += len(data)
             self.on_data(data, self.loop.time())
+
+    def _polled(self) -> None:
+        self._poll = None
+        self._polled_once()
         if not self._closed:
             self._poll = self.loop.call_later(POLL_INTERVAL, self._polled)
 

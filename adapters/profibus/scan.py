@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from .diag import SlaveDiag
 from .dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
 from .errors import ProfibusDecodeError
-from .events import Event, LineNoise, Received, Transmit
+from .events import Event, LineNoise, Received, Transmit, Written
 from .fdl import (
     DataTelegram,
     FcbState,
@@ -53,6 +53,7 @@ class _Probe:
     kind: str = "status"  # "status", "diag", "cfg"
     tries: int = 0
     deadline: float = 0.0
+    written: bool = False  # confirmed by Written: the reply wait counts from there
 
 
 @dataclass(frozen=True)
@@ -68,9 +69,10 @@ class Scanner:
     """FDL status requests to each address in turn (sans-IO, like the master).
 
     ``step(now, event) -> [Transmit]`` until :attr:`done`. Each address gets
-    ``1 + retries`` tries; :attr:`found` maps the addresses that answered to the station
-    type in their reply's FC (fact sheet 1.3); :attr:`slaves` what each slave's diagnosis
-    and Get_Cfg said (with ``identify``). :attr:`probed` counts the addresses done.
+    ``1 + retries`` tries, each waited for from the time the driver confirms it was written
+    (:class:`Written`, as in the master); :attr:`found` maps the addresses that answered to
+    the station type in their reply's FC (fact sheet 1.3); :attr:`slaves` what each slave's
+    diagnosis and Get_Cfg said (with ``identify``). :attr:`probed` counts the addresses done.
     """
 
     def __init__(
@@ -96,11 +98,26 @@ class Scanner:
         return self._probe is None and not self._todo
 
     def next_deadline(self) -> float | None:
-        return self._probe.deadline if self._probe is not None else None
+        probe = self._probe
+        return probe.deadline if probe is not None and probe.written else None
+
+    def awaiting_reply(self) -> bool:
+        return self._probe is not None and self._probe.written
 
     def step(self, now: float, event: Event | None = None) -> list[Transmit]:
         out: list[Transmit] = []
         probe = self._probe
+        if isinstance(event, Written):
+            if probe is not None and not probe.written:
+                probe.written = True
+                end = event.at + self.bus.tx_time(len(probe.data))
+                probe.deadline = end + self.bus.reply_wait
+                self._idle_since = max(self._idle_since, end)
+            return out
+        if event is not None:  # 1.1: any byte received restarts the idle time
+            self._idle_since = max(self._idle_since, now)
+        if probe is not None and not probe.written:
+            return out
         if probe is not None and isinstance(event, Received):
             t = event.telegram
             if isinstance(t, DataTelegram) and not t.is_request and t.sa == probe.address:
@@ -156,7 +173,7 @@ class Scanner:
     def _send(self, probe: _Probe, now: float, out: list[Transmit]) -> None:
         not_before = max(now, self._idle_since + self.bus.tsyn)
         probe.tries += 1
-        probe.deadline = not_before + self.bus.tx_time(len(probe.data)) + self.bus.reply_wait
+        probe.written = False
         self._probe = probe
         self.stats.telegrams += 1
         out.append(Transmit(probe.data, not_before, True))

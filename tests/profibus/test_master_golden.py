@@ -95,8 +95,8 @@ def test_dpv1_read_of_index_47_request_poll_and_answer() -> None:
     master.set_outputs(5, h("04 7F 20 00"))
     script.sent(DATA_1)
     script.answer(INPUTS)
-    job = master.read_record(5, 0, 47, 240, script.now)
     script.sent(DATA_2)
+    job = master.read_record(5, 0, 47, 240, script.now)  # taken in this turn
     script.answer(INPUTS)
     script.sent(READ_47)
     script.answer(SHORT_ACK)  # 1.10: the request is taken, the answer comes on a poll
@@ -111,8 +111,8 @@ def test_dpv1_error_answer_carries_the_codes() -> None:
     start(script, "68 0F 0F 68 85 82 5D 3D 3E 88 01 0A 0B 80 B5 00 80 00 00 32 16")
     script.sent("68 07 07 68 05 02 7D 00 00 00 00 84 16")  # outputs never set: zeros
     script.answer(INPUTS)
-    job = master.read_record(5, 0, 47, 240, script.now)
     script.sent()
+    job = master.read_record(5, 0, 47, 240, script.now)  # taken in this turn
     script.answer(INPUTS)
     script.sent(READ_47)
     script.answer(READ_ERROR)  # answered at once (DL with the error PDU)

@@ -87,3 +87,18 @@ def test_no_gateway_is_a_clear_error(tmp_path: Path) -> None:
     out = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 1
     assert "no answer" in out.stderr or "error" in out.stderr
+
+
+def test_watch_says_why_a_drive_left() -> None:
+    """The last comm event with a reason (not the hub's bare transitions) is in the row."""
+    from gateway.cli_tools import COLUMNS, Board
+
+    board = Board()
+    board.on_state({"id": "cfw11", "device": "CFW-11", "comm": "online", "status": "ready"})
+    reason = "left data exchange: no reply to Data_Exchange after 3 tries (waited 60.4 ms for each)"
+    board.on_event({"drive": "cfw11", "kind": "comm", "text": reason, "reason": "..."})
+    board.on_event({"drive": "cfw11", "kind": "comm", "text": "comm offline -> connecting"})
+    board.on_event({"drive": "cfw11", "kind": "fault", "text": "F070 overcurrent"})
+    (row,) = board.rows(1e9)
+    assert COLUMNS[-1] == "last comm event"
+    assert row[-1].startswith(reason + " (")
