@@ -283,7 +283,7 @@ def gsd_models(draw: st.DrawFn) -> g.Gsd:
     ints = {"ident_number": draw(st.integers(0, 0xFFFF)), "user_prm_data_len": length}
     for key in ("station_type", "modular_station", "max_module", "dpv1_slave", "c1_max_data_len"):
         if draw(st.booleans()):
-            ints[key] = draw(st.integers(0, 240))
+            ints[key] = draw(st.integers(1 if key == "max_module" else 0, 240))  # a GSD's 1+
     bauds = draw(st.lists(st.sampled_from(list(g.BAUD_KEYS)), unique=True))
     return g.Gsd(
         ints=tuple(sorted(ints.items())),
