@@ -39,6 +39,7 @@ from gateway.modbus.frontend import ModbusFrontEnd
 from gateway.modbus.map import DRIVE_HOLDINGS, DRIVE_INPUTS, MIRROR_OFFSET
 from gateway.modbus.regs import block_size
 from gateway.systemd import Notifier
+from tests.support import plugins
 from tests.support.net import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,6 +49,8 @@ ROUND_S = 1.0
 ROUNDS = 5
 COMMANDS = 1000
 INPUTS = block_size(DRIVE_INPUTS)
+
+plugins.register()
 
 CONFIG = """
 [gateway]
@@ -59,7 +62,7 @@ enabled = false
 bind = "127.0.0.1:{port}"
 allow = ["127.0.0.0/8"]
 [buses.line1]
-adapter = "tests.support.fake_adapter:FakeAdapter"
+adapter = "fake"  # tests/support/plugins.py
 cycle = 0.01
 [[buses.line1.drives]]
 id = "d1"

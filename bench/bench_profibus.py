@@ -489,6 +489,12 @@ class _NoLink:
     def write(self, data: bytes) -> None:
         self.sent.append(data)
 
+    def wait_readable(self, timeout: float) -> bool:
+        return False  # the replies come from the bench, never from waiting
+
+    def read_now(self) -> None:
+        return
+
 
 ENGINE_MESSAGES: Final = 20000
 # Without a line the replies come at once; at a real rate the driver would wait out the

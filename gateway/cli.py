@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "param": "gateway.cli_tools:add_param",
     "health": "gateway.cli_tools:add_health",
     "profibus": "adapters.profibus.cli:add_profibus",
+    "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.simcli:add_sim",
 }
 """Subcommand -> "module:function(subparsers)"; a module not in this build is skipped."""
@@ -49,12 +50,43 @@ def _print_config_errors(exc: ConfigErrors | ConfigError) -> None:
         print(f"error: {err}", file=sys.stderr)
 
 
-def _load_or_report(path: str | Path) -> Config | None:
+def front_end_problems(config: Config) -> list[ConfigError]:
+    """What a front end would refuse at start that can be known without opening
+    anything: the Zenoh session config (the file's or the one made from [zenoh]) as
+    Zenoh itself reads it. ``check-config`` and ``run`` both ask it."""
+    if not config.zenoh.enabled:
+        return []
     try:
-        return load(path)
+        from gateway.zenoh.session import zenoh_config
+    except ModuleNotFoundError:  # the Zenoh front end is not part of this build
+        return []
+    try:
+        zenoh_config(config.zenoh)
+    except ConfigError as exc:
+        return [exc]
+    return []
+
+
+def _load_or_report(path: str | Path) -> Config | None:
+    """The config, or None once every error is printed; ``check-config`` and ``run``
+    refuse exactly the same files, each with a message and never a traceback."""
+    try:
+        config = load(path)
     except (ConfigErrors, ConfigError) as exc:
         _print_config_errors(exc)
         return None
+    except Exception as exc:  # a checker bug: still a message (and status 2), no traceback
+        print(f"error: {path}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return None
+    try:
+        problems = front_end_problems(config)
+    except Exception as exc:  # as above
+        print(f"error: {path}: cannot be checked ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return None
+    if problems:
+        _print_config_errors(ConfigErrors(problems))
+        return None
+    return config
 
 
 # ---------------------------------------------------------------- run

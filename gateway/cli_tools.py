@@ -1,26 +1,33 @@
 """Operator tools: Zenoh clients for any running gateway (``--connect ENDPOINT``).
 
 ``watch`` (live table of drives, ``--once`` for scripts), ``cmd`` (a command as a
-query; exit 0 only when accepted), ``param`` (read/write through the params
-queryable; device error text and exit 1 on refusal) and ``health``.
-The client session connects only to the given endpoint, listens on nothing and
-does no multicast scouting.
+query; exit 0 only when accepted, the gateway's reason and exit 1 when refused), ``param``
+(read/write through the params queryable; device error text and exit 1 on refusal) and
+``health``. The client session connects only to the given endpoint, listens on nothing and
+does no multicast scouting. Every query carries the session's source info (its Zenoh id and
+a sequence number), so the gateway can tell this client from the others.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
+import re
 import sys
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TextIO
 
 import zenoh
+
+from gateway.config import read_zenoh_config_file
+from gateway.errors import ConfigError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "demo"
@@ -45,8 +52,8 @@ def client_config(endpoint: str, config_file: str | None = None) -> zenoh.Config
     With ``config_file`` (JSON5, e.g. with TLS certificates for a secured
     gateway) that file is the base and ``endpoint`` is added to connect to.
     """
-    if config_file is not None:
-        conf = zenoh.Config.from_file(config_file)
+    if config_file is not None:  # bounded and checked first (gateway.config)
+        conf = zenoh.Config.from_json5(read_zenoh_config_file(Path(config_file)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         return conf
@@ -82,22 +89,53 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _use_config_file(path: str) -> str:
+    try:
+        read_zenoh_config_file(Path(path))
+    except ConfigError as exc:  # argparse: "error: argument --zenoh-config: ...", exit 2
+        raise argparse.ArgumentTypeError(str(exc)) from None
     _CONFIG_FILE[0] = path
     return path
 
 
+_SEQUENCE = itertools.count(1)
+
+
+def source_info(s: zenoh.Session, key: str) -> zenoh.SourceInfo:
+    """This session's identity for a put or a query on ``key``: the id of a publisher it
+    declares there (the session's Zenoh id and an entity id; ``EntityGlobalId`` has no
+    constructor) and the next sequence number."""
+    publisher = s.declare_publisher(key)
+    return zenoh.SourceInfo(publisher.id, next(_SEQUENCE))
+
+
 def query(endpoint: str, key: str, payload: Any | None = None) -> Any:
-    """One query, its first reply as JSON; raises RuntimeError when nothing answers."""
+    """One query, its first reply as JSON (an error reply as ``{"error": text}``); raises
+    RuntimeError when nothing answers."""
     with session(endpoint) as s:
-        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT}
+        kwargs: dict[str, Any] = {"timeout": QUERY_TIMEOUT, "source_info": source_info(s, key)}
         if payload is not None:
             kwargs["payload"] = json.dumps(payload)
         for reply in s.get(key, **kwargs):
             if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_string())
+                return _json_or_text(reply.ok.payload.to_string())
             if reply.err is not None:
-                return {"error": reply.err.payload.to_string()}
+                return _error_body(reply.err.payload.to_string())
     raise RuntimeError(f"no answer on {key} from {endpoint}")
+
+
+def _json_or_text(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except ValueError:
+        return {"error": f"not JSON: {text!r}"}
+
+
+def _error_body(text: str) -> dict[str, Any]:
+    """An error reply: the gateway's own ``{"error": ...}`` body, or its text as the error."""
+    body = _json_or_text(text)
+    if isinstance(body, dict) and "error" in body:
+        return body
+    return {"error": text}
 
 
 def _print_json(doc: Any, out: TextIO = sys.stdout) -> None:
@@ -156,11 +194,19 @@ def cmd_cmd(args: argparse.Namespace) -> int:
     except RuntimeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    if answer.get("accepted") is True:
+    if isinstance(answer, dict) and answer.get("accepted") is True:
         print(f"{args.drive}: accepted {json.dumps(command)}")
         return 0
-    print(f"{args.drive}: refused: {answer.get('error', answer)}", file=sys.stderr)
+    print(f"{args.drive}: refused: {refusal_reason(answer)}", file=sys.stderr)
     return 1
+
+
+def refusal_reason(answer: Any) -> str:
+    """The gateway's reason for a refused command (``{"accepted": false, "error": ...}`` or
+    an error reply), else the answer as it came."""
+    if isinstance(answer, dict) and isinstance(answer.get("error"), str):
+        return str(answer["error"])
+    return json.dumps(answer)
 
 
 # ------------------------------------------------------------------ param
@@ -172,13 +218,34 @@ def add_param(sub: Any) -> None:
     p.add_argument("drive")
     ops = p.add_subparsers(dest="op", required=True)
     r = ops.add_parser("read")
-    r.add_argument("number", type=int)
+    r.add_argument("number", type=param_number, help="100 or P0100")
     r.add_argument("--subindex", type=int, default=0)
     w = ops.add_parser("write")
-    w.add_argument("number", type=int)
+    w.add_argument("number", type=param_number, help="100 or P0100")
     w.add_argument("value", type=float)
     w.add_argument("--subindex", type=int, default=0)
     p.set_defaults(handler=cmd_param)
+
+
+def param_number(text: str) -> int:
+    """A parameter number as the manuals write it ("P0100", "p100") or bare ("100")."""
+    digits = text[1:] if text[:1] in ("P", "p") else text
+    if not digits.isascii() or not digits.isdigit():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a parameter number (100 or P0100)")
+    return int(digits)
+
+
+def param_line(answer: dict[str, Any], number: int) -> str:
+    """``P0100 Acceleration time = 2.0 s`` where the drive's table knows the parameter,
+    else ``P100 = 20`` (the raw value)."""
+    sub = answer.get("subindex", 0)
+    code = answer.get("code") or f"P{answer.get('number', number)}"
+    if sub:
+        code += f".{sub}"
+    if "name" not in answer:
+        return f"{code} = {answer.get('value')}"
+    unit = f" {answer['unit']}" if answer.get("unit") else ""
+    return f"{code} {answer['name']} = {answer.get('scaled', answer.get('value'))}{unit}"
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -197,16 +264,14 @@ def cmd_param(args: argparse.Namespace) -> int:
     if "error" in answer:
         print(f"{args.drive} P{args.number}: {answer['error']}", file=sys.stderr)
         return 1
-    print(
-        f"{args.drive} P{answer.get('number', args.number)}.{answer.get('subindex', 0)} = "
-        f"{answer.get('value')}"
-    )
+    print(param_line(answer, args.number))
     return 0
 
 
 # ------------------------------------------------------------------ watch
 
-COLUMNS = ("id", "device", "comm", "status", "speed", "current", "fault", "age")
+COLUMNS = ("id", "device", "comm", "status", "speed", "current", "fault", "age", "last comm event")
+_TRANSITION = re.compile(r"comm \w+ -> \w+")  # the hub's own comm events: no reason in them
 
 
 @dataclass
@@ -216,6 +281,7 @@ class Board:
     states: dict[str, dict[str, Any]] = field(default_factory=dict)
     received: dict[str, float] = field(default_factory=dict)
     alive: set[str] = field(default_factory=set)
+    comm_events: dict[str, tuple[str, float]] = field(default_factory=dict)  # text, received
     lock: threading.Lock = field(default_factory=threading.Lock)
     changed: threading.Event = field(default_factory=threading.Event)
 
@@ -223,6 +289,15 @@ class Board:
         with self.lock:
             self.states[doc["id"]] = doc
             self.received[doc["id"]] = time.monotonic()
+        self.changed.set()
+
+    def on_event(self, doc: dict[str, Any]) -> None:
+        """Keep a drive's last comm event that says why (left data exchange: the reason)."""
+        text = doc.get("text")
+        if doc.get("kind") != "comm" or not isinstance(text, str) or _TRANSITION.fullmatch(text):
+            return
+        with self.lock:
+            self.comm_events[str(doc.get("drive"))] = (text, time.monotonic())
         self.changed.set()
 
     def on_alive(self, drive_id: str, alive: bool) -> None:
@@ -249,6 +324,10 @@ class Board:
         if d["id"] not in self.alive and comm == "online":
             comm = "gone"
         age = f"{now - self.received.get(d['id'], now):.1f}s"
+        why = "-"
+        if d["id"] in self.comm_events:
+            text, at = self.comm_events[d["id"]]
+            why = f"{text} ({now - at:.0f}s ago)"
         return (
             d["id"],
             str(d.get("device")),
@@ -258,6 +337,7 @@ class Board:
             current,
             fault,
             age,
+            why,
         )
 
 
@@ -288,6 +368,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
         with suppress(ValueError, KeyError):
             board.on_state(json.loads(sample.payload.to_string()))
 
+    def on_event(sample: zenoh.Sample) -> None:
+        with suppress(ValueError, KeyError):
+            board.on_event(json.loads(sample.payload.to_string()))
+
     def on_token(sample: zenoh.Sample) -> None:
         drive = _key_drive(str(sample.key_expr), prefix)
         if drive is not None:
@@ -295,6 +379,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
     with session(args.connect) as s:
         sub_states = s.declare_subscriber(f"{prefix}/drives/*/state", on_sample)
+        sub_events = s.declare_subscriber(f"{prefix}/drives/*/events", on_event)
         sub_alive = s.liveliness().declare_subscriber(f"{prefix}/drives/*", on_token, history=True)
         try:
             if args.once:
@@ -310,6 +395,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             return 0
         finally:
             sub_states.undeclare()
+            sub_events.undeclare()
             sub_alive.undeclare()
 
 

@@ -4,33 +4,49 @@ Layout (see config/site.example.toml for every key)::
 
     [gateway]            name, log_level, shutdown_timeout, tick
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
-    [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections
-    [buses.<name>]       adapter = "profibus" | "devicenet" | "module:Class",
-                         plus the adapter's keys
+    [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
+                         idle_timeout
+    [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
+                         (never a module path, gateway/adapter.py), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
                          on_command_timeout, on_shutdown, writable_params, plus the adapter's keys
 
-Every error names the file, the key path and what is wrong; unknown keys are
-errors; duplicate drive ids, Modbus units and bus addresses are errors.
+Every error names the file, the key path and what is wrong, and one pass reports
+every error of a file (gateway/schema.py); a drive is named by its id
+(``buses.line1.drives[cfw11].address``); unknown keys are errors, with the nearest
+known key as a hint; duplicate drive ids, Modbus units and bus addresses are
+errors naming both drives. The file itself is bounded (:data:`MAX_FILE_BYTES`,
+:data:`MAX_DEPTH`), and so is ``zenoh.config_file``: it is read and checked here
+(:func:`read_zenoh_config_file`), once, by ``check-config`` and ``run`` alike, and
+the text checked is the text Zenoh gets.
 """
 
 from __future__ import annotations
 
 import ipaddress
+import os
+import stat
 import tomllib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from gateway.adapter import load_adapter
 from gateway.errors import AdapterError, ConfigError, ConfigErrors
+from gateway.json5check import Json5Error, check_json5
 from gateway.model import ControlMode, Device, StopAction
 from gateway.schema import Table
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "demo.toml"
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+T = TypeVar("T")
 IpNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network
+MAX_FILE_BYTES = 1 << 20
+"""The largest config file, and the largest ``zenoh.config_file``, read (1 MiB)."""
+MAX_DEPTH = 32
+"""Tables and arrays inside each other in the TOML file (the layout needs 4)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +67,8 @@ class ZenohSection:
     multicast_scouting: bool = False
     heartbeat: float = 1.0
     config_file: Path | None = None
+    config_text: str | None = field(default=None, repr=False, compare=False)
+    """The text of ``config_file`` as checked at load: what Zenoh is given."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +81,7 @@ class ModbusSection:
     gateway_unit: int = 0
     frame_timeout: float = 5.0  # s for the rest of a begun frame to arrive
     max_connections: int = 100  # clients connected at once
+    idle_timeout: float = 60.0  # s with no complete request before a connection is closed; 0: never
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,6 +127,9 @@ class Config:
 
         cfg = self
         if zenoh_endpoint is not None:
+            problem = _endpoint_problem(zenoh_endpoint)
+            if problem:
+                raise ConfigError("--zenoh-endpoint", "", problem)
             cfg = replace(cfg, zenoh=replace(cfg.zenoh, listen=(zenoh_endpoint,)))
         if modbus_bind is not None:
             host, port = parse_host_port(modbus_bind, "--modbus-bind", "--modbus-bind")
@@ -118,7 +140,8 @@ class Config:
 def parse_host_port(text: str, file: str, key: str) -> tuple[str, int]:
     host, sep, port_text = text.rpartition(":")
     host = host.strip("[]")
-    if not sep or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+    digits = port_text.isascii() and port_text.isdigit()
+    if not sep or not host or not digits or not 0 <= int(port_text) <= 65535:
         raise ConfigError(file, key, f"{text!r} is not HOST:PORT")
     return host, int(port_text)
 
@@ -136,29 +159,52 @@ def _gateway_section(t: Table) -> GatewaySection:
         ),
         tick=t.number("tick", d.tick, minimum=0.001, maximum=1.0),
     )
-    t.finish()
     return section
+
+
+ZENOH_PROTOCOLS = frozenset(
+    ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "serial", "vsock")
+)
+"""The link protocols a Zenoh endpoint may name (``proto/address[?config][#metadata]``)."""
+_HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+
+def _endpoint_problem(ep: str) -> str | None:
+    proto, sep, rest = ep.partition("/")
+    if not sep or not proto or not rest:
+        return f"{ep!r} is not a Zenoh endpoint (like tcp/127.0.0.1:7447)"
+    if proto not in ZENOH_PROTOCOLS:
+        known = ", ".join(sorted(ZENOH_PROTOCOLS))
+        return f"{ep!r}: {proto!r} is not a Zenoh link protocol ({known})"
+    address = rest.partition("#")[0].partition("?")[0]
+    if proto in _HOST_PORT_PROTOCOLS:
+        try:
+            parse_host_port(address, "", "")
+        except ConfigError:
+            return f"{ep!r}: {address!r} is not HOST:PORT (like tcp/127.0.0.1:7447)"
+    return None
 
 
 def _endpoint_list(t: Table, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
     endpoints: tuple[str, ...] = t.str_list(key, default)
     for i, ep in enumerate(endpoints):
-        proto, sep, rest = ep.partition("/")
-        if not sep or not proto or not rest:
-            raise t.error(
-                f"{key}[{i}]", f"{ep!r} is not a Zenoh endpoint (like tcp/127.0.0.1:7447)"
-            )
+        problem = _endpoint_problem(ep)
+        if problem:
+            t.errors.append(t.error(f"{key}[{i}]", problem))
+            return default
     return endpoints
 
 
 def _zenoh_section(t: Table, base: Path) -> ZenohSection:
     d = ZenohSection()
     config_file = t.string("config_file", None)
-    path = None
+    path = text = None
     if config_file is not None:
-        path = (base / config_file).resolve()
-        if not path.is_file():
-            raise t.error("config_file", f"{config_file!r} does not exist")
+        path = Path(os.path.abspath(base / config_file))
+        try:
+            text = read_zenoh_config_file(path, config_file)
+        except ConfigError as exc:
+            t.errors.append(t.error("config_file", f"{config_file!r} {exc.reason}"))
     section = ZenohSection(
         enabled=t.boolean("enabled", d.enabled),
         prefix=_prefix(t),
@@ -168,8 +214,8 @@ def _zenoh_section(t: Table, base: Path) -> ZenohSection:
         multicast_scouting=t.boolean("multicast_scouting", d.multicast_scouting),
         heartbeat=t.number("heartbeat", d.heartbeat, minimum=0.05, maximum=3600.0),
         config_file=path,
+        config_text=text,
     )
-    t.finish()
     return section
 
 
@@ -177,20 +223,24 @@ def _prefix(t: Table) -> str:
     prefix: str = t.string("prefix", ZenohSection().prefix)
     bad = set("*$?#") & set(prefix)
     if not prefix or prefix.startswith("/") or prefix.endswith("/") or "//" in prefix or bad:
-        raise t.error("prefix", f"{prefix!r} is not a valid Zenoh key prefix")
+        t.errors.append(t.error("prefix", f"{prefix!r} is not a valid Zenoh key prefix"))
     return prefix
 
 
 def _modbus_section(t: Table) -> ModbusSection:
     d = ModbusSection()
     bind = t.string("bind", f"{d.host}:{d.port}")
-    host, port = parse_host_port(bind, t.file, t.key("bind"))
+    try:
+        host, port = parse_host_port(bind, t.file, t.key("bind"))
+    except ConfigError as exc:
+        t.errors.append(exc)
+        host, port = d.host, d.port
     allow: list[IpNetwork] = []
     for i, text in enumerate(t.str_list("allow", ())):
         try:
             allow.append(ipaddress.ip_network(text, strict=False))
         except ValueError:
-            raise t.error(f"allow[{i}]", f"{text!r} is not an address or CIDR network") from None
+            t.errors.append(t.error(f"allow[{i}]", f"{text!r} is not an address or CIDR network"))
     section = ModbusSection(
         enabled=t.boolean("enabled", d.enabled),
         host=host,
@@ -200,15 +250,16 @@ def _modbus_section(t: Table) -> ModbusSection:
         gateway_unit=t.integer("gateway_unit", d.gateway_unit, minimum=0, maximum=255),
         frame_timeout=_frame_timeout(t, d.frame_timeout),
         max_connections=t.integer("max_connections", d.max_connections, minimum=1, maximum=1000),
+        idle_timeout=t.number("idle_timeout", d.idle_timeout, minimum=0.0, maximum=86400.0),
     )
-    t.finish()
     return section
 
 
 def _frame_timeout(t: Table, default: float) -> float:
     value: float = t.number("frame_timeout", default, maximum=3600.0)
     if value <= 0:
-        raise t.error("frame_timeout", f"must be above 0, not {value:g}")
+        t.errors.append(t.error("frame_timeout", f"must be above 0, not {value:g}"))
+        return default
     return value
 
 
@@ -217,11 +268,12 @@ def _frame_timeout(t: Table, default: float) -> float:
 
 def _drive(t: Table, bus: str, cls: Any) -> DriveConfig:
     device_names = [d.value for d in sorted(cls.devices, key=lambda d: d.value)]
+    drive_id = _drive_id(t)
     device = Device(t.string("device", choices=device_names))
     lo, hi = cls.address_range
     command_timeout = t.number("command_timeout", 0.0, minimum=0.0, maximum=3600.0)
     drive = DriveConfig(
-        id=_drive_id(t),
+        id=drive_id,
         bus=bus,
         device=device,
         address=t.integer("address", minimum=lo, maximum=hi),
@@ -234,46 +286,99 @@ def _drive(t: Table, bus: str, cls: Any) -> DriveConfig:
     )
     from dataclasses import replace
 
-    drive = replace(drive, options=cls.parse_drive_options(t, drive))
-    t.finish()
-    return drive
+    return replace(drive, options=cls.parse_drive_options(t, drive))
+
+
+def _valid_id(value: Any) -> bool:
+    return (
+        isinstance(value, str)
+        and 0 < len(value) <= 64
+        and all(c.isascii() and (c.isalnum() or c in "-_") for c in value)
+    )
 
 
 def _drive_id(t: Table) -> str:
     drive_id: str = t.string("id")
-    if not drive_id or not all(c.isalnum() or c in "-_" for c in drive_id):
+    if not _valid_id(drive_id):
         raise t.error("id", f"{drive_id!r} must be letters, digits, '-' or '_' (it is a key)")
     return drive_id
 
 
-def _bus(name: str, t: Table, errors: list[ConfigError]) -> BusConfig | None:
+def _named_by_id(t: Table) -> Table:
+    """``buses.l.drives[0]`` becomes ``buses.l.drives[cfw11]`` once the id is known."""
+    drive_id = t.data.get("id")
+    if _valid_id(drive_id):
+        t.path = f"{t.path.rpartition('[')[0]}[{drive_id}]"
+    return t
+
+
+def _bus(name: str, t: Table) -> BusConfig:
     adapter_name = t.string("adapter")
     try:
         cls = load_adapter(adapter_name)
     except AdapterError as exc:
         raise t.error("adapter", str(exc)) from None
-    options = cls.parse_bus_options(t)
-    drives: list[DriveConfig] = []
-    for dt in t.table_list("drives"):
-        try:
-            drives.append(_drive(dt, name, cls))
-        except ConfigError as exc:
-            errors.append(exc)
-    t.finish()
-    _check_unique(t, "drives", [(d.address, f"address {d.address}") for d in drives], errors)
+    options = _read(t, cls.parse_bus_options, finish=False)
+    drives = [
+        drive
+        for dt in _drive_tables(t)
+        if (drive := _read(_named_by_id(dt), lambda dt: _drive(dt, name, cls))) is not None
+    ]
+    _read(t, lambda t: None)  # the bus table's unknown keys
+    owners = [(d.address, d.id) for d in drives]
+    _check_unique(t, "drives", "address", owners)
     return BusConfig(name=name, adapter=adapter_name, options=options, drives=tuple(drives))
 
 
-def _check_unique(
-    t: Table, key: str, items: Iterable[tuple[Any, str]], errors: list[ConfigError]
-) -> None:
-    seen: set[Any] = set()
-    for value, label in items:
-        if value is None:
-            continue
-        if value in seen:
-            errors.append(t.error(key, f"duplicate {label}"))
-        seen.add(value)
+def _drive_tables(t: Table) -> list[Table]:
+    try:
+        return t.table_list("drives")
+    except ConfigError as exc:
+        t.errors.append(exc)
+        return []
+
+
+def _check_unique(t: Table, key: str, what: str, owners: Iterable[tuple[Any, str]]) -> None:
+    """One error per value given to more than one owner, naming every owner."""
+    by_value: dict[Any, list[str]] = {}
+    for value, owner in owners:
+        if value is not None:
+            by_value.setdefault(value, []).append(owner)
+    for value, names in by_value.items():
+        if len(names) > 1:
+            listed = ", ".join(names[:-1]) + f" and {names[-1]}"
+            t.errors.append(t.error(key, f"{what} {value} is used by {listed}"))
+
+
+def _read(t: Table, reader: Callable[[Table], T], *, finish: bool = True) -> T | None:
+    """``reader(t)`` and then ``t.finish()``; every error goes to ``t.errors`` and
+    None is returned when the table could not be read (the rest of the file is)."""
+    try:
+        result = reader(t)
+        if finish:
+            t.finish()
+    except (ConfigErrors, ConfigError) as exc:
+        for error in exc.errors if isinstance(exc, ConfigErrors) else [exc]:
+            _add_once(t.errors, error)
+        return None
+    return result
+
+
+def _add_once(errors: list[ConfigError], error: ConfigError) -> None:
+    """One error per key: a check that fails on the default a bad value was replaced with
+    (``max_rpm`` bad, then "max_rpm is required") would only repeat the first."""
+    if not any(e.file == error.file and e.key == error.key for e in errors):
+        errors.append(error)
+
+
+def _section(root: Table, key: str, reader: Callable[[Table], T]) -> T | None:
+    """One of the top-level sections, read with ``reader`` (None if it cannot be)."""
+    try:
+        table = root.table(key)
+    except ConfigError as exc:
+        root.errors.append(exc)
+        return None
+    return _read(table, reader)
 
 
 # ---------------------------------------------------------------- loading
@@ -281,55 +386,109 @@ def _check_unique(
 
 def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     """Validate a parsed TOML document; raises ConfigErrors with every problem found."""
-    root = Table(data, file)
-    errors: list[ConfigError] = []
+    root = Table(data, file, collect=True)
     base = base or Path(file).resolve().parent
-    sections: dict[str, Any] = {}
-    readers = {
-        "gateway": _gateway_section,
-        "zenoh": lambda t: _zenoh_section(t, base),
-        "modbus": _modbus_section,
-    }
-    for key, reader in readers.items():
-        try:
-            sections[key] = reader(root.table(key))
-        except ConfigError as exc:
-            errors.append(exc)
+    gateway = _section(root, "gateway", _gateway_section)
+    zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
+    modbus = _section(root, "modbus", _modbus_section)
     buses: list[BusConfig] = []
-    try:
-        bus_tables = root.tables("buses")
-    except ConfigError as exc:
-        errors.append(exc)
-        bus_tables = {}
-    for name, table in bus_tables.items():
-        try:
-            bus = _bus(name, table, errors)
-        except ConfigError as exc:
-            errors.append(exc)
-            continue
+    for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
+        bus = _read(table, partial(_bus, name), finish=False)
         if bus is not None:
             buses.append(bus)
-    try:
-        root.finish()
-    except ConfigError as exc:
-        errors.append(exc)
+    _read(root, lambda r: None)  # unknown top-level keys
     drives = [d for b in buses for d in b.drives]
-    _check_unique(root, "buses", [(d.id, f"drive id {d.id!r}") for d in drives], errors)
-    units = [(d.modbus_unit, f"modbus_unit {d.modbus_unit} ({d.id})") for d in drives]
-    _check_unique(root, "buses", units, errors)
-    modbus = sections.get("modbus")
+    places = [(repr(d.id), f"buses.{d.bus} address {d.address}") for d in drives]
+    _check_unique(root, "buses", "drive id", places)
+    _check_unique(root, "buses", "modbus_unit", [(d.modbus_unit, d.id) for d in drives])
     if modbus is not None:
         for d in drives:
             if d.modbus_unit is not None and d.modbus_unit == modbus.gateway_unit:
-                errors.append(
+                root.errors.append(
                     root.error(
                         "modbus.gateway_unit",
                         f"{modbus.gateway_unit} is also the modbus_unit of drive {d.id!r}",
                     )
                 )
-    if errors:
-        raise ConfigErrors(errors)
-    return Config(file=file, buses=tuple(buses), **sections)
+    if root.errors or gateway is None or zenoh is None or modbus is None:
+        raise ConfigErrors(root.errors)
+    return Config(file=file, gateway=gateway, zenoh=zenoh, modbus=modbus, buses=tuple(buses))
+
+
+def _depth(data: Any) -> int:
+    """How deep tables and arrays nest in ``data`` (without recursion)."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(data, 0)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, dict | list):
+            deepest = max(deepest, depth + 1)
+            if deepest > MAX_DEPTH:
+                return deepest
+            items = value.values() if isinstance(value, dict) else value
+            stack.extend((v, depth + 1) for v in items)
+    return deepest
+
+
+def _file_kind(mode: int) -> str:
+    kinds = {
+        stat.S_ISDIR: "a directory",
+        stat.S_ISCHR: "a character device",
+        stat.S_ISBLK: "a block device",
+        stat.S_ISFIFO: "a named pipe",
+        stat.S_ISSOCK: "a socket",
+    }
+    return next((name for test, name in kinds.items() if test(mode)), "not a regular file")
+
+
+def read_text_file(path: Path, shown: str, what: str, limit: int = MAX_FILE_BYTES) -> str:
+    """A regular file's UTF-8 text, at most ``limit`` bytes; ConfigError(shown, "", reason)
+    naming the real reason otherwise (missing, a device, too large, unreadable...)."""
+
+    def fail(reason: str) -> ConfigError:
+        return ConfigError(shown, "", reason)
+
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise fail("does not exist") from None
+    except NotADirectoryError:
+        raise fail("does not exist (a part of its path is not a directory)") from None
+    except OSError as exc:
+        raise fail(f"cannot be read: {(exc.strerror or str(exc)).lower()}") from None
+    except ValueError as exc:  # an embedded NUL
+        raise fail(f"is not a usable path: {exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise fail(f"is {_file_kind(info.st_mode)}, not a regular file ({what})")
+    if info.st_size > limit:
+        raise fail(f"is {info.st_size} bytes; {what} may have at most {limit}")
+    try:
+        with open(path, "rb") as f:
+            raw = f.read(limit + 1)
+    except OSError as exc:
+        raise fail(f"cannot be read: {(exc.strerror or str(exc)).lower()}") from None
+    if len(raw) > limit:
+        raise fail(f"is more than {limit} bytes; {what} may have at most {limit}")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise fail(f"is not UTF-8 text (byte {exc.start})") from None
+
+
+def read_zenoh_config_file(path: Path, shown: str | None = None) -> str:
+    """The text of a ``zenoh.config_file`` once it is known safe to give Zenoh: a regular
+    file, at most :data:`MAX_FILE_BYTES`, one JSON5 object nested at most
+    :data:`gateway.json5check.MAX_DEPTH` deep (Zenoh's parser overflows its stack on
+    deep nesting and kills the process). Raises ConfigError with the reason."""
+    shown = shown or str(path)
+    text = read_text_file(path, shown, "a Zenoh config file")
+    if path.suffix.lower() in (".yaml", ".yml"):
+        raise ConfigError(shown, "", "is YAML; the gateway takes a Zenoh config in JSON5")
+    try:
+        check_json5(text, top="{")
+    except Json5Error as exc:
+        raise ConfigError(shown, "", f"is not a Zenoh JSON5 config: {exc}") from None
+    return text
 
 
 def load(path: str | Path) -> Config:
@@ -337,13 +496,17 @@ def load(path: str | Path) -> Config:
     path = Path(path)
     file = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigErrors([ConfigError(file, "", "file not found")]) from None
-    except OSError as exc:
-        raise ConfigErrors([ConfigError(file, "", f"cannot read: {exc.strerror}")]) from None
+        text = read_text_file(path, file, "a config file")
+    except ConfigError as exc:
+        reason = "file not found" if exc.reason == "does not exist" else exc.reason
+        raise ConfigErrors([ConfigError(file, "", reason)]) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigErrors([ConfigError(file, "", f"not valid TOML: {exc}")]) from None
+    except RecursionError:
+        raise ConfigErrors([ConfigError(file, "", "not valid TOML: nested too deep")]) from None
+    if _depth(data) > MAX_DEPTH:
+        reason = f"tables and arrays nest deeper than {MAX_DEPTH} levels"
+        raise ConfigErrors([ConfigError(file, "", reason)])
     return parse(data, file, path.resolve().parent)

@@ -4,8 +4,18 @@ Adapters are found through the name -> "module:Class" table of
 :mod:`gateway.adapter` and front ends through :data:`FRONT_ENDS`, both imported
 lazily. An adapter that crashes is logged with its traceback and restarted with
 back-off while its drives are offline; the rest of the gateway keeps running.
+One master per line: an adapter whose first run finds its line held by another master
+(:class:`LineHeld`) stops the daemon before it starts, one line logged and exit status
+:data:`EXIT_LINE_HELD`; met again after a restart, it is logged and retried. READY waits
+for every adapter's optional ``claimed`` event (its line held) as for the front ends'
+``ready``, so a refused start never reports READY.
 SIGTERM/SIGINT shut down in order (safety rule 4). SIGHUP reloads nothing (a
 restart is the way, docs/decisions.md): it checks the file on disk and logs the result.
+
+Start-up: the front ends start first; a :class:`StartupError` from one of them before
+READY (a Modbus port in use or not allowed, a Zenoh endpoint that cannot be bound or
+parsed) is fatal: one line naming the cause and the fix, no READY, no bus touched, and
+:data:`EXIT_STARTUP` (docs/operations.md). Only once they serve are the buses started.
 """
 
 from __future__ import annotations
@@ -16,14 +26,14 @@ import importlib
 import logging
 import signal
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from gateway import __version__
 from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
-from gateway.errors import ConfigError, ConfigErrors
+from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -39,6 +49,10 @@ FRONT_ENDS: dict[str, str] = {
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
+EXIT_LINE_HELD = 75  # EX_TEMPFAIL (sysexits.h): another master holds a line; it may be freed
+EXIT_STARTUP = 2
+"""Exit status when the gateway cannot start (as for a config error; the unit file's
+RestartPreventExitStatus=2 keeps systemd from restarting into the same error)."""
 
 
 class Backoff:
@@ -167,6 +181,9 @@ class Daemon:
         self._started_front_ends: list[str] = []
         self.ready = asyncio.Event()
         """Set when the daemon has reported READY (its front ends serve)."""
+        self.exit_status = 0
+        self.fatal: StartupError | ConfigError | None = None
+        """Why the gateway could not start (then it exits with EXIT_STARTUP)."""
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -174,9 +191,14 @@ class Daemon:
     def check_reload(self) -> None:
         """SIGHUP: no reload. The running config stays as it is; the file on disk is
         validated so the operator learns, before a restart, whether it would start."""
+        from gateway.cli import front_end_problems  # what `run` would refuse, as check-config
+
         file = self.config.file
         try:
             new = load(file)
+            problems = front_end_problems(new)
+            if problems:
+                raise ConfigErrors(problems)
         except (ConfigErrors, ConfigError) as exc:
             errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
             log.error(
@@ -214,6 +236,7 @@ class Daemon:
     ) -> None:
         """Run ``start()`` again and again, with back-off, until cancelled."""
         backoff = Backoff()
+        first = True
         while True:
             started = time.monotonic()
             error: Exception | None = None
@@ -221,16 +244,48 @@ class Daemon:
                 await start()
             except asyncio.CancelledError:
                 raise
+            except LineHeld as exc:
+                if first:
+                    self._refuse_start(what, exc)
+                    on_crash()
+                    return
+                error = exc
+            except (StartupError, ConfigError) as exc:
+                if not self.ready.is_set():
+                    self._cannot_start(exc)
+                    return
+                error = exc
             except Exception as exc:
                 error = exc
+            first = False
             pause = backoff.after_crash(time.monotonic() - started)
-            if error is not None:  # logged with its traceback
+            if isinstance(error, LineHeld):  # its text says it all: one line
+                log.error("%s: %s; retrying in %.1f s", what, error, pause)
+            elif isinstance(error, StartupError | ConfigError):  # its one line says it all
+                log.error("%s crashed: %s; restarting in %.1f s", what, error, pause)
+            elif error is not None:  # logged with its traceback
                 log.error("%s crashed; restarting in %.1f s", what, pause, exc_info=error)
             else:
                 log.error("%s returned; restarting in %.1f s", what, pause)
             self.runtime.restarts[what] = self.runtime.restarts.get(what, 0) + 1
             on_crash()
             await asyncio.sleep(pause)
+
+    def _refuse_start(self, what: str, error: LineHeld) -> None:
+        """Another master holds a line of ours at start: stop, never become the second."""
+        log.error(
+            "%s: %s; drive-gateway does not start (exit status %d)", what, error, EXIT_LINE_HELD
+        )
+        self.exit_status = EXIT_LINE_HELD
+        self._stop.set()
+
+    def _cannot_start(self, error: StartupError | ConfigError) -> None:
+        """Fatal at start-up: one line with the cause and the fix, then stop."""
+        if self.fatal is None:
+            self.fatal = error
+            log.error("drive-gateway cannot start: %s", error)
+            self.notifier.status(f"cannot start: {error}")
+        self._stop.set()
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
         async def start() -> None:
@@ -304,51 +359,80 @@ class Daemon:
             log.warning(
                 "no drives are configured in %s; serving the gateway only", self.config.file
             )
-        for bus in self.config.buses:
-            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
             self._spawn(self._watchdog(self.notifier.watchdog_interval), "sd-watchdog")
         not_serving = await self._front_ends_serving()
+        if self.fatal is not None:  # no bus touched, no READY
+            await self._cancel(self._tasks)
+            return EXIT_STARTUP
+        for bus in self.config.buses if not self._stop.is_set() else ():
+            self._adapter_tasks.append(self._spawn(self._supervise_bus(bus), f"bus-{bus.name}"))
+        unclaimed = await self._lines_claimed()
         status = f"{len(drives)} drive(s) on {len(self.config.buses)} bus(es)"
         if not_serving:
             status += f"; not serving yet: {', '.join(not_serving)}"
             log.error("front end(s) %s not serving after %g s", ", ".join(not_serving), READY_BOUND)
+        if unclaimed:
+            status += f"; line not claimed yet: {', '.join(unclaimed)}"
+            log.warning(
+                "bus(es) %s: line not claimed after %g s", ", ".join(unclaimed), READY_BOUND
+            )
         if not self._stop.is_set():
             self.notifier.ready(status)
             self.ready.set()
             log.info("drive-gateway %s running: %s", __version__, status)
         await self._stop.wait()
         await self._shutdown()
-        return 0
+        return self.exit_status
 
     async def _front_ends_serving(self) -> list[str]:
         """Wait until every front end serves (its ``ready`` event), bounded by READY_BOUND;
-        returns the names of those that do not. A front end restarted meanwhile is a
-        new instance: its own event is the one waited for."""
+        returns the names of those that do not."""
+        deadline = asyncio.get_running_loop().time() + READY_BOUND
+        return [
+            name
+            for name in self._started_front_ends
+            if not await self._until_set(self.front_ends, name, "ready", deadline)
+        ]
+
+    async def _lines_claimed(self) -> list[str]:
+        """Wait until every adapter has claimed its line (its ``claimed`` event: a serial
+        port held, a DeviceNet MAC ID checked), bounded by READY_BOUND, so that a line
+        another master holds stops the daemon before it reports READY; returns the buses
+        that have not. An adapter without the event claims nothing."""
+        deadline = asyncio.get_running_loop().time() + READY_BOUND
+        return [
+            bus.name
+            for bus in self.config.buses
+            if not await self._until_set(self.runtime.adapters, bus.name, "claimed", deadline)
+        ]
+
+    async def _until_set(
+        self, parts: Mapping[str, object], name: str, attr: str, deadline: float
+    ) -> bool:
+        """Wait until the ``attr`` event of ``parts[name]`` is set, or the daemon stops; False
+        at ``deadline``. A part restarted meanwhile is a new instance: its own event is the
+        one waited for; an instance without such an event is set once it exists."""
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + READY_BOUND
-        pending: list[str] = []
-        for name in self._started_front_ends:
-            while not self._stop.is_set():
-                front_end = self.front_ends.get(name)
-                ready = getattr(front_end, "ready", None)
-                if front_end is not None and not isinstance(ready, asyncio.Event):
-                    break  # a front end without a readiness event serves once started
-                if ready is not None and ready.is_set():
-                    break
-                remaining = deadline - loop.time()
-                if remaining <= 0:
-                    pending.append(name)
-                    break
-                if ready is None:
-                    await asyncio.sleep(0.01)  # its task has not created it yet
-                    continue
-                with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(min(remaining, 0.25)):
-                        await ready.wait()
-        return pending
+        while not self._stop.is_set():
+            current = parts.get(name)
+            event = getattr(current, attr, None)
+            if current is not None and not isinstance(event, asyncio.Event):
+                return True
+            if event is not None and event.is_set():
+                return True
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                return False
+            if event is None:
+                await asyncio.sleep(0.01)  # its task has not created it yet
+                continue
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(remaining, 0.25)):
+                    await event.wait()
+        return True
 
     async def _shutdown(self) -> None:
         """Rule 4: on_shutdown, bounded wait for stopped, then leave the buses."""

@@ -30,6 +30,17 @@ class ConfigErrors(GatewayError, ValueError):
         super().__init__("\n".join(str(e) for e in self.errors))
 
 
+class StartupError(GatewayError):
+    """The gateway cannot start (a port in use or not allowed, an endpoint Zenoh cannot
+    bind): fatal at start-up, reported as one line naming the cause and the fix."""
+
+    def __init__(self, what: str, cause: str, fix: str) -> None:
+        self.what = what
+        self.cause = cause
+        self.fix = fix
+        super().__init__(f"{what}: {cause}; {fix}")
+
+
 class FrameDecodeError(GatewayError, ValueError):
     """Bytes on a bus that do not decode; carries the raw bytes."""
 
@@ -71,6 +82,13 @@ class ParameterNotWritable(ParameterError):
 
 class AdapterError(GatewayError):
     """A fieldbus adapter failed (port missing, bus down)."""
+
+
+class LineHeld(AdapterError):
+    """Another master already holds the line (safety rule 3, one master per line): a
+    serial port locked by another process, the scanner's DeviceNet MAC ID answered by
+    another device. The text names the line, the holder where it can be known, and what
+    to do. The gateway never becomes a second master: it refuses to start on it."""
 
 
 class DriveOffline(GatewayError):

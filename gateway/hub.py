@@ -4,14 +4,25 @@ All methods run on the event loop's thread. Time comes from an injected
 monotonic clock (watchdogs) and wall clock (timestamps), so the safety rules are
 tested by stepping :meth:`Hub.tick` with a fake clock.
 
-Safety rules (ARCHITECTURE.md) enforced here:
+Safety rules (ARCHITECTURE.md, docs/reliability.md) enforced here:
 
-1. No unintended restart: ``run`` is cleared at start-up, when a drive comes
-   (back) online, when it faults or trips, on a fault reset and when control
-   passes to another source. Only a new command carrying ``run: true`` sets it.
+1. No unintended start: a drive runs only on a run command given after the last
+   of these: the gateway started; the drive came (back) online; a fault or trip
+   ended, however it ended (the gateway's reset, the keypad, an auto-reset, a
+   power cycle); a quick stop or coast stop was given or released; control
+   passed to another client; the command watchdog acted. Each of these clears
+   the desired ``run`` (and ``jog``). A run command that arrives while the drive
+   is faulted or tripped, latched in quick stop or coast stop, or not online is
+   refused with the reason, never held for later.
 2. Fault reset is an edge: each request bumps ``fault_reset_seq`` once.
-3. Command watchdog per drive: a client in control that stops refreshing within
+3. Control belongs to a client (a source and the client's id within it: a Modbus
+   peer address, a Zenoh session id), not to a protocol. The command watchdog
+   is fed only by the client in control; a client that stops refreshing within
    ``command_timeout`` gets ``on_command_timeout`` applied (ramp stop, coast, hold).
+
+Every accepted command that changes the desired command is written to the log
+and to the drive's events (the audit trail); repeated identical refusals are
+logged once per client, reason and period, with a count.
 """
 
 from __future__ import annotations
@@ -22,7 +33,8 @@ import logging
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from enum import Enum
+from typing import Any, Protocol, cast
 
 from gateway.adapter import Capabilities, Event, EventKind, ParamValue
 from gateway.errors import (
@@ -32,16 +44,19 @@ from gateway.errors import (
     UnknownDrive,
 )
 from gateway.model import (
+    COMMAND_FIELDS,
     STATE_FIELDS,
     CommState,
     ControlMode,
     DesiredCommand,
+    Direction,
     DriveCommand,
     DriveState,
     DriveStatus,
     Source,
     StopAction,
 )
+from gateway.ratelimit import LogRateLimit
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +78,7 @@ class DrivePolicy:
 
 _TRANSITION_FIELDS = frozenset({"comm", "status", "alarm", "alarm_code", "fault_code"})
 """Fields whose change may raise an event or clear run (rule 1)."""
-_HUB_FIELDS = frozenset({"seq", "ts", "control_source"})
+_HUB_FIELDS = frozenset({"seq", "ts", "control_source", "control_client"})
 """Fields the hub sets itself; an adapter's values for them are ignored."""
 
 
@@ -125,18 +140,35 @@ class StateSubscription:
         self.close()
 
 
+NEVER_DROPPED = frozenset({EventKind.FAULT, EventKind.TRIP, EventKind.SAFETY, EventKind.COMM})
+"""Event kinds a subscription never drops: a fault or trip, a safety action, a comm change."""
+
+
 class EventSubscription:
-    """Bounded queue of events; the oldest are dropped (and counted) when full."""
+    """A bounded queue of events, in order.
+
+    When ``limit`` events wait, a new one is dropped and counted, unless its kind is
+    in :data:`NEVER_DROPPED` (those are always queued: the drives make them, not the
+    network). The next event queued after a drop carries ``dropped``: how many were
+    lost before it (docs/zenoh-keys.md, "Session and delivery").
+    """
 
     def __init__(self, hub: Hub, limit: int = EVENT_QUEUE_LIMIT) -> None:
         self._hub = hub
-        self._queue: collections.deque[Event] = collections.deque(maxlen=limit)
+        self._limit = limit
+        self._queue: collections.deque[Event] = collections.deque()
         self._ready = asyncio.Event()
-        self.dropped = 0
+        self.dropped = 0  # in all
+        self._lost = 0  # since the last event queued
 
     def _offer(self, event: Event) -> None:
-        if len(self._queue) == self._queue.maxlen:
+        if len(self._queue) >= self._limit and event.kind not in NEVER_DROPPED:
             self.dropped += 1
+            self._lost += 1
+            return
+        if self._lost:
+            event = replace(event, data={**event.data, "dropped": self._lost})
+            self._lost = 0
         self._queue.append(event)
         self._ready.set()
 
@@ -172,6 +204,7 @@ class Hub:
         self._event_subs: set[EventSubscription] = set()
         self._seq = 0
         self._listeners: list[Callable[[str], None]] = []
+        self._refusal_log = LogRateLimit()
         self.started = clock()
         self.shutting_down = False
 
@@ -249,9 +282,12 @@ class Hub:
         self._seq += 1
         delta["seq"] = self._seq
         delta["ts"] = self._wallclock()
-        source = drv.desired.source
-        if source is not old.control_source:
-            delta["control_source"] = source
+        desired = drv.desired
+        if desired.source is not old.control_source:
+            delta["control_source"] = desired.source
+        client = desired.client or None
+        if client != old.control_client:
+            delta["control_client"] = client
         new = drv.state = old._derive(delta)
         if transition:
             self._on_transitions(drive_id, drv, old, new)
@@ -262,7 +298,12 @@ class Hub:
     def _commit(self, drv: _Drive, new: DriveState) -> DriveState:
         self._seq += 1
         new = new.evolve(
-            {"seq": self._seq, "ts": self._wallclock(), "control_source": drv.desired.source}
+            {
+                "seq": self._seq,
+                "ts": self._wallclock(),
+                "control_source": drv.desired.source,
+                "control_client": drv.desired.client or None,
+            }
         )
         drv.state = new
         for sub in self._state_subs:
@@ -282,6 +323,8 @@ class Hub:
             self._fault_event(drive_id, new)
         if old.faulted and not new.faulted:
             self.event(drive_id, EventKind.FAULT, "fault cleared")
+            # Rule 1: however the fault ended (keypad, auto-reset, power cycle, our reset)
+            self._clear_run(drive_id, drv, "fault ended")
         if new.alarm and (not old.alarm or new.alarm_code != old.alarm_code):
             known = drv.caps.alarm_texts.get(new.alarm_code) if new.alarm_code else None
             text = f"alarm {new.alarm_code}" + (f": {known}" if known else "")
@@ -323,9 +366,41 @@ class Hub:
 
     def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None:
         ev = Event(drive_id=drive_id, kind=kind, text=text, ts=self._wallclock(), data=data)
-        log.info("%s: %s: %s", drive_id, kind.value, text)
+        self._log_event(ev)
         for sub in tuple(self._event_subs):
             sub._offer(ev)
+
+    def _log_event(self, ev: Event) -> None:
+        """One log line per event; a refusal repeated by the same client for the same
+        reason is written once per period, with the count of those held back."""
+        if ev.kind is not EventKind.COMMAND_REFUSED:
+            log.info("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
+            return
+        held = self._refusal_log.admit((ev.drive_id, ev.text), self._clock())
+        if held is None:
+            log.debug("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
+        elif held:
+            log.info(
+                "%s: %s: %s (and %d more like it since the last line)",
+                ev.drive_id,
+                ev.kind.value,
+                ev.text,
+                held,
+            )
+        else:
+            log.info("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
+
+    def _flush_refusal_log(self) -> None:
+        for key, held in self._refusal_log.flush(self._clock()):
+            drive_id, text = cast(tuple[str, str], key)
+            log.info(
+                "%s: %s: %s: %d more like it in the last %g s",
+                drive_id,
+                EventKind.COMMAND_REFUSED.value,
+                text,
+                held,
+                self._refusal_log.period,
+            )
 
     def subscribe_events(self) -> EventSubscription:
         sub = EventSubscription(self)
@@ -345,7 +420,7 @@ class Hub:
         for listener in self._listeners:
             listener(drive_id)
 
-    def check(self, drive_id: str, source: Source, cmd: DriveCommand) -> None:
+    def check(self, drive_id: str, source: Source, cmd: DriveCommand, client: str = "") -> None:
         """Raise CommandRejected (with the reason) if ``cmd`` may not be applied."""
         drv = self._drive(drive_id)
         if self.shutting_down:
@@ -358,6 +433,8 @@ class Hub:
             raise CommandRejected(f"drive {drive_id} is {drv.state.comm.value}")
         if cmd.run and cmd.fault_reset:
             raise CommandRejected("send run after the fault reset, not in the same command")
+        if cmd.run or cmd.jog:
+            _check_start(drive_id, drv, cmd)
         self._check_capabilities(drv, cmd)
 
     def _check_capabilities(self, drv: _Drive, cmd: DriveCommand) -> None:
@@ -365,6 +442,14 @@ class Hub:
             value = getattr(cmd, name, None)
             if value not in (None, False):
                 raise CommandRejected(reason)
+        no_reverse = drv.caps.reverse_refused
+        if no_reverse is not None:
+            if cmd.direction is Direction.REVERSE:
+                raise CommandRejected(f"direction reverse: {no_reverse}")
+            for name in ("speed_rpm", "speed_pct"):
+                value = getattr(cmd, name)
+                if value is not None and value < 0:
+                    raise CommandRejected(f"{name} {value:g} asks for reverse: {no_reverse}")
         scale = drv.caps.speed_scale
         if cmd.has_speed and scale is None:
             raise CommandRejected(f"{drv.state.device.value} has no speed reference")
@@ -379,49 +464,91 @@ class Hub:
                 f"speed_pct {cmd.speed_pct:g} is beyond the drive's scale (±{scale.max_pct:g} %)"
             )
 
-    def submit(self, drive_id: str, source: Source, cmd: DriveCommand) -> DesiredCommand:
-        """Apply a partial command from a northbound source, or raise CommandRejected.
+    def in_control(self, drive_id: str, source: Source, client: str = "") -> bool:
+        """Whether this client is the one in control of the drive (rule 3)."""
+        return self._drive(drive_id).desired.controller == (source, client)
 
-        Nothing of a refused command is applied.
+    def submit(
+        self, drive_id: str, source: Source, cmd: DriveCommand, client: str = ""
+    ) -> DesiredCommand:
+        """Apply a partial command from a northbound client, or raise CommandRejected.
+
+        ``client`` tells apart the clients of one source (a Modbus peer address, a
+        Zenoh session id). Nothing of a refused command is applied. An empty command
+        is a keep-alive: it feeds the watchdog of the client in control and does
+        nothing for any other client (it neither takes control nor feeds it).
         """
+        who = _client_text(source, client)
         try:
-            self.check(drive_id, source, cmd)
+            self.check(drive_id, source, cmd, client)
         except CommandRejected as exc:
             self.event(
                 drive_id,
                 EventKind.COMMAND_REFUSED,
-                f"command from {source.value} refused: {exc.reason}",
+                f"command from {who} refused: {exc.reason}",
                 source=source.value,
+                client=client,
             )
             raise
         drv = self._drive(drive_id)
+        if cmd.is_empty:
+            self.refresh(drive_id, source, client)
+            return drv.desired
         old = drv.desired
         base = old
-        if old.source not in (source, Source.NONE):
-            # Rule 1: control passes to another source -> run needs a new run command.
+        if old.controller != (source, client) and old.source is not Source.NONE:
+            # Rule 1: control passes to another client -> run needs a new run command.
             base = replace(old, run=False, jog=False)
             self.event(
                 drive_id,
                 EventKind.CONTROL,
-                f"control passed from {old.source.value} to {source.value}",
+                f"control passed from {_client_text(old.source, old.client)} to {who}",
+                source=source.value,
+                client=client,
             )
-        new = base.merged(cmd, source)
-        if cmd.fault_reset:
-            # Rule 1 and 2: a reset is one edge, and the drive does not restart by itself.
+        new = base.merged(cmd, source, client)
+        if cmd.fault_reset or new.quick_stop or new.coast_stop:
+            # Rules 1 and 2: a reset is one edge and the drive does not restart by itself;
+            # a quick stop or coast stop ends a run, and its release never restarts one.
             new = replace(new, run=False, jog=False)
         drv.desired = new
         drv.last_refresh = self._clock()
         drv.watchdog_expired = False
         if new != old:
+            self._audit(drive_id, who, (source, client), old, new)
             self._notify_command(drive_id)
-            if new.source != drv.state.control_source:
+            if new.controller != (drv.state.control_source, drv.state.control_client or ""):
                 self._commit(drv, drv.state)
         return new
 
-    def refresh(self, drive_id: str, source: Source) -> None:
-        """A keep-alive from the source in control (feeds the command watchdog)."""
+    def _audit(
+        self,
+        drive_id: str,
+        who: str,
+        controller: tuple[Source, str],
+        old: DesiredCommand,
+        new: DesiredCommand,
+    ) -> None:
+        """The audit trail: one log line and one event per command that changed something."""
+        changes = _command_changes(old, new)
+        text = f"command from {who} accepted: " + (
+            ", ".join(f"{name} {before} -> {after}" for name, before, after in changes)
+            or "takes control"
+        )
+        self.event(
+            drive_id,
+            EventKind.COMMAND,
+            text,
+            source=controller[0].value,
+            client=controller[1],
+            changes={name: after for name, _before, after in changes},
+        )
+
+    def refresh(self, drive_id: str, source: Source, client: str = "") -> None:
+        """A keep-alive: it feeds the command watchdog only when it comes from the
+        client in control (rule 3); from any other client it does nothing."""
         drv = self._drive(drive_id)
-        if drv.desired.source is source:
+        if drv.desired.controller == (source, client):
             drv.last_refresh = self._clock()
             drv.watchdog_expired = False
 
@@ -432,6 +559,7 @@ class Hub:
         now = self._clock()
         for drive_id, drv in self._drives.items():
             self._check_watchdog(drive_id, drv, now)
+        self._flush_refusal_log()
 
     def _check_watchdog(self, drive_id: str, drv: _Drive, now: float) -> None:
         timeout = drv.policy.command_timeout
@@ -442,7 +570,8 @@ class Hub:
             return
         drv.watchdog_expired = True
         action = drv.policy.on_command_timeout
-        self.apply_stop(drive_id, action, f"no command from {source.value} for {timeout:g} s")
+        who = _client_text(source, drv.desired.client)
+        self.apply_stop(drive_id, action, f"no command from {who} for {timeout:g} s")
 
     def apply_stop(self, drive_id: str, action: StopAction, why: str) -> None:
         """A safety action of the gateway: stop (or hold) the drive."""
@@ -502,3 +631,52 @@ class Hub:
 
     def snapshot(self) -> Mapping[str, DriveState]:
         return {k: d.state for k, d in self._drives.items()}
+
+
+def _client_text(source: Source, client: str) -> str:
+    """How logs and events name a client: ``modbus 10.0.0.5``, ``zenoh <session id>``."""
+    return f"{source.value} {client}" if client else source.value
+
+
+def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
+    """Rule 1: a run or jog command is refused, never held, while the drive may not start."""
+    state = drv.state
+    if state.faulted:
+        code = "" if state.fault_code is None else f" {state.fault_code}"
+        text = f" ({state.fault_text})" if state.fault_text else ""
+        raise CommandRejected(
+            f"drive {drive_id} is {state.status.label}{code}{text}: "
+            "reset the fault, then send a new run command"
+        )
+    desired = drv.desired
+    for latch in ("quick_stop", "coast_stop"):
+        wanted = getattr(cmd, latch)
+        if wanted:
+            raise CommandRejected(f"run and {latch} in one command: a stop wins; send one")
+        if getattr(desired, latch):
+            if wanted is False:
+                raise CommandRejected(f"send run after releasing {latch}, in a command of its own")
+            raise CommandRejected(
+                f"drive {drive_id} is latched in {latch}: release it ({latch} false), "
+                "then send a new run command"
+            )
+
+
+_AUDITED = (*(n for n in COMMAND_FIELDS if n != "fault_reset"), "fault_reset_seq")
+
+
+def _command_changes(old: DesiredCommand, new: DesiredCommand) -> list[tuple[str, Any, Any]]:
+    """The fields a command changed, with their JSON values before and after."""
+    out: list[tuple[str, Any, Any]] = []
+    for name in _AUDITED:
+        before, after = getattr(old, name), getattr(new, name)
+        if before != after:
+            if name == "fault_reset_seq":
+                out.append(("fault_reset", False, True))
+                continue
+            out.append((name, _plain(before), _plain(after)))
+    return out
+
+
+def _plain(value: Any) -> Any:
+    return value.value if isinstance(value, Enum) else value

@@ -121,9 +121,10 @@ JSON_FIELDS: tuple[str, ...] = (
 )
 """The fixed JSON fields, in order (issue 2). Extra documented fields follow them."""
 
-EXTRA_JSON_FIELDS: tuple[str, ...] = ("control_source", "speed_base", "values")
+EXTRA_JSON_FIELDS: tuple[str, ...] = ("control_source", "speed_base", "values", "control_client")
 """Documented additions: who is in control, which scale base the speed uses,
-and named raw values (telegram words mapped to parameters the profile does not model)."""
+named raw values (telegram words mapped to parameters the profile does not model),
+and which client of ``control_source`` is in control (safety rule 3)."""
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,7 @@ class DriveState:
     control_source: Source = Source.NONE
     speed_base: str | None = None
     values: Mapping[str, float | int] = field(default_factory=dict)
+    control_client: str | None = None
 
     @property
     def online(self) -> bool:
@@ -380,10 +382,17 @@ class DesiredCommand:
     remote: bool = True
     fault_reset_seq: int = 0
     source: Source = Source.NONE
+    client: str = ""
+    """Which client of ``source`` gave it (a Modbus peer address, a Zenoh session id)."""
 
-    def merged(self, cmd: DriveCommand, source: Source) -> DesiredCommand:
+    @property
+    def controller(self) -> tuple[Source, str]:
+        """The client in control (safety rule 3): its source and its id within it."""
+        return self.source, self.client
+
+    def merged(self, cmd: DriveCommand, source: Source, client: str = "") -> DesiredCommand:
         """This command with the given fields of a partial command applied."""
-        changes: dict[str, Any] = {"source": source}
+        changes: dict[str, Any] = {"source": source, "client": client}
         for name in ("run", "direction", "quick_stop", "coast_stop", "jog", "remote"):
             value = getattr(cmd, name)
             if value is not None:
@@ -406,6 +415,7 @@ class DesiredCommand:
             jog=False,
             coast_stop=action is StopAction.COAST,
             source=source,
+            client="",
         )
 
     def to_json(self) -> dict[str, Any]:

@@ -2,17 +2,26 @@
 
 Every adapter validates its own table with :class:`Table`; the core uses it for
 its own sections. A table remembers which keys were read, and :meth:`Table.finish`
-turns every key nobody read into an error: unknown keys are never ignored.
+turns every key nobody read into an error (with the nearest known key as a hint):
+unknown keys are never ignored.
+
+Every error of a file is reported in one pass (``collect=True``, as the config
+loader reads a document): a key that has a default and a bad value is recorded in
+:attr:`Table.errors` (one list shared by a document's tables) and the reader goes
+on with the default; a required key that is missing or bad raises, which ends that
+table (a section, a bus, a drive), not the document. A table made without
+``collect`` raises at the first error (an adapter's own unit tests).
 """
 
 from __future__ import annotations
 
+import difflib
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from enum import Enum
 from typing import Any, TypeVar
 
-from gateway.errors import ConfigError
+from gateway.errors import ConfigError, ConfigErrors
 
 E = TypeVar("E", bound=Enum)
 
@@ -39,11 +48,37 @@ def _type_name(value: Any) -> str:
 class Table:
     """One TOML table being read; ``path`` is its dotted key path in the file."""
 
-    def __init__(self, data: Mapping[str, Any], file: str, path: str = "") -> None:
+    def __init__(
+        self,
+        data: Mapping[str, Any],
+        file: str,
+        path: str = "",
+        errors: list[ConfigError] | None = None,
+        *,
+        collect: bool = False,
+    ) -> None:
         self.data = data
         self.file = file
         self.path = path
+        self.collect = collect
+        self.errors: list[ConfigError] = [] if errors is None else errors
+        """Errors recorded while reading on (shared with the tables read from this one)."""
         self._read: set[str] = set()
+
+    def child(self, data: Mapping[str, Any], path: str) -> Table:
+        """A table inside this one (its errors go to the same list)."""
+        return Table(data, self.file, path, self.errors, collect=self.collect)
+
+    def _soft(self, read: Callable[..., Any], key: str, default: Any, **kw: Any) -> Any:
+        """``read(key, default, **kw)``; a bad value of a key that has a default is
+        recorded and the default used, so the rest of the file is still checked."""
+        try:
+            return read(key, default, **kw)
+        except ConfigError as exc:
+            if default is REQUIRED or not self.collect:
+                raise
+            self.errors.append(exc)
+            return default
 
     def key(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else key
@@ -65,7 +100,7 @@ class Table:
     def raw(self, key: str, default: Any = REQUIRED) -> Any:
         return self._get(key, default)
 
-    def string(
+    def _string(
         self, key: str, default: Any = REQUIRED, *, choices: Iterable[str] | None = None
     ) -> Any:
         value = self._get(key, default)
@@ -79,7 +114,7 @@ class Table:
                 raise self.error(key, f"{value!r} is not one of {', '.join(map(repr, allowed))}")
         return value
 
-    def boolean(self, key: str, default: Any = REQUIRED) -> Any:
+    def _boolean(self, key: str, default: Any = REQUIRED) -> Any:
         value = self._get(key, default)
         if value is default and key not in self.data:
             return value
@@ -87,7 +122,7 @@ class Table:
             raise self.error(key, f"must be true or false, not {_type_name(value)}")
         return value
 
-    def integer(
+    def _integer(
         self,
         key: str,
         default: Any = REQUIRED,
@@ -110,7 +145,7 @@ class Table:
         self._check_range(key, value, minimum, maximum)
         return value
 
-    def number(
+    def _number(
         self,
         key: str,
         default: Any = REQUIRED,
@@ -143,7 +178,7 @@ class Table:
             return enum(value)
         return value
 
-    def int_list(
+    def _int_list(
         self,
         key: str,
         default: Any = REQUIRED,
@@ -162,7 +197,7 @@ class Table:
             self._check_range(f"{key}[{i}]", item, minimum, maximum)
         return tuple(value)
 
-    def str_list(self, key: str, default: Any = REQUIRED) -> Any:
+    def _str_list(self, key: str, default: Any = REQUIRED) -> Any:
         value = self._get(key, default)
         if value is default and key not in self.data:
             return value
@@ -173,11 +208,64 @@ class Table:
                 raise self.error(f"{key}[{i}]", f"must be a string, not {_type_name(item)}")
         return tuple(value)
 
+    # the getters: a bad value of a key with a default is recorded (see _soft)
+
+    def string(
+        self, key: str, default: Any = REQUIRED, *, choices: Iterable[str] | None = None
+    ) -> Any:
+        return self._soft(self._string, key, default, choices=choices)
+
+    def boolean(self, key: str, default: Any = REQUIRED) -> Any:
+        return self._soft(self._boolean, key, default)
+
+    def integer(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+        allowed: Iterable[int] | None = None,
+        what: str = "",
+    ) -> Any:
+        return self._soft(
+            self._integer,
+            key,
+            default,
+            minimum=minimum,
+            maximum=maximum,
+            allowed=allowed,
+            what=what,
+        )
+
+    def number(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: float | None = None,
+        maximum: float | None = None,
+    ) -> Any:
+        return self._soft(self._number, key, default, minimum=minimum, maximum=maximum)
+
+    def int_list(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+    ) -> Any:
+        return self._soft(self._int_list, key, default, minimum=minimum, maximum=maximum)
+
+    def str_list(self, key: str, default: Any = REQUIRED) -> Any:
+        return self._soft(self._str_list, key, default)
+
     def table(self, key: str, required: bool = False) -> Table:
         value = self._get(key, REQUIRED if required else {})
         if not isinstance(value, Mapping):
             raise self.error(key, f"must be a table, not {_type_name(value)}")
-        return Table(value, self.file, self.key(key))
+        return self.child(value, self.key(key))
 
     def table_list(self, key: str) -> list[Table]:
         value = self._get(key, [])
@@ -187,7 +275,7 @@ class Table:
         for i, item in enumerate(value):
             if not isinstance(item, Mapping):
                 raise self.error(f"{key}[{i}]", f"must be a table, not {_type_name(item)}")
-            out.append(Table(item, self.file, f"{self.key(key)}[{i}]"))
+            out.append(self.child(item, f"{self.key(key)}[{i}]"))
         return out
 
     def tables(self, key: str) -> dict[str, Table]:
@@ -198,13 +286,25 @@ class Table:
             outer._read.add(name)
             if not isinstance(value, Mapping):
                 raise outer.error(name, f"must be a table, not {_type_name(value)}")
-            out[name] = Table(value, self.file, outer.key(name))
+            out[name] = self.child(value, outer.key(name))
         return out
 
     def unread(self) -> list[str]:
         return sorted(k for k in self.data if k not in self._read)
 
+    def unknown_key(self, key: str) -> ConfigError:
+        """An unknown key, with the nearest key this table knows as a hint."""
+        known = sorted(self._read)
+        close = difflib.get_close_matches(str(key), known, n=1)
+        return self.error(
+            key, f"unknown key (did you mean {close[0]!r}?)" if close else "unknown key"
+        )
+
     def finish(self) -> None:
-        """Raise for the first key that nobody read."""
-        for key in self.unread():
-            raise self.error(key, "unknown key")
+        """Raise for the keys that nobody read: all of them (ConfigErrors) when
+        collecting, else the first (ConfigError)."""
+        unknown = [self.unknown_key(k) for k in self.unread()]
+        if unknown and self.collect:
+            raise ConfigErrors(unknown)
+        if unknown:
+            raise unknown[0]

@@ -5,12 +5,19 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
+import sys
 import threading
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
 import pytest_asyncio
+
+# The test adapters' entry points (tests/support/plugins.py), without importing the tests
+# package: tests/gateway/test_leak_guard.py runs this file elsewhere.
+_TEST_SITE = Path(__file__).resolve().parent / "support" / "site"
+if _TEST_SITE.is_dir() and str(_TEST_SITE) not in sys.path:
+    sys.path.append(str(_TEST_SITE))
 
 pytest_plugins = ["pytester"]  # tests/gateway/test_leak_guard.py runs the guard on itself
 

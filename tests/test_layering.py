@@ -37,6 +37,7 @@ CODEC_NAMES = {
         "frame",
         "errors",
         "_validate",
+        "eds",
     ),
 }
 # Parts of an adapter package that are not codecs: a codec may not import them.

@@ -1,8 +1,9 @@
 """The DeviceNet adapter: python-can link + scanner engine + CFW-08 profile, as a DriveAdapter.
 
 Per drive, once the scanner has it online (allocated, identity and sizes checked, EPR
-set), the adapter configures it through explicit messages: P710 must select the
-configured assembly pair (seed 4.1.8), P313 is read (the drive's own reaction to a
+set), the adapter configures it through explicit messages: the I/O connection's paths
+must name the configured assembly pair (seed tables 13-14; P710 counts only after a
+reset, seed 4.1.8), P313 is read (the drive's own reaction to a
 communication error, seed 4.1.3), the maximum speed is read if the config asks, and
 ``startup_params`` are written and read back. Until that succeeds the scanner sends
 idle (zero-length) I/O and the drive stays ``connecting``: it never runs half-set.
@@ -15,12 +16,12 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
+from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
-    ASSEMBLY_SIZE,
     P070_COMM_ERROR,
     P070_TEXT,
     P081_IDLE,
@@ -53,6 +54,7 @@ from adapters.devicenet.cfw08_objects import (
     encode_attribute,
 )
 from adapters.devicenet.cip import CipClass
+from adapters.devicenet.eds import Param
 from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import (
     ErrorResponse,
@@ -71,7 +73,7 @@ from adapters.devicenet.link import (
     RxFailed,
     RxFrame,
 )
-from adapters.devicenet.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus, parse_drive
 from adapters.devicenet.scanner import (
     Action,
     BadFrame,
@@ -81,6 +83,7 @@ from adapters.devicenet.scanner import (
     FrameIn,
     IdentityCheck,
     InputData,
+    IoKind,
     LineFault,
     LineOnline,
     LinkDown,
@@ -96,14 +99,32 @@ from adapters.devicenet.scanner import (
     Send,
     TxFailed,
 )
+from adapters.devicenet.scanner.probe import (
+    Finished,
+    LineProbe,
+    NodeInfo,
+    ProbeAction,
+    ProbeConfig,
+    Progress,
+)
 from adapters.devicenet.sim import SimNodeConfig, SimRunner
-from gateway.adapter import EventKind, HubPort, ParamValue
+from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
+from gateway.adapter import (
+    Capabilities,
+    EventKind,
+    HubPort,
+    ParamInfo,
+    ParamTable,
+    ParamValue,
+    param_table,
+)
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import (
     AdapterError,
     DriveOffline,
     FrameEncodeError,
     GatewayTimeout,
+    LineHeld,
     ParameterError,
 )
 from gateway.model import CommState, Device
@@ -117,6 +138,7 @@ LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SIM_START_BOUND = 2.0  # s
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
 SIM_DEFAULT_MAX_RPM = 1800.0
+ADR_INTERVAL = 1.0  # s between two looks at MAC 63 while an adr drive is missing
 IDLE = "idle"
 
 REPORT_EVENTS: dict[ReportKind, EventKind] = {
@@ -147,6 +169,7 @@ class _Drive:
     reset_sent_at: float | None = None
     p313: int | None = None
     problem: str | None = None
+    in_force: str | None = None  # the assembly pair the I/O connection's paths name
     io_values: dict[str, int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
     bad_inputs: int = 0
@@ -164,6 +187,25 @@ class _Drive:
     @property
     def values(self) -> dict[str, int]:
         return {**self.io_values, **self.params}
+
+
+def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
+    """The EDS parameters (P number -> ParamN) as the drive's parameter table: name, units,
+    limits and the EDS scaling ((raw + offset) x multiplier x base / divisor / 10^decimals)."""
+    return param_table(
+        ParamInfo(
+            number=number,
+            name=p.name,
+            unit=p.units,
+            decimals=p.decimals,
+            minimum=None if p.minimum is None else p.scale(p.minimum),
+            maximum=None if p.maximum is None else p.scale(p.maximum),
+            code=f"P{number}",
+            multiplier=p.multiplier * p.base / p.divisor,
+            offset=p.offset,
+        )
+        for number, p in sorted(params.items())
+    )
 
 
 class DeviceNetAdapter:
@@ -205,6 +247,11 @@ class DeviceNetAdapter:
         self._hub: HubPort | None = None
         self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
+        self._adr: LineProbe | None = None
+        self._adr_next = 0.0
+        self._missing_since: dict[int, float] = {}
+        self.claimed = asyncio.Event()
+        """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
             LineOnline: self._on_line_online,
             LineFault: self._on_line_fault,
@@ -221,7 +268,7 @@ class DeviceNetAdapter:
         o = self.options
         return ScannerConfig(
             mac=o.mac,
-            vendor_id=0,
+            vendor_id=o.vendor_id,
             serial_number=SCANNER_SERIAL_BASE + o.mac,
             poll_interval=o.poll_interval,
             response_timeout=o.response_timeout,
@@ -239,14 +286,22 @@ class DeviceNetAdapter:
             o = d.opts
             identity = IdentityCheck()
             if o.check_identity:
-                identity = IdentityCheck(o.vendor_id, o.product_code, o.product_name or None)
+                identity = IdentityCheck(
+                    o.vendor_id,
+                    o.product_code,
+                    o.product_name or None,
+                    product_type=o.product_type,
+                    revision=o.revision,
+                )
             out.append(
                 NodeConfig(
                     mac=d.mac,
                     io=o.connection,
                     ack=o.ack,
-                    produced_size=ASSEMBLY_SIZE,  # every CFW-08 assembly (seed 4.1.8, table 11)
-                    consumed_size=ASSEMBLY_SIZE,
+                    # every CFW-08 assembly is 4 bytes (seed 4.1.8, table 11); an EDS's
+                    # sizes are checked against that when the config is read
+                    produced_size=o.io_sizes[0],
+                    consumed_size=o.io_sizes[1],
                     epr=self.options.expected_packet_rate,
                     identity=identity,
                 )
@@ -261,12 +316,15 @@ class DeviceNetAdapter:
                 SimNodeConfig(
                     mac=d.mac,
                     p710=s.p710 if s.p710 is not None else o.assembly.p710,
+                    p710_stored=s.p710_stored,
                     p313=s.p313,
                     max_rpm=s.max_rpm or o.max_rpm or SIM_DEFAULT_MAX_RPM,
                     ramp_time=s.ramp_time,
                     weg_speed_scale=o.weg_speed_scale,
                     product_code=o.product_code if o.product_code is not None else 8,
                     dupmac_timeout=self.options.dupmac_timeout,
+                    identity=None if o.eds is None else sim_identity(o.eds),
+                    io_sizes=o.io_sizes,
                 )
             )
         return out
@@ -278,7 +336,7 @@ class DeviceNetAdapter:
         for d in self.drives.values():
             hub.update(d.id, comm=CommState.OFFLINE)
             if d.settings is not None:
-                hub.set_capabilities(d.id, capabilities(d.settings))
+                hub.set_capabilities(d.id, self._capabilities(d, d.settings))
         o = self.options
         link = CanLink(LinkConfig(o.interface, o.channel, o.bitrate))
         engine = Scanner(self.scanner_config(), self.node_configs())
@@ -331,13 +389,19 @@ class DeviceNetAdapter:
             deadline = engine.next_deadline()
             if deadline is None or now >= deadline:
                 self._act(now, engine.step(now))
+            self._tick_adr(now, engine)
             self._flush(now)
             deadline = engine.next_deadline()
             wake = next_refresh if deadline is None else min(deadline, next_refresh)
+            adr = self._adr.next_deadline() if self._adr is not None else None
+            if adr is not None:
+                wake = min(wake, adr)
             events = await link.receive(max(wake - self.clock(), 0.0))
             now = self.clock()
             for event in events:
                 self._act(now, engine.step(now, _event(event)))
+                if self._adr is not None and isinstance(event, RxFrame):
+                    self._adr_actions(now, self._adr.step(now, event.frame))
             self._flush(now)
 
     async def _leave(self, link: CanLink, engine: Scanner) -> None:
@@ -391,14 +455,22 @@ class DeviceNetAdapter:
 
     def _on_line_online(self, now: float, action: LineOnline) -> None:
         log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
+        self.claimed.set()
         for d in self.drives.values():
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
     def _on_line_fault(self, now: float, action: LineFault) -> None:
+        """The scanner's MAC ID is answered on the line: another master is there (fact
+        sheet 2.3: a device failing its check stays off the line). Nothing but the two
+        check requests went out; the gateway does not start on this line."""
         hub = self._hub_port()
         for d in self.drives.values():
             hub.event(d.id, EventKind.BUS, action.text)
-        raise AdapterError(action.text)
+        o = self.options
+        raise LineHeld(
+            f"DeviceNet {o.interface} channel {o.channel}: {action.text}; another master is "
+            "on this line: stop it (one master per line)"
+        )
 
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]
@@ -460,6 +532,83 @@ class DeviceNetAdapter:
         for d in targets:
             hub.event(d.id, kind, action.text, **action.data)
 
+    # ------------------------------------------------------------ Automatic Device Replacement
+
+    def _adr_drives(self, engine: Scanner) -> list[_Drive]:
+        """Drives with ``adr = true`` (none while a configured drive holds MAC 63)."""
+        if ADR_MAC in self.drives or not engine.online:
+            return []
+        return [d for d in self.drives.values() if d.opts.adr]
+
+    def _tick_adr(self, now: float, engine: Scanner) -> None:
+        """Seed 6.1: while an ``adr`` drive is missing, look at MAC 63 for a drive with its
+        identity (every ``ADR_INTERVAL``); one found is re-addressed and reset, then comes
+        up at the missing drive's MAC ID and is reprogrammed at connect (startup_params)."""
+        drives = self._adr_drives(engine)
+        for d in drives:
+            if engine.nodes[d.mac].phase is Phase.ONLINE:
+                self._missing_since.pop(d.mac, None)
+            else:
+                self._missing_since.setdefault(d.mac, now)
+        if self._adr is None:
+            if not self._missing(now) or now < self._adr_next:
+                return
+            o = self.options
+            config = ProbeConfig(
+                mac=o.mac, macs=(ADR_MAC,), timeout=o.explicit_timeout, claim=False, window=1
+            )
+            self._adr = LineProbe(config, self._adr_target)
+        self._adr_actions(now, self._adr.step(now))
+
+    def _missing(self, now: float) -> list[_Drive]:
+        """``adr`` drives missing long enough to be replaced (not merely slow to start)."""
+        after = 2 * (self.options.explicit_timeout + self.options.dupmac_timeout)
+        return [
+            self.drives[mac] for mac, since in self._missing_since.items() if now - since >= after
+        ]
+
+    def _adr_target(self, info: NodeInfo) -> int | None:
+        now = self.clock()
+        matches = [d for d in self._missing(now) if _same_identity(d.opts, info)]
+        if len(matches) == 1:
+            return matches[0].mac
+        if len(matches) > 1:
+            names = ", ".join(d.id for d in matches)
+            text = (
+                f"ADR: the drive at MAC {ADR_MAC} (serial {info.serial_number}) matches "
+                f"several missing drives ({names}): not re-addressed"
+            )
+            for d in matches:
+                self._hub_port().event(d.id, EventKind.CONFIG, text)
+        return None
+
+    def _adr_actions(self, now: float, actions: list[ProbeAction]) -> None:
+        for action in actions:
+            if isinstance(action, CanFrame):
+                self._outbox.append(action)
+            elif isinstance(action, Finished):
+                self._adr = None
+                self._adr_next = now + ADR_INTERVAL
+            elif isinstance(action, Progress) and action.found is not None:
+                self._adr_found(action.found)
+
+    def _adr_found(self, info: NodeInfo) -> None:
+        target = info.readdressed
+        d = self.drives.get(target) if target is not None else None
+        if d is None:
+            if info.problem is not None:
+                log.info("DeviceNet %s: ADR at MAC %d: %s", self.name, ADR_MAC, info.problem)
+            return
+        self._missing_since.pop(d.mac, None)
+        self._hub_port().event(
+            d.id,
+            EventKind.CONFIG,
+            f"ADR: a drive with the identity of {d.id} (serial {info.serial_number}) appeared "
+            f"at MAC {ADR_MAC}: set to MAC {d.mac} and reset (seed 6.1); it is reprogrammed "
+            "when it connects (startup_params)",
+            serial_number=info.serial_number,
+        )
+
     # ------------------------------------------------------------ outputs
 
     def _refresh_outputs(self, now: float) -> None:
@@ -503,6 +652,8 @@ class DeviceNetAdapter:
                 return
             except NotConfigured as exc:
                 problem = str(exc)
+                if problem != d.problem:  # the drive's own setup is wrong: a warning
+                    log.warning("DeviceNet %s: drive %s not configured: %s", self.name, d.id, exc)
             except (GatewayTimeout, DriveOffline) as exc:
                 problem = f"no answer while configuring: {exc}"
             if problem != d.problem:
@@ -516,13 +667,7 @@ class DeviceNetAdapter:
             pause = min(2 * pause, self.options.retry_max)
 
     async def _try_configure(self, d: _Drive) -> None:
-        p710 = await self._checked_read(d, P710)
-        pair = AssemblyPair.from_p710(p710)
-        if pair is not d.opts.assembly:
-            shown = pair.label if pair is not None else "none"
-            raise NotConfigured(
-                f"P710 = {p710} selects assembly {shown}, the config says {d.opts.assembly.label}"
-            )
+        await self._check_assembly(d)
         d.p313 = await self._checked_read(d, P313)
         d.params["P313"] = d.p313
         if d.opts.max_rpm_param is not None:
@@ -554,6 +699,59 @@ class DeviceNetAdapter:
         d.status = asyncio.get_running_loop().create_task(
             self._watch_status(d), name=f"devicenet-status-{d.id}"
         )
+
+    async def _check_assembly(self, d: _Drive) -> None:
+        """The assembly pair in force must be the configured one, or no I/O.
+
+        P710 is only what the drive will use after its next reset (seed 4.1.8 note), so
+        the pair in force is read from the I/O connection itself: its produced and
+        consumed connection paths (Connection 05h, seed tables 13-14). A P710 that
+        differs while the pair in force is right is reported: the drive runs correctly
+        until its next reset, and is refused then.
+        """
+        want = d.opts.assembly
+        instance = _IO_INSTANCE[d.opts.connection]
+        produced = await self._path_assembly(d, instance, objects.ConnectionAttribute.PRODUCED_PATH)
+        consumed = await self._path_assembly(d, instance, objects.ConnectionAttribute.CONSUMED_PATH)
+        p710 = await self._checked_read(d, P710)
+        d.params["P710"] = p710
+        stored = AssemblyPair.from_p710(p710)
+        in_force = f"{consumed}/{produced}"
+        d.in_force = in_force
+        if (consumed, produced) != (want.output_instance, want.input_instance):
+            raise NotConfigured(_assembly_problem(want, in_force, instance, p710, stored))
+        if stored is not want:
+            shown = stored.label if stored is not None else "none"
+            self._hub_port().event(
+                d.id,
+                EventKind.CONFIG,
+                f"P710 = {p710} selects assembly {shown}, the config says {want.label}: "
+                f"{want.label} is in force until the drive's next reset, then the drive "
+                "will not be brought online (seed 4.1.8)",
+                P710=p710,
+            )
+
+    async def _path_assembly(self, d: _Drive, instance: int, attribute: int) -> int:
+        """The Assembly instance a connection path of the I/O connection names; a path
+        that names none (or cannot be read) leaves the pair in force unknown: refused."""
+        where = f"Connection 05h instance {instance} attribute {attribute}"
+        body = GetAttributeSingle(CipClass.CONNECTION, instance, attribute)
+        try:
+            data = _success(await self._request(d, body))
+        except ParameterError as exc:
+            raise NotConfigured(
+                f"reading the assembly in force ({where}) refused: {exc.text}"
+            ) from None
+        try:
+            assembly = objects.decode_path(data).assembly
+        except DeviceNetDecodeError:
+            assembly = None
+        if assembly is None:
+            shown = data.hex(" ") or "empty"
+            raise NotConfigured(
+                f"the assembly in force is unknown: {where} names no assembly ({shown})"
+            )
+        return assembly
 
     async def _check_baud_rate(self, d: _Drive) -> None:
         """P702 against the line's expected rate (seed 4.1.6; effective after a reset).
@@ -587,7 +785,7 @@ class DeviceNetAdapter:
         if not 1 <= rpm <= SPEED_REF_MAX_RPM:
             raise NotConfigured(f"P{number} = {rpm} is not a usable maximum speed (rpm)")
         d.settings = _settings(d.opts, float(rpm))
-        self._hub_port().set_capabilities(d.id, capabilities(d.settings))
+        self._hub_port().set_capabilities(d.id, self._capabilities(d, d.settings))
 
     async def _read_status(self, d: _Drive, numbers: tuple[int, ...] = (P070, P081)) -> None:
         """P070 and P081 (seed 4.1.1, 4.1.2) into the values, with an event on change."""
@@ -672,6 +870,22 @@ class DeviceNetAdapter:
         body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
         _success(await self._request(d, body))
 
+    @staticmethod
+    def _capabilities(d: _Drive, settings: ProfileSettings) -> Capabilities:
+        """The profile's capabilities with the parameter table of the drive's EDS (the
+        lookup the front ends name parameter values with, gateway.adapter.ParamInfo)."""
+        return replace(capabilities(settings), params=eds_param_table(d.opts.params))
+
+    def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
+        """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the
+        ``scaled`` engineering value of ``raw`` (EDS scaling); {} when the drive has no EDS
+        or the EDS does not name that parameter. The params services add these beside
+        the raw value."""
+        param = self._drive(drive_id).opts.params.get(number)
+        if param is None:
+            return {}
+        return {"name": param.name, "unit": param.units, "scaled": param.scale(int(raw))}
+
     # ------------------------------------------------------------ standard objects
 
     async def read_object(
@@ -735,6 +949,7 @@ class DeviceNetAdapter:
             entry: dict[str, Any] = {
                 "mac": d.mac,
                 "assembly": d.opts.assembly.label,
+                "assembly_in_force": d.in_force,
                 "connection": d.opts.connection.value,
                 "configured": d.configured,
                 "problem": d.problem,
@@ -752,6 +967,22 @@ class DeviceNetAdapter:
 # ---------------------------------------------------------------- helpers
 
 
+def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
+    """The node at MAC 63 shows what this drive's config (or EDS) expects of it."""
+    revision_ok = opts.revision is None or (
+        info.revision is not None
+        and info.revision[0] == opts.revision[0]
+        and info.revision[1] >= opts.revision[1]
+    )
+    return (
+        info.vendor_id == opts.vendor_id
+        and (opts.product_code is None or info.product_code == opts.product_code)
+        and (not opts.product_name or info.product_name == opts.product_name)
+        and (opts.product_type is None or info.product_type == opts.product_type)
+        and revision_ok
+    )
+
+
 def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
     return ProfileSettings(
         pair=opts.assembly,
@@ -759,6 +990,29 @@ def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
         weg_speed_scale=opts.weg_speed_scale,
         at_reference_rpm=opts.at_reference_rpm,
     )
+
+
+_IO_INSTANCE: dict[IoKind, int] = {
+    IoKind.POLLED: objects.ConnectionInstance.POLL,  # seed table 13
+    IoKind.COS: objects.ConnectionInstance.COS_CYCLIC,  # seed table 14
+    IoKind.CYCLIC: objects.ConnectionInstance.COS_CYCLIC,
+}
+
+
+def _assembly_problem(
+    want: AssemblyPair, in_force: str, instance: int, p710: int, stored: AssemblyPair | None
+) -> str:
+    text = (
+        f"the drive's I/O uses assembly {in_force} (Connection 05h instance {instance} "
+        f"paths), the config says {want.label}"
+    )
+    if stored is want:
+        return (
+            f"{text}; P710 = {p710} selects {want.label} but takes effect only after a "
+            "reset of the drive (seed 4.1.8): reset or power-cycle it"
+        )
+    shown = stored.label if stored is not None else "none"
+    return f"{text}; P710 = {p710} selects assembly {shown}"
 
 
 def _event(event: LinkEvent) -> Event:

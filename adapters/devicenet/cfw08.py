@@ -520,7 +520,7 @@ def command_assembly(
     c = _Command(
         settings=settings,
         desired=desired,
-        run=desired.run and not desired.coast_stop,
+        run=desired.run and not desired.coast_stop and not desired.quick_stop,  # rule 1
         reverse=_reverse(desired),
         rpm=min(reference_rpm(settings, desired), settings.max_rpm),
         reset=fault_reset,
@@ -549,7 +549,7 @@ def _out100(c: _Command) -> OutputAssembly:
         ramp_enable=c.run,
         general_enable=not d.coast_stop,
         reverse=c.reverse,
-        jog=d.jog and not d.coast_stop,
+        jog=d.jog and not d.coast_stop and not d.quick_stop,
         remote=d.remote,
         fault_reset=c.reset,
         speed_counts=rpm_to_counts(c.rpm, s.max_rpm, s.weg_speed_scale),
@@ -574,10 +574,18 @@ def capabilities(settings: ProfileSettings) -> Capabilities:
             f"assembly {pair.label} has no general disable (use 100/150 for a coast stop)"
         )
         unsupported["jog"] = f"assembly {pair.label} has no JOG bit (use 100/150)"
+    reverse_refused = None
     if pair is AssemblyPair.BASIC:
         unsupported["direction"] = "assembly 20/70 runs forward only (Run Fwd); use 21/71"
         unsupported["remote"] = "assembly 20/70 has no network control bit; use 21/71"
-    return Capabilities(speed_scale=settings.speed_scale, unsupported=unsupported)
+        # Seed table 5: Run Fwd is the only run bit, so a reverse would go out as Run Fwd = 0
+        # (a ramp stop) while the state said reverse. Refused instead (issue 17 item 5).
+        reverse_refused = "assembly 20/70 has no reverse (Run Fwd only); use 21/71 or 100/150"
+    return Capabilities(
+        speed_scale=settings.speed_scale,
+        unsupported=unsupported,
+        reverse_refused=reverse_refused,
+    )
 
 
 def _speed_fields(settings: ProfileSettings, rpm: float) -> dict[str, Any]:

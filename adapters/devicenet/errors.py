@@ -9,7 +9,7 @@ Encoders raise :class:`gateway.errors.FrameEncodeError`.
 
 from __future__ import annotations
 
-from gateway.errors import FrameDecodeError, GatewayTimeout
+from gateway.errors import ConfigError, FrameDecodeError, GatewayTimeout
 
 
 class DeviceNetDecodeError(FrameDecodeError):
@@ -121,3 +121,18 @@ class FragmentAckTimeout(GatewayTimeout):
 
 class AssemblyDecodeError(DeviceNetDecodeError):
     """I/O assembly data of the wrong length for its instance (CFW-08 seed 3, table 11)."""
+
+
+class EdsError(ConfigError):
+    """An EDS file that does not parse or says something impossible.
+
+    Names the file, the line (0: the whole file) and the key (``[Section] Key``).
+    A :class:`gateway.errors.ConfigError`, so a drive config naming a bad EDS fails
+    like any other config error.
+    """
+
+    def __init__(self, file: str, line: int, key: str, reason: str) -> None:
+        self.line = line
+        self.eds_key = key
+        where = " ".join(p for p in (f"line {line}:" if line else "", key) if p)
+        super().__init__(file, where.removesuffix(":"), reason)

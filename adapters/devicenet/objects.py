@@ -146,3 +146,65 @@ class WatchdogAction(IntEnum):
 
 
 INACTIVITY_EPR_FACTOR = 4  # fact sheet 2.9: inactivity timeout = 4 x EPR
+
+
+# ---------------------------------------------------------------- connection paths
+
+# Packed EPATH logical segments (fact sheet 2.10 step 4; 2.5: DeviceNet paths are packed):
+# segment byte -> (what it names, how many value bytes follow, little-endian).
+_LOGICAL_SEGMENTS: dict[int, tuple[str, int]] = {
+    0x20: ("class", 1),
+    0x21: ("class", 2),
+    0x24: ("instance", 1),
+    0x25: ("instance", 2),
+    0x30: ("attribute", 1),
+    0x31: ("attribute", 2),
+}
+ASSEMBLY_CLASS = 0x04  # fact sheet 2.11; seed 5.4
+ASSEMBLY_DATA = 3  # seed table 10: the Data attribute
+
+
+@dataclass(frozen=True, slots=True)
+class LogicalPath:
+    """A connection path (Connection attributes 14 and 16) as class, instance, attribute."""
+
+    class_id: int | None = None
+    instance_id: int | None = None
+    attribute_id: int | None = None
+
+    @property
+    def assembly(self) -> int | None:
+        """The Assembly instance the path names, or None when it names something else."""
+        if self.class_id != ASSEMBLY_CLASS or self.attribute_id not in (None, ASSEMBLY_DATA):
+            return None
+        return self.instance_id
+
+
+def assembly_path(instance: int) -> bytes:
+    """The path of an Assembly instance's Data: ``20 04 24 <instance> 30 03`` (fact sheet
+    2.10 step 4); a 16-bit instance segment above 255."""
+    if not 0 <= instance <= 0xFFFF:
+        raise FrameEncodeError(f"assembly instance {instance} does not fit a path")
+    if instance <= 0xFF:
+        middle = bytes((0x24, instance))
+    else:
+        middle = bytes((0x25,)) + instance.to_bytes(2, "little")
+    return bytes((0x20, ASSEMBLY_CLASS)) + middle + bytes((0x30, ASSEMBLY_DATA))
+
+
+def decode_path(data: bytes) -> LogicalPath:
+    """A packed logical path; DataTypeDecodeError on any other segment or a short one."""
+    raw = bytes(data)
+    found: dict[str, int] = {}
+    i = 0
+    while i < len(raw):
+        segment = _LOGICAL_SEGMENTS.get(raw[i])
+        if segment is None:
+            raise DataTypeDecodeError(f"path segment {raw[i]:#04x} is not a logical one", raw)
+        name, size = segment
+        value = raw[i + 1 : i + 1 + size]
+        if len(value) != size or name in found:
+            raise DataTypeDecodeError(f"bad {name} segment in a connection path", raw)
+        found[name] = int.from_bytes(value, "little")
+        i += 1 + size
+    return LogicalPath(found.get("class"), found.get("instance"), found.get("attribute"))

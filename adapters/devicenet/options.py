@@ -1,24 +1,31 @@
 """The DeviceNet bus table and its drives' keys (read with gateway.schema.Table).
 
-Bus keys: interface, channel, bitrate, mac, poll_interval, expected_packet_rate,
-response_timeout, explicit_timeout, dupmac_timeout, retry_max, status_interval,
-simulate. Drive keys: assembly, connection, ack, check_identity, vendor_id,
-product_code, product_name, max_rpm, max_rpm_param, weg_speed_scale,
+Bus keys: interface, channel, bitrate, mac, vendor_id, poll_interval,
+expected_packet_rate, response_timeout, explicit_timeout, dupmac_timeout, retry_max,
+status_interval, simulate. Drive keys: assembly, connection, ack, eds, check_identity,
+vendor_id, product_code, product_name, adr, max_rpm, max_rpm_param, weg_speed_scale,
 at_reference_rpm, startup_params, and the simulator's sim_p313, sim_p710,
-sim_ramp_time, sim_max_rpm. See docs/devices.md.
+sim_p710_stored, sim_ramp_time, sim_max_rpm. See docs/devices.md.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
 
+from adapters.devicenet import objects
 from adapters.devicenet.cfw08 import (
+    ASSEMBLY_SIZE,
     DEFAULT_AT_REFERENCE_RPM,
     DEFAULT_WEG_SPEED_SCALE,
     MAX_PARAMETER,
     SPEED_REF_MAX_RPM,
     AssemblyPair,
+    parameter_of,
 )
+from adapters.devicenet.eds import ConnectionType, Eds, Param, load_eds
+from adapters.devicenet.errors import DeviceNetDecodeError, EdsError
 from adapters.devicenet.link import REFUSED_INTERFACES
 from adapters.devicenet.scanner import IoKind
 from gateway.config import DriveConfig
@@ -26,6 +33,10 @@ from gateway.schema import Table
 
 BITRATES = (125_000, 250_000, 500_000)  # DeviceNet rates (seed table 4, P702)
 WEG_VENDOR_ID = 0x355  # seed table 8
+# The vendor ID the scanner's Duplicate MAC ID check frames carry (fact sheet 2.3). 0 is
+# "Reserved"; the gateway has no ODVA-assigned ID, so the default is 0xFFFF, the top of
+# the UINT range, far above any ID assigned, and never a real vendor's (docs/devices.md).
+SCANNER_VENDOR_ID = 0xFFFF
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,12 +53,14 @@ class BusOptions:
     retry_max: float = 30.0
     status_interval: float = 2.0
     simulate: bool = False
+    vendor_id: int = SCANNER_VENDOR_ID
 
 
 @dataclass(frozen=True, slots=True)
 class SimOptions:
     p313: int = 2
     p710: int | None = None  # default: the one matching ``assembly``
+    p710_stored: int | None = None  # P710 changed but not yet applied by a reset
     ramp_time: float = 2.0
     max_rpm: float | None = None  # default: the drive's max_rpm, else 1800
 
@@ -67,6 +80,12 @@ class DriveOptions:
     at_reference_rpm: float = DEFAULT_AT_REFERENCE_RPM
     startup_params: tuple[tuple[int, int], ...] = ()
     sim: SimOptions = SimOptions()
+    eds: Eds | None = None
+    product_type: int | None = None  # from the EDS (ProdType)
+    revision: tuple[int, int] | None = None  # from the EDS (MajRev, MinRev)
+    io_sizes: tuple[int, int] = (ASSEMBLY_SIZE, ASSEMBLY_SIZE)  # (produced, consumed)
+    params: Mapping[int, Param] = field(default_factory=dict)  # P number -> EDS ParamN
+    adr: bool = False  # Automatic Device Replacement from MAC 63 (seed 6.1)
 
 
 def parse_bus(t: Table) -> BusOptions:
@@ -94,6 +113,7 @@ def parse_bus(t: Table) -> BusOptions:
         channel=t.string("channel", d.channel),
         bitrate=t.integer("bitrate", d.bitrate, allowed=BITRATES, what="a DeviceNet rate"),
         mac=t.integer("mac", d.mac, minimum=0, maximum=63),
+        vendor_id=t.integer("vendor_id", d.vendor_id, minimum=0, maximum=0xFFFF),
         poll_interval=poll,
         expected_packet_rate=epr,
         response_timeout=t.number(
@@ -125,6 +145,7 @@ def _sim(t: Table) -> SimOptions:
     return SimOptions(
         p313=t.integer("sim_p313", d.p313, minimum=0, maximum=3),
         p710=t.integer("sim_p710", d.p710, minimum=0, maximum=2),
+        p710_stored=t.integer("sim_p710_stored", d.p710_stored, minimum=0, maximum=2),
         ramp_time=t.number("sim_ramp_time", d.ramp_time, minimum=0.1, maximum=999.0),
         max_rpm=t.number("sim_max_rpm", d.max_rpm, minimum=1.0, maximum=SPEED_REF_MAX_RPM),
     )
@@ -146,14 +167,38 @@ def parse_drive(t: Table, drive: DriveConfig) -> DriveOptions:
     if not ack and connection is IoKind.POLLED:
         raise t.error("ack", "false needs connection = 'cos' or 'cyclic'")
     product_code = t.integer("product_code", None, minimum=0, maximum=0xFFFF)
+    vendor_id = t.integer("vendor_id", d.vendor_id, minimum=0, maximum=0xFFFF)
+    product_name = t.string("product_name", d.product_name)
+    eds = _load_eds(t)
+    adr = t.boolean("adr", d.adr)
+    if adr and drive.address == ADR_MAC:
+        raise t.error("adr", f"a drive at MAC {ADR_MAC} cannot be replaced from MAC {ADR_MAC}")
+    product_type: int | None = None
+    revision: tuple[int, int] | None = None
+    io_sizes = d.io_sizes
+    params: Mapping[int, Param] = {}
+    if eds is not None:
+        dev = eds.device
+        for key, mine, theirs in (
+            ("vendor_id", vendor_id, dev.vendor_code),
+            ("product_code", product_code, dev.product_code),
+            ("product_name", product_name, dev.product_name),
+        ):
+            if t.has(key) and mine != theirs:
+                raise t.error(key, f"{mine!r} differs from the EDS ({eds.file}: {theirs!r})")
+        vendor_id, product_code, product_name = dev.vendor_code, dev.product_code, dev.product_name
+        product_type, revision = dev.product_type, (dev.major_rev, dev.minor_rev)
+        io_sizes = _eds_sizes(t, eds, connection)
+        params = eds_parameters(eds)
     return DriveOptions(
         assembly=AssemblyPair(assembly),
         connection=connection,
         ack=ack,
         check_identity=t.boolean("check_identity", d.check_identity),
-        vendor_id=t.integer("vendor_id", d.vendor_id, minimum=0, maximum=0xFFFF),
+        vendor_id=vendor_id,
         product_code=product_code,
-        product_name=t.string("product_name", d.product_name),
+        product_name=product_name,
+        adr=adr,
         max_rpm=max_rpm,
         max_rpm_param=max_rpm_param,
         weg_speed_scale=t.integer("weg_speed_scale", d.weg_speed_scale, minimum=1, maximum=0xFFFF),
@@ -162,4 +207,63 @@ def parse_drive(t: Table, drive: DriveConfig) -> DriveOptions:
         ),
         startup_params=_startup_params(t),
         sim=_sim(t),
+        eds=eds,
+        product_type=product_type,
+        revision=revision,
+        io_sizes=io_sizes,
+        params=params,
     )
+
+
+ADR_MAC = 63  # seed 6.1 and P701 note: new devices come up at MAC 63
+_EDS_CONNECTION = {
+    IoKind.POLLED: ConnectionType.POLL,
+    IoKind.COS: ConnectionType.COS,
+    IoKind.CYCLIC: ConnectionType.CYCLIC,
+}
+
+
+def _load_eds(t: Table) -> Eds | None:
+    text = t.string("eds", None)
+    if text is None:
+        return None
+    path = Path(text)
+    if not path.is_absolute() and Path(t.file).is_file():
+        path = Path(t.file).resolve().parent / path  # relative to the config file
+    try:
+        return load_eds(path)
+    except EdsError as exc:
+        raise t.error("eds", str(exc)) from None
+
+
+def _eds_sizes(t: Table, eds: Eds, connection: IoKind) -> tuple[int, int]:
+    """The EDS's I/O sizes for the configured connection, checked against the assemblies
+    in use (every CFW-08 assembly is 4 bytes, seed table 11)."""
+    kind = _EDS_CONNECTION[connection]
+    sizes = eds.io.sizes(kind)
+    if sizes is None:
+        raise t.error("eds", f"{eds.file} has no {kind.name} connection in [IO_Info]")
+    if sizes != (ASSEMBLY_SIZE, ASSEMBLY_SIZE):
+        raise t.error(
+            "eds",
+            f"{eds.file}: the {kind.name} connection is {sizes[0]} bytes in, {sizes[1]} "
+            f"bytes out; the CFW-08 assemblies in use are {ASSEMBLY_SIZE} and {ASSEMBLY_SIZE} "
+            "(seed table 11)",
+        )
+    return sizes
+
+
+def eds_parameters(eds: Eds) -> dict[int, Param]:
+    """The EDS parameters that name a CFW-08 parameter by their link path (seed 5.10)."""
+    out: dict[int, Param] = {}
+    for param in eds.params.values():
+        try:
+            path = objects.decode_path(param.path)
+        except DeviceNetDecodeError:
+            continue
+        if path.class_id is None or path.attribute_id is None or path.instance_id != 1:
+            continue
+        number = parameter_of(path.class_id, path.attribute_id)
+        if number is not None:
+            out[number] = param
+    return out

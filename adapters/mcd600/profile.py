@@ -19,7 +19,13 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
-from adapters.profibus.profile import DiagEvent, EventSink, RecordChannel, SlaveSetup
+from adapters.profibus.profile import (
+    AddressRange,
+    DiagEvent,
+    EventSink,
+    RecordChannel,
+    SlaveSetup,
+)
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import DriveOffline, GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, DriveStatus
@@ -62,6 +68,9 @@ class Mcd600Profile:
     """:class:`adapters.profibus.profile.DpProfile` for the MCD 600 PROFIBUS card."""
 
     device: ClassVar[Device] = Device.MCD600
+    addresses: ClassVar[AddressRange] = AddressRange(
+        1, 125, "MCD 600 PROFIBUS manual 7.2 Configurações: Faixa de endereços 1-125"
+    )
     sees_every_diag: ClassVar[bool] = True
     """Every diagnosis read comes here, even bytes equal to the last ones: after a reset the
     card clears its telegram (5.1.1) without raising the alert, so the same trip again is
@@ -136,6 +145,8 @@ class Mcd600Profile:
         coast = desired.coast_stop or desired.quick_stop  # 4.2 t2 byte 0 bit 4: quick stop
         if not desired.run:
             self._run_armed = True
+        elif coast:
+            self._run_armed = False  # rule 1: a run asked before the stop never restarts
         # 4.2 note: byte 0 bit 4 must be 0 for a start; never start and reset together.
         start = desired.run and self._run_armed and not coast and not reset
         self._start_sent = start

@@ -13,8 +13,10 @@ card's installation guide:
 * data requests (4.3) with their scales, parameter reads and writes (4.4) with the invalid
   number / invalid value answers, and the diagnosis telegram (5.1).
 
-Fault injection: :meth:`trip` (any code, until reset), :meth:`keypad_change`,
-``reset_input_closed``, ``input_a``/``input_b``, ``warning``, :attr:`faults` (the shared
+Fault injection: :meth:`trip` (any code, until reset), :meth:`keypad_reset` (the LCP's
+reset, behind the network's back), the auto-reset parameters (a trip resets itself after a
+delay on the injected clock), :meth:`keypad_change`, ``reset_input_closed``,
+``input_a``/``input_b``, ``warning``, :attr:`faults` (the shared
 :class:`gateway.sim.FaultInjector`, whose line-level knobs the host applies).
 """
 
@@ -41,6 +43,9 @@ from .monitoring import (
 from .options import DEFAULT_IDENT_NUMBER, Mcd600Options, parse_user_prm
 from .programming import ParamReply, ParamRequest
 from .simparams import (
+    AUTO_RESET_ACTION,
+    AUTO_RESET_DELAY,
+    AUTO_RESET_MAX,
     COMMAND_SOURCE,
     CURRENT_LIMIT,
     EXCESS_START_TIME,
@@ -52,6 +57,7 @@ from .simparams import (
     START_RAMP_TIME,
     STOP_MODE,
     STOP_TIME,
+    AutoResetAction,
     CommandSource,
     NetworkCommsAction,
     ParamStore,
@@ -143,6 +149,8 @@ class Mcd600Sim:
         self._comm_acted = False
         self._comm_warning = False
         self._last_tick: float | None = None
+        self._tripped_at: float | None = None  # when the present trip began (auto-reset)
+        self.auto_resets = 0  # auto-resets since the last manual reset or power-up
         self._control = ControlWord()
         self._applied = OutputTelegram()
         self._param_reply = ParamReply()
@@ -226,22 +234,43 @@ class Mcd600Sim:
         return self.trip_code != 0
 
     def tick(self, now: float) -> None:
+        """Advance to ``now``; the timers due on the way (communication timeout, auto-reset)
+        act at their own time."""
         last = now if self._last_tick is None else self._last_tick
         self._last_tick = max(now, last)
-        dt = max(0.0, now - last)
-        deadline = self._comm_deadline()
-        if deadline is not None and deadline <= now:
-            self._advance(max(0.0, deadline - last))
-            self._comm_timeout_expired()
-            self._advance(now - max(deadline, last))
-        else:
-            self._advance(dt)
+        while (event := self._next_timer()) is not None and event[0] <= now:
+            at, action = event
+            self._advance_to(last, at)
+            last = max(at, last)
+            action(self, last)
+            self._advance_to(last, last)  # a trip the action made begins now
+        self._advance_to(last, now)
+
+    def _advance_to(self, last: float, when: float) -> None:
+        self._advance(max(0.0, when - last))
+        if not self.starter.tripped:
+            self._tripped_at = None
+        elif self._tripped_at is None:
+            self._tripped_at = max(when, last)
+
+    def _next_timer(self) -> tuple[float, Callable[[Mcd600Sim, float], None]] | None:
+        timers = [
+            (at, action)
+            for at, action in (
+                (self._comm_deadline(), Mcd600Sim._comm_timeout_expired),
+                (self.auto_reset_due(), Mcd600Sim._auto_reset),
+            )
+            if at is not None
+        ]
+        return min(timers, key=lambda t: t[0]) if timers else None
 
     def power_cycle(self, now: float) -> None:
         """Control power off and on: parameters and thermal model kept, the rest lost."""
         self.tick(now)
         self.starter.power_off()
         self.faults.clear()
+        self._tripped_at = None
+        self.auto_resets = 0
         self.comm_timeout = DEFAULT_COMM_TIMEOUT
         self.prm_ok = False
         self.exchanging = False
@@ -279,12 +308,49 @@ class Mcd600Sim:
 
     # ------------------------------------------------------------------ fault injection
 
-    def trip(self, code: int) -> None:
-        """Trip on ``code`` (any 1-255); the starter stops and reports it until reset."""
+    def trip(self, code: int, now: float | None = None) -> None:
+        """Trip on ``code`` (any 1-255); the starter stops and reports it until reset. The
+        trip begins at ``now`` (default: the last tick) for the auto-reset delay."""
         if not 1 <= code <= 255:
             raise ValueError(f"trip code {code} is not 1..255")
+        if now is not None:
+            self.tick(now)
         self.faults.trip(code)
+        if not self.starter.tripped:
+            self._tripped_at = self._last_tick
         self.starter.trip(code)
+
+    def keypad_reset(self, now: float) -> bool:
+        """The Reset key on the starter's LCP: the trip clears behind the network's back (if
+        its condition is gone). Start is a level (guide 4.2, byte 1 bit 0): a start the
+        master still sends starts the motor again at the next exchange."""
+        self.tick(now)
+        done = self._reset()
+        if done:
+            log.info("MCD 600 sim: trip reset at the keypad")
+        return done
+
+    def auto_reset_due(self) -> float | None:
+        """When the present trip resets by itself: the auto-reset delay after it began, while
+        the auto-reset action is on and fewer than its maximum resets were made."""
+        p = self.params
+        if (
+            p[AUTO_RESET_ACTION] == AutoResetAction.OFF
+            or self._tripped_at is None
+            or self.auto_resets >= p[AUTO_RESET_MAX]
+        ):
+            return None
+        return self._tripped_at + p[AUTO_RESET_DELAY]
+
+    def _auto_reset(self, at: float) -> None:
+        self.auto_resets += 1
+        code = self.trip_code
+        if self.starter.reset():
+            self.faults.clear()
+            self._tripped_at = None
+            log.info("MCD 600 sim: auto-reset of trip %d (%d made)", code, self.auto_resets)
+        else:
+            self._tripped_at = at  # the condition is still there: try again after the delay
 
     def keypad_change(self, number: int, value: int) -> None:
         """Someone changes a parameter on the starter's keypad (5.1.2)."""
@@ -326,7 +392,7 @@ class Mcd600Sim:
             return None  # 3.3: timeout 0 leaves the starter as it is
         return self._lost_at + self.comm_timeout
 
-    def _comm_timeout_expired(self) -> None:
+    def _comm_timeout_expired(self, _at: float = 0.0) -> None:
         self._comm_acted = True
         action = NetworkCommsAction(self.params[NETWORK_COMMS])
         log.info("MCD 600 sim: communication timeout, %s", action.name)
@@ -366,9 +432,14 @@ class Mcd600Sim:
             self.starts += 1
             self.motor_set_used = motor_set
 
-    def _reset(self) -> None:
+    def _reset(self) -> bool:
+        """A manual reset (the network's edge, the keypad)."""
         if self.starter.tripped and self.starter.reset():
             self.faults.clear()  # the injected condition is gone (5.1.1)
+            self._tripped_at = None
+            self.auto_resets = 0
+            return True
+        return False
 
     def _program(self, request: ParamRequest) -> ParamReply:
         """4.4: answer a read or write; a write wins when both bits are set."""

@@ -33,6 +33,14 @@ class NetworkCommsAction(IntEnum):
     LOG_ONLY = 3
 
 
+class AutoResetAction(IntEnum):
+    """The starter's auto-reset (its operating guide's auto-reset parameters, not in the
+    card's guide): reset a trip by itself after a delay, a limited number of times."""
+
+    OFF = 0
+    RESET_TRIP = 1
+
+
 class StopMode(IntEnum):
     COAST_TO_STOP = 0
     SOFT_STOP = 1
@@ -60,6 +68,9 @@ STOP_TIME: Final = 9
 NETWORK_COMMS: Final = 10
 PROFIBUS_ADDRESS: Final = 11
 MODEL_FLC: Final = 12
+AUTO_RESET_ACTION: Final = 13
+AUTO_RESET_MAX: Final = 14
+AUTO_RESET_DELAY: Final = 15
 
 PARAMS: Final[tuple[ParamDef, ...]] = (
     # The simulator's default is Network so a demo runs; the starter's own default differs.
@@ -77,6 +88,9 @@ PARAMS: Final[tuple[ParamDef, ...]] = (
     ),
     ParamDef(PROFIBUS_ADDRESS, "12-7 PROFIBUS Address", 3, 1, 125),
     ParamDef(MODEL_FLC, "Model FLC (A, read only)", 140, 0, 0xFFFF, writable=False),
+    ParamDef(AUTO_RESET_ACTION, "Auto-Reset Action", AutoResetAction.OFF, 0, 1),
+    ParamDef(AUTO_RESET_MAX, "Auto-Reset Maximum Resets", 1, 1, 5),
+    ParamDef(AUTO_RESET_DELAY, "Auto-Reset Delay (s)", 5, 1, 900),
 )
 PARAM_DEFS: Final[dict[int, ParamDef]] = {p.number: p for p in PARAMS}
 

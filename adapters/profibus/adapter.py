@@ -17,9 +17,12 @@ device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive
 * leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
 
 The port disappearing never crashes the gateway: drives go offline and the port is
-reopened with back-off. On cancellation the master sends Global_Control Clear to every
-slave and closes the port. With ``simulate = true`` the adapter makes a pty pair and runs
-its drives' simulated devices on the other end, in-process.
+reopened with back-off. One master per line: a port another process holds when the
+adapter first opens it ends the run with :class:`PortHeld` (the daemon does not start);
+held when it comes back after a loss, it is retried like a missing one, the holder named.
+On cancellation the master sends Global_Control Clear to every slave and closes the port.
+With ``simulate = true`` the adapter makes a pty pair and runs its drives' simulated
+devices on the other end, in-process.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from .driver import LineDriver
 from .link import OPEN_ERRORS, SerialLink, open_link
 from .master import (
     DiagnosisRead,
+    FaultKind,
     InputsReceived,
     LineMode,
     LineNoise,
@@ -57,13 +61,25 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
-from .profile import PROFILES, DpProfile, RecordAccessError, SlaveSetup
+from .portlock import PortHeld
+from .profile import (
+    DP_STATIONS,
+    PROFILES,
+    SET_SLAVE_ADD_DEFAULT,
+    AddressRange,
+    DpProfile,
+    RecordAccessError,
+    SlaveSetup,
+)
 
 if TYPE_CHECKING:
     from .sim.line import SimLine
     from .sim.port import SimPort
 
 log = logging.getLogger(__name__)
+
+DEFAULT_ADDRESSES: Final = AddressRange(*DP_STATIONS, "DP station addresses, fact sheet 1.2")
+"""For a profile that declares no ``addresses`` of its own (a test device)."""
 
 REOPEN_BACKOFF: Final = (0.5, 10.0)  # s, first and longest pause before reopening the port
 CONNECT_BACKOFF: Final = (2.0, 60.0)  # s, between on_connect attempts of a drive
@@ -81,6 +97,10 @@ CONNECTING_STATES: Final = frozenset(
     }
 )
 
+FAULT_EVENTS: Final[Mapping[FaultKind, EventKind]] = {
+    FaultKind.DPV1_UNANSWERED: EventKind.BUS,  # the line's trouble; data exchange goes on
+}
+
 DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "fault": EventKind.FAULT,
     "trip": EventKind.TRIP,
@@ -88,6 +108,7 @@ DIAG_KINDS: Final[Mapping[str, EventKind]] = {
     "parameter": EventKind.PARAMETER,
     "info": EventKind.BUS,
     "config": EventKind.CONFIG,
+    "safety": EventKind.SAFETY,
 }
 
 
@@ -141,7 +162,9 @@ class ProfibusAdapter:
     devices: ClassVar[frozenset[Device]] = frozenset(
         {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
     )
-    address_range: ClassVar[tuple[int, int]] = (0, 125)
+    # 0-126 in the core's check: a device's own range (its profile's ``addresses``, from its
+    # manual) and the DP stations 0-125 are checked in parse_drive_options, naming the drive
+    address_range: ClassVar[tuple[int, int]] = (0, SET_SLAVE_ADD_DEFAULT)
     profiles: ClassVar[Mapping[Device, str]] = PROFILES
     sim_devices: ClassVar[Mapping[Device, str] | None] = None  # None: sim.devices.SIM_DEVICES
 
@@ -153,8 +176,16 @@ class ProfibusAdapter:
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
-        profile_options = cls.profile_class(drive.device).parse_options(table, drive)
-        return opts.parse_drive_options(table, drive, profile_options)
+        profile_class = cls.profile_class(drive.device)
+        addresses = getattr(profile_class, "addresses", DEFAULT_ADDRESSES)
+        refusal = addresses.refusal(drive.device.value, drive.address)
+        if refusal is not None:
+            raise table.error("address", refusal)
+        profile_options = profile_class.parse_options(table, drive)
+        builtin = None  # the profile's own setup: only to check a GSD module or cfg against
+        if table.has("gsd") or table.has("cfg"):
+            builtin = profile_class(replace(drive, options=profile_options)).setup()
+        return opts.parse_drive_options(table, drive, profile_options, builtin)
 
     @classmethod
     def profile_class(cls, device: Device) -> Any:
@@ -174,11 +205,14 @@ class ProfibusAdapter:
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
+        self._overrides: dict[str, opts.SetupOverride] = {}
         for d in bus.drives:
             drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
+            if drive_opts is not None and drive_opts.setup is not None:
+                self._overrides[d.id] = drive_opts.setup
             inner = replace(d, options=drive_opts.profile if drive_opts else d.options)
             profile: DpProfile = self.profile_class(d.device)(inner)
-            setup = profile.setup()
+            setup = _overridden(profile.setup(), drive_opts.setup if drive_opts else None)
             drive = _Drive(config=inner, profile=profile, setup=setup)
             self._drives[d.id] = drive
             self._by_address[d.address] = drive
@@ -196,6 +230,9 @@ class ProfibusAdapter:
         self._port_state = "closed"
         self._port_error: str | None = None
         self._reopens = 0
+        self._link_opens = 0  # PortHeld before the first: refuse to start (one master per line)
+        self.claimed = asyncio.Event()
+        """Set once the port's first open was not refused as held (the daemon's READY)."""
         self._control_timer: asyncio.TimerHandle | None = None
         self.sim: SimPort | None = None
         self.sim_line: SimLine | None = None  # the simulated slaves (simulate = true)
@@ -240,11 +277,21 @@ class ProfibusAdapter:
                     on_error,
                     rs485=self.options.rs485,
                 )
+            except PortHeld as exc:
+                if self._link_opens == 0:
+                    raise  # at start: refuse to be a second master (the daemon stops)
+                self._port_down(str(exc))  # taken while ours was gone: wait for it
+                await asyncio.sleep(pause)
+                pause = min(2 * pause, REOPEN_BACKOFF[1])
+                continue
             except OPEN_ERRORS as exc:
+                self.claimed.set()  # not held by another master: missing, or refused
                 self._port_down(f"cannot open {self._port}: {exc}")
                 await asyncio.sleep(pause)
                 pause = min(2 * pause, REOPEN_BACKOFF[1])
                 continue
+            self._link_opens += 1
+            self.claimed.set()
             pause = REOPEN_BACKOFF[0]
             self._attach(link)
             lost = await failed
@@ -323,14 +370,21 @@ class ProfibusAdapter:
                 future.cancel()
 
     def _start_simulation(self) -> str:
-        from .sim.devices import SIM_DEVICES, make_device
+        from .sim.devices import SIM_DEVICES, make_device, with_setup
         from .sim.line import SimLine
         from .sim.port import SimPort
         from .sim.slave import DpSlave
 
         table = self.sim_devices if self.sim_devices is not None else SIM_DEVICES
         line = SimLine(
-            DpSlave(d.address, make_device(d.config.device, d.config, table))
+            DpSlave(
+                d.address,
+                with_setup(
+                    make_device(d.config.device, d.config, table),
+                    d.config.device,
+                    self._overrides.get(d.id),
+                ),
+            )
             for d in self._drives.values()
         )
         sim, path = SimPort.on_pty(line)
@@ -402,12 +456,30 @@ class ProfibusAdapter:
         drive.profile.on_comm_lost()
         if self._hub is not None:
             self._hub.update(drive.id, comm=CommState.OFFLINE, running=False)
-            self._event(drive, EventKind.COMM, f"left data exchange: {reason}")
+            self._event(drive, EventKind.COMM, f"left data exchange: {reason}", reason=reason)
 
     def _on_fault(self, action: SlaveFault) -> None:
         drive = self._drive_at(action.address)
         if drive is not None:
-            self._event(drive, EventKind.CONFIG, action.text, fault=action.kind.value)
+            kind = FAULT_EVENTS.get(action.kind, EventKind.CONFIG)
+            text = action.text + self._gsd_hint(drive, action.slave_cfg)
+            self._event(drive, kind, text, fault=action.kind.value)
+
+    def _gsd_hint(self, drive: _Drive, slave_cfg: bytes | None) -> str:
+        """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""
+        override = self._overrides.get(drive.id)
+        if override is None or override.gsd is None or slave_cfg is None:
+            return ""
+        from .gsd import match_modules
+
+        modules = match_modules(override.gsd, slave_cfg)
+        if modules is None:
+            return "; the slave's configuration is no module of the GSD"
+        names = ", ".join(repr(m.name) for m in modules)
+        return (
+            f"; the slave's configuration is GSD module {names}: configure that, "
+            "or program the drive for the one sent"
+        )
 
     def _on_inputs(self, action: InputsReceived) -> None:
         drive = self._drive_at(action.address)
@@ -638,6 +710,22 @@ def _ignore(data: bytes, now: float) -> None:
     return
 
 
+def _overridden(setup: SlaveSetup, override: opts.SetupOverride | None) -> SlaveSetup:
+    """The profile's setup with what a GSD file or explicit config keys give instead."""
+    if override is None:
+        return setup
+    changes: dict[str, Any] = {"origin": override.origin}
+    if override.ident_number is not None:
+        changes["ident_number"] = override.ident_number
+    if override.cfg is not None:
+        changes["cfg"] = override.cfg
+    if override.user_prm is not None:
+        changes["user_prm"] = override.user_prm
+    if override.dpv1 is not None:
+        changes["dpv1"] = override.dpv1
+    return replace(setup, **changes)
+
+
 def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlaveParams:
     return SlaveParams(
         address=address,
@@ -649,6 +737,7 @@ def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlavePara
         dpv1=setup.dpv1,
         group=setup.group,
         watchdog=watchdog or None,
+        origin=setup.origin,
     )
 
 

@@ -1,7 +1,13 @@
 """Command-line tools of the Profibus line (the only printing in this package).
 
-* ``drive-gateway profibus scan --port PORT [--baud B] [--from A --to B] [--rs485 MODE]``:
-  the live list, one FDL status request per address (fact sheet 1.2, 1.3).
+* ``drive-gateway profibus scan --port PORT [--baud B] [--from A --to B] [--rs485 MODE]
+  [--gsd-dir DIR [--toml]]``: the live list, one FDL status request per address (fact sheet
+  1.2, 1.3), then each slave's Ident_Number (Slave_Diag, 1.8) and configuration (Get_Cfg,
+  1.7). With ``--gsd-dir`` each slave is matched to a GSD file of DIR by its Ident_Number
+  and to the module its configuration is; ``--toml`` prints drive stanzas to paste into a
+  config. Progress goes to stderr (a status line on a terminal, plain lines otherwise). A
+  port another process holds (a running gateway) is refused before anything is sent: one
+  master per line.
 * ``drive-gateway sim profibus --port PORT --slaves SPEC...``: simulated slaves on a serial
   port (or ``--port pty``: a new pty pair, its path printed for the master), until Ctrl-C.
   SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: cfw11, cfw700, cfw320, mcd600, echo;
@@ -18,7 +24,7 @@ import signal
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from gateway.config import Config, DriveConfig
 
@@ -26,7 +32,8 @@ from .driver import LineDriver
 from .fdl import MAX_STATION, StationType
 from .link import OPEN_ERRORS, Rs485, open_link
 from .options import ProfibusDriveOptions
-from .scan import Scanner
+from .portlock import PortHeld
+from .scan import Scanner, SlaveInfo
 from .timing import BAUD_RATES, BusParams
 
 if TYPE_CHECKING:
@@ -92,6 +99,10 @@ def add_profibus(sub: Any) -> None:
         help="repeats per address (1-15, default 1)",
     )
     scan.add_argument("--json", action="store_true", help="print JSON")
+    scan.add_argument("--gsd-dir", metavar="DIR", help="match each slave to a GSD file of DIR")
+    scan.add_argument(
+        "--toml", action="store_true", help="print config stanzas for the slaves (--gsd-dir)"
+    )
     scan.set_defaults(handler=cmd_scan)
 
 
@@ -125,13 +136,30 @@ def scan_params(args: argparse.Namespace) -> BusParams:
 
 
 async def scan(
-    port: str, bus: BusParams, addresses: Iterable[int], rs485: Rs485 = Rs485.AUTO
+    port: str,
+    bus: BusParams,
+    addresses: Iterable[int],
+    rs485: Rs485 = Rs485.AUTO,
+    progress: Callable[[Scanner], None] | None = None,
 ) -> dict[int, StationType]:
     """FDL status requests to ``addresses`` on ``port``; the stations that answered."""
+    scanner = await run_scan(port, bus, addresses, rs485, progress)
+    return dict(sorted(scanner.found.items()))
+
+
+async def run_scan(
+    port: str,
+    bus: BusParams,
+    addresses: Iterable[int],
+    rs485: Rs485 = Rs485.AUTO,
+    progress: Callable[[Scanner], None] | None = None,
+) -> Scanner:
+    """The scan of ``addresses`` on ``port``, done (its ``found`` and ``slaves``)."""
     loop = asyncio.get_running_loop()
     scanner = Scanner(bus, addresses, loop.time())
     done: asyncio.Future[None] = loop.create_future()
     failed: list[BaseException] = []
+    seen = [-1]
 
     def on_error(exc: BaseException) -> None:
         failed.append(exc)
@@ -139,6 +167,9 @@ async def scan(
             done.set_result(None)
 
     def on_stepped() -> None:
+        if progress is not None and scanner.probed != seen[0]:
+            seen[0] = scanner.probed
+            progress(scanner)
         if scanner.done and not done.done():
             done.set_result(None)
 
@@ -152,27 +183,168 @@ async def scan(
         await link.aclose()
     if failed:
         raise failed[0]
-    return dict(sorted(scanner.found.items()))
+    return scanner
+
+
+class Progress:
+    """Scan progress on stderr: one status line rewritten on a terminal, else a plain line
+    every ``every`` addresses and at the end."""
+
+    def __init__(self, stream: Any = None, every: int = 16) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.every = every
+
+    def __call__(self, scanner: Scanner) -> None:
+        n, total = scanner.probed, scanner.total
+        text = f"scanned {n}/{total} addresses, {len(scanner.found)} station(s) answered"
+        if self.tty:
+            end = "\n" if n == total else ""
+            print(f"\r{text}", end=end, file=self.stream, flush=True)
+        elif n == total or n % self.every == 0:
+            print(text, file=self.stream, flush=True)
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
     if args.first > args.last:
         print(f"error: --from {args.first} is above --to {args.last}", file=sys.stderr)
         return 2
+    if args.toml and not args.gsd_dir:
+        print("error: --toml needs --gsd-dir DIR (the GSD files to match)", file=sys.stderr)
+        return 2
     bus = scan_params(args)
     addresses = range(args.first, args.last + 1)
     try:
-        found = asyncio.run(scan(args.port, bus, addresses, args.rs485))
+        scanner = asyncio.run(run_scan(args.port, bus, addresses, args.rs485, Progress()))
+    except PortHeld as exc:  # a gateway (or another tool) is master there: nothing was sent
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except OPEN_ERRORS as exc:
         print(f"error: {args.port}: {exc}", file=sys.stderr)
         return 1
+    found = dict(sorted(scanner.found.items()))
+    matches = {a: match_gsd(args.gsd_dir, info) for a, info in scanner.slaves.items()}
     if args.json:
-        print(json.dumps({str(a): STATION_NAMES[t] for a, t in found.items()}))
+        print(
+            json.dumps(
+                {str(a): _json(t, scanner.slaves.get(a), matches.get(a)) for a, t in found.items()}
+            )
+        )
+        return 0
+    if args.toml:
+        for address in found:
+            match = matches.get(address)
+            if match is not None:
+                print(stanza(address, match))
         return 0
     print(f"{args.port}: {len(found)} station(s) answered, addresses {args.first}-{args.last}")
     for address, station in found.items():
-        print(f"  {address:>3}  {STATION_NAMES[station]}")
+        text = _station_text(station, scanner.slaves.get(address), matches.get(address))
+        print(f"  {address:>3}  {text}")
     return 0
+
+
+@dataclass(frozen=True)
+class GsdMatch:
+    """A slave matched to a GSD file (and to its module, where its Get_Cfg is one)."""
+
+    gsd: Any  # adapters.profibus.gsd.Gsd
+    modules: tuple[str, ...] | None
+    cfg: bytes | None
+
+
+def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
+    """The GSD of ``directory`` with the slave's Ident_Number (the first by file name)."""
+    from .gsd import find_in_dir, match_modules
+
+    if directory is None or info.ident_number is None:
+        return None
+    files = find_in_dir(directory, info.ident_number)
+    for gsd in files:  # the first whose modules make the slave's configuration
+        modules = match_modules(gsd, info.cfg) if info.cfg else None
+        if modules is not None:
+            return GsdMatch(gsd, tuple(m.name for m in modules), info.cfg)
+    return GsdMatch(files[0], None, info.cfg) if files else None
+
+
+def _station_text(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) -> str:
+    from .events import describe_cfg
+
+    parts = [STATION_NAMES[station]]
+    if info is not None and info.ident_number is not None:
+        parts.append(f"Ident_Number 0x{info.ident_number:04X}")
+        if info.master_address not in (None, 0xFF):
+            parts.append(f"parameterised by master {info.master_address}")
+    if info is not None and info.cfg is not None:
+        parts.append(f"configuration {describe_cfg(info.cfg)}")
+    if match is not None:
+        parts.append(f"GSD {match.gsd.path}")
+        if match.modules is not None:
+            parts.append(f"module {', '.join(map(repr, match.modules))}")
+        else:
+            parts.append("no module of it matches the configuration")
+    return ", ".join(parts)
+
+
+def _json(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) -> dict[str, Any]:
+    out: dict[str, Any] = {"station": STATION_NAMES[station]}
+    if info is not None:
+        out["ident_number"] = info.ident_number
+        out["master_address"] = info.master_address
+        out["cfg"] = None if info.cfg is None else info.cfg.hex(" ").upper()
+    if match is not None:
+        out["gsd"] = match.gsd.path
+        out["modules"] = None if match.modules is None else list(match.modules)
+    return out
+
+
+_DEVICE_NAMES: Final = (
+    ("CFW-11", ("cfw-11", "cfw11")),
+    ("CFW700", ("cfw700", "cfw-700")),
+    ("CFW320", ("cfw320", "cfw-320")),
+    ("MCD 600", ("mcd 600", "mcd600", "mcd6")),
+)
+
+
+def _device_of(gsd: Any) -> str | None:
+    """The device model a GSD's Model_Name names (None: not one the gateway knows)."""
+    name = str(gsd.name).casefold()
+    for device, keys in _DEVICE_NAMES:
+        if any(k in name for k in keys):
+            return device
+    return None
+
+
+_MCD_MODES: Final = {(2, 2): "basic", (6, 3): "extended", (10, 7): "parameter"}
+
+
+def stanza(address: int, match: GsdMatch) -> str:
+    """A ``[[buses.profibus.drives]]`` table for a matched slave, ready to paste."""
+    from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
+
+    device = _device_of(match.gsd)
+    lines = [
+        "[[buses.profibus.drives]]",
+        f'id = "station{address}"',
+        f'device = "{device}"' if device else 'device = ""  # not a model the gateway knows',
+        f"address = {address}",
+        f"gsd = {json.dumps(str(match.gsd.path))}",
+    ]
+    if match.modules is None:
+        cfg = match.cfg.hex(" ").upper() if match.cfg else "none"
+        lines.append(f'module = ""  # the slave\'s configuration {cfg} is no module of the GSD')
+        return "\n".join(lines) + "\n"
+    if len(match.modules) == 1 and not match.gsd.modular:
+        lines.append(f"module = {json.dumps(match.modules[0])}")
+    else:
+        lines.append(f"modules = {json.dumps(list(match.modules))}")
+    ids = decode_identifiers(match.cfg or b"")
+    sizes = (total_input_bytes(ids), total_output_bytes(ids))
+    if device == "MCD 600" and sizes in _MCD_MODES:
+        lines.append(f'mode = "{_MCD_MODES[sizes]}"')
+    elif device is not None and device != "MCD 600" and sizes[0] == sizes[1] and sizes[0] != 4:
+        lines.append(f"words = {sizes[0] // 2}")
+    return "\n".join(lines) + "\n"
 
 
 # ---------------------------------------------------------------------------------------
@@ -239,7 +411,7 @@ def build_line(
     """The simulated line of the command line's slaves and a config's Profibus drives."""
     from gateway.sim import FaultInjector
 
-    from .sim.devices import KINDS, make_device
+    from .sim.devices import KINDS, make_device, with_setup
     from .sim.echo import EchoSim
     from .sim.line import SimLine
     from .sim.slave import DpSlave
@@ -253,7 +425,8 @@ def build_line(
         line.add(DpSlave(spec.address, device))
     for drive in _profibus_drives(config):
         inner = replace(drive, options=drive.options.profile)
-        line.add(DpSlave(drive.address, make_device(drive.device, inner)))
+        sim = with_setup(make_device(drive.device, inner), drive.device, drive.options.setup)
+        line.add(DpSlave(drive.address, sim))
     return line
 
 
@@ -322,6 +495,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     try:
         asyncio.run(main())
+    except PortHeld as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except OPEN_ERRORS as exc:
         print(f"error: {args.port}: {exc}", file=sys.stderr)
         return 1

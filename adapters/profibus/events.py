@@ -67,6 +67,7 @@ class FaultKind(Enum):
     PRM_REQ_LOOP = "prm_req_loop"  # keeps asking for parameters
     NOT_READY = "not_ready"  # stays not ready after a good start-up
     REFUSED = "refused"  # Set_Prm/Chk_Cfg answered negatively at FDL level
+    DPV1_UNANSWERED = "dpv1_unanswered"  # a DP-V1 telegram never answered (data exchange goes on)
 
 
 class RecordFailure(Enum):
@@ -100,7 +101,22 @@ class Receiving:
     """Bytes of a telegram arrived but the telegram is not complete yet."""
 
 
-Event = Received | LineNoise | Receiving
+@dataclass(frozen=True)
+class Written:
+    """The driver wrote the oldest unconfirmed :class:`Transmit` to the port at ``at``.
+
+    ``at`` is the driver's clock read after the write returned, not the time the engine
+    planned: an event loop can run a callback late. The engine counts the line busy until
+    the telegram's line time after ``at`` (fact sheet 1.1: bytes x 11 bit times; on a
+    UART the bytes leave over that time once handed to the kernel), and every idle time
+    and reply deadline from there. Until a Transmit is confirmed the engine sends nothing
+    else and times nothing out.
+    """
+
+    at: float
+
+
+Event = Received | LineNoise | Receiving | Written
 
 
 @dataclass(frozen=True)
@@ -136,11 +152,13 @@ class SlaveDown:
 
 @dataclass(frozen=True)
 class SlaveFault:
-    """Start-up failed for a reason the slave gave (or the master saw): ``text`` says it."""
+    """Start-up failed for a reason the slave gave (or the master saw), or DP-V1 to a slave
+    in data exchange went unanswered: ``text`` says it."""
 
     address: int
     kind: FaultKind
     text: str
+    slave_cfg: bytes | None = None  # Cfg_Fault: what Get_Cfg said the slave has
 
 
 @dataclass(frozen=True)
@@ -203,6 +221,7 @@ class SlaveParams:
     dpv1: bool = True
     group: int = 0  # Group_Ident bits
     watchdog: float | None = 0.5  # s; None = watchdog off
+    origin: str = ""  # "GSD <file>, module '...'": named in Cfg_Fault / Prm_Fault events
 
     def set_prm(self, min_tsdr: int) -> SetPrm:
         """The Set_Prm PDU: locked to this master, watchdog, min TSDR, DP-V1 bytes (1.6)."""

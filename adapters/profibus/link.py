@@ -12,6 +12,11 @@ and their arrival time to ``on_data``, writes without blocking (a short write wa
 ``on_error``. A port without a file descriptor (rfc2217, whose pyserial class reads in a
 thread of its own) is polled every :data:`POLL_INTERVAL` instead.
 
+One master per line: a local port is held exclusively (:class:`ExclusiveSerial`: an
+advisory flock taken before any setting changes, then ``TIOCEXCL``; :mod:`.portlock`
+says why both). A port another process holds is refused with :class:`PortHeld`, naming the
+holder where ``/proc`` shows it, before anything is sent or set.
+
 RS-485 direction control: a converter with automatic direction control (most USB ones)
 needs nothing; a UART wired to a transceiver needs the kernel's RS-485 mode, RTS driving the
 transmitter (``TIOCSRS485``). :class:`Rs485` says what to do: ``auto`` (the default) asks
@@ -33,16 +38,20 @@ import contextlib
 import errno
 import logging
 import os
+import select
 import socket
 import stat
 import termios
 import threading
+import time
 from collections.abc import Callable
 from enum import Enum
 from typing import Any, Final, TypeVar
 
 import serial
 import serial.rs485
+
+from .portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +92,27 @@ def is_pty(port: str) -> bool:
     return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in PTY_MAJORS
 
 
+class ExclusiveSerial(serial.Serial):  # type: ignore[misc]  # pyserial has no types
+    """A local port held exclusively while open (module docstring, :mod:`.portlock`)."""
+
+    def __init__(self) -> None:
+        super().__init__(exclusive=True)  # pyserial flocks before it sets anything
+
+    def open(self) -> None:
+        try:
+            super().open()
+        except serial.SerialException as exc:
+            if not held(exc):
+                raise
+            raise PortHeld(str(self.port), find_holder(str(self.port))) from None
+        set_exclusive(self.fd)
+
+    def close(self) -> None:
+        if self.is_open and self.fd is not None:
+            clear_exclusive(self.fd)
+        super().close()
+
+
 def _configure(ser: Any, baudrate: int) -> None:
     ser.baudrate = baudrate
     ser.bytesize = serial.EIGHTBITS
@@ -97,14 +127,15 @@ def _configure(ser: Any, baudrate: int) -> None:
 
 def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
     """An open pyserial port set to 8E1 at ``baudrate``, RS-485 as ``rs485`` says (a pty
-    keeps what it can).
+    keeps what it can), held exclusively (a local port); :class:`PortHeld` if another
+    process holds it.
 
     Blocks for a URL port (see the module docstring): call :func:`open_link` from a loop.
     """
     if is_url(port):
         ser = serial.serial_for_url(port, do_not_open=True)
     else:
-        ser = serial.Serial()
+        ser = ExclusiveSerial()
         ser.port = port
     _configure(ser, baudrate)
     try:
@@ -112,10 +143,7 @@ def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
     except termios.error:
         if not is_pty(port):
             raise
-        # a pty refuses some rates (EINVAL) but ignores the rate anyway
-        log.info("%s is a pty: baud rate %d not settable there, ignored", port, baudrate)
-        ser.baudrate = 9600
-        ser.open()
+        _open_pty_anyway(ser, port, baudrate)
     if port.startswith("socket://"):
         _no_delay(ser)
     try:
@@ -124,6 +152,23 @@ def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
         ser.close()
         raise
     return ser
+
+
+def _open_pty_anyway(ser: Any, port: str, baudrate: int) -> None:
+    """Open a pty that refused the 8E1 settings (EINVAL); it ignores rate and parity anyway.
+
+    A pty drops even parity (PARENB): asked for settings where only the parity differs from
+    what it has (a second open at the same rate), tcsetattr fails with EINVAL. So without
+    parity first, then also at 9600 (a rate every pty has). Retrying at 9600 with parity on
+    failed at 9600 itself: the intermittent ``(22, 'Invalid argument')`` (issue 20).
+    """
+    log.info("%s is a pty: 8E1 at %d baud not settable there, ignored", port, baudrate)
+    ser.parity = serial.PARITY_NONE
+    try:
+        ser.open()
+    except termios.error:
+        ser.baudrate = 9600
+        ser.open()
 
 
 def set_rs485(ser: Any, port: str, mode: Rs485) -> bool:
@@ -251,8 +296,30 @@ class SerialLink:
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
 
-    def _polled(self) -> None:
-        self._poll = None
+    def wait_readable(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s (sub-millisecond: a driver's wait for TSYN) until bytes
+        can be read; a port without a file descriptor is only waited out."""
+        if timeout <= 0 or self._closed:
+            return False
+        if self._fd is None:
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                pass
+            return False
+        try:
+            readable, _, _ = select.select([self._fd], [], [], timeout)
+        except (OSError, ValueError):
+            return False
+        return bool(readable)
+
+    def read_now(self) -> None:
+        """Read what has arrived now (as the reader callback would) and hand it on."""
+        if self._fd is None:
+            self._polled_once()
+        else:
+            self._readable()
+
+    def _polled_once(self) -> None:
         if self._closed:
             return
         try:
@@ -264,6 +331,10 @@ class SerialLink:
         if data:
             self.bytes_in += len(data)
             self.on_data(data, self.loop.time())
+
+    def _polled(self) -> None:
+        self._poll = None
+        self._polled_once()
         if not self._closed:
             self._poll = self.loop.call_later(POLL_INTERVAL, self._polled)
 

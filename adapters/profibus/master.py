@@ -20,6 +20,21 @@ Operate/Clear broadcast and one live-list probe when due. An absent slave is pro
 per ``absent_retry`` with a single try, so it costs one slot time per period, never a
 whole retry series every cycle.
 
+Timing (1.1). Every idle time and reply deadline counts from when a telegram actually went
+out: the driver confirms each :class:`Transmit` with a :class:`Written` event carrying the
+time it wrote the bytes, and the telegram occupies the line for its line time after that
+(an event loop runs callbacks late; the planned time is never used). Until a Transmit is
+confirmed nothing else is sent and nothing times out. Any byte received (a reply, a stray
+reply to a retried request, an echo, noise) restarts the idle time: the next request is
+decided only once the line has been quiet for TSYN, so bytes arriving meanwhile move it.
+A short acknowledgement (E5) carries no address: it is taken only as the answer to a request
+that may be answered so, never as a Data_Exchange reply of a slave with inputs.
+
+DP-V1 (1.10). A DP-V1 telegram that stays unanswered after every try does not restart the
+slave: its job fails, DP-V1 to that slave is held for a back-off (:data:`DPV1_BACKOFF`,
+doubling), its Data_Exchange goes on, and a :class:`SlaveFault` reports it once (again only
+after a DP-V1 answer came in between).
+
 The steady case (a plain reply to a Data_Exchange, nothing else waiting, the next turn a
 Data_Exchange too) takes a short path from reply to request; a property test runs it and
 the general path on the same lines and finds every telegram, action and counter equal.
@@ -68,6 +83,7 @@ from .events import (
     SlaveStateChanged,
     SlaveUp,
     Transmit,
+    Written,
     check_slave,
     describe_cfg,
 )
@@ -91,6 +107,7 @@ MAX_TURN: Final = 4  # telegrams of one slave in one cycle (retries not counted)
 MAX_ACYCLIC_PER_TURN: Final = 2  # DP-V1 request + first poll
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"
 IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
+DPV1_BACKOFF: Final = (1.0, 60.0)  # s: DP-V1 held after an unanswered request, doubling
 FRAME_MEMO: Final = 4  # Data_Exchange telegrams kept encoded per slave (2 FCBs x outputs)
 
 # 1.5, pyprofibus state timeouts (s): how long a start-up state may last before restarting.
@@ -125,6 +142,7 @@ __all__ = [
     "SlaveStateChanged",
     "SlaveUp",
     "Transmit",
+    "Written",
     "check_slave",
     "describe_cfg",
 ]
@@ -167,6 +185,9 @@ class _Slave:
     fault: str | None = None
     last_diag: SlaveDiag | None = None
     jobs: deque[_Job] = field(default_factory=deque)
+    dpv1_hold_until: float = -math.inf  # DP-V1 held after an unanswered request
+    dpv1_backoff: float = 0.0  # the last hold, s (0: none since the last answer)
+    dpv1_reported: bool = False  # the unanswered DP-V1 fault was reported
     frames: dict[tuple[bool, bool, bytes], bytes] = field(default_factory=dict)
     turn: _Turn = field(default_factory=_Turn)
     stats: SlaveStats = field(default_factory=SlaveStats)
@@ -189,6 +210,7 @@ class _Pending:
     garbled: bool = False
     job: _Job | None = None
     dsap: int | None = None  # the request's DSAP: the reply's SSAP must match (1.2)
+    written: bool = False  # the driver confirmed the write (Written): the deadline counts
 
 
 Reply = DataTelegram | ShortAck
@@ -219,6 +241,8 @@ class Master:
         self._reply_wait = bus.reply_wait
         self.mode = LineMode.OPERATE
         self._pending: _Pending | None = None
+        self._retry: _Pending | None = None  # timed out, repeated once the line is idle
+        self._unwritten: deque[tuple[int, _Pending | None]] = deque()  # bytes, request
         self._idle_since = now - bus.tsyn
         self._busy_until = now
         self._cycle_started: float | None = None
@@ -239,6 +263,10 @@ class Master:
         self._out: list[Action] = []
 
     # ------------------------------------------------------------------ views
+
+    def slave_params(self) -> tuple[SlaveParams, ...]:
+        """What each slave is sent at start-up (Set_Prm, Chk_Cfg), by address."""
+        return tuple(sl.params for sl in self._slaves.values())
 
     @property
     def addresses(self) -> tuple[int, ...]:
@@ -331,8 +359,9 @@ class Master:
         sl = self._slaves[job.address]
         if job in sl.jobs:
             sl.jobs.remove(job)
-        if self._pending is not None and self._pending.job is job:
-            self._pending.job = None
+        for p in (self._pending, self._retry):
+            if p is not None and p.job is job:
+                p.job = None
 
     def _queue_job(
         self, address: int, request: dpv1.ReadRequest | dpv1.WriteRequest, now: float
@@ -342,7 +371,9 @@ class Master:
         self._job_ids += 1
         job = _Job(self._job_ids, address, request, now + self.bus.acyclic_timeout)
         self._jobs[job.id] = job
-        if sl.state is SlaveState.DATA_EXCHANGE and sl.params.dpv1:
+        if sl.state is SlaveState.DATA_EXCHANGE and sl.params.dpv1 and now < sl.dpv1_hold_until:
+            self._finish(job, RecordFailure.TIMEOUT, self._held_text(sl, now))
+        elif sl.state is SlaveState.DATA_EXCHANGE and sl.params.dpv1:
             sl.jobs.append(job)
         else:
             why = "not in data exchange" if sl.params.dpv1 else "runs without DP-V1"
@@ -351,7 +382,8 @@ class Master:
 
     def reset(self, now: float) -> list[Action]:
         """Start every slave up again (the port was reopened): nothing is outstanding."""
-        self._pending = None
+        self._pending = self._retry = None
+        self._unwritten.clear()
         for sl in self._slaves.values():
             self._enter(sl, SlaveState.WAIT_DIAG, now, "the serial port was reopened")
         self._cycle_started = None
@@ -367,7 +399,11 @@ class Master:
         self._pending = None
         self.mode = LineMode.CLEAR
         data = global_control_request(GlobalControl.clear(), sa=self.address).encode()
-        first = max(now, self._idle_since + self._tsyn)
+        busy = self._idle_since  # a telegram not confirmed yet: assume it went out now
+        for n, _ in self._unwritten:
+            busy = max(busy, now + self.bus.tx_time(n))
+        self._unwritten.clear()
+        first = max(now, busy + self._tsyn)
         second = first + self.bus.tx_time(len(data)) + self._tsyn
         return [Transmit(data, first, False), Transmit(data, second, False)]
 
@@ -395,12 +431,21 @@ class Master:
         """When to step again if nothing arrives (None: only after a command)."""
         if self._stopped:
             return None
+        if self._unwritten:  # the line is ours until the driver confirms the write
+            return min((j.deadline for j in self._jobs.values()), default=None)
         if self._pending is not None:
             return self._pending.deadline
+        line_free = max(self._busy_until, self._idle_since + self._tsyn)
+        if self._retry is not None:
+            return line_free
         # in a cycle (after a broadcast): go on when the line is free; else the next cycle
         base = self._busy_until if self._cycle_started is not None else self._next_cycle
         times = [base, *(j.deadline for j in self._jobs.values())]
-        return max(self._busy_until, min(times))
+        return max(line_free, min(times))
+
+    def awaiting_reply(self) -> bool:
+        """A request is on the line (confirmed written) and its reply deadline runs."""
+        return self._pending is not None and self._pending.written
 
     def _take(self) -> list[Action]:
         out, self._out = self._out, []
@@ -409,13 +454,33 @@ class Master:
     # ------------------------------------------------------------------ events
 
     def _on_event(self, event: Event, now: float) -> None:
+        if isinstance(event, Written):
+            self._on_written(event.at)
+            return
+        # 1.1: any byte on the line restarts the idle time before the next request
+        self._idle_since = max(self._idle_since, now)
         if isinstance(event, Received):
             self._on_received(event.telegram, now)
         elif isinstance(event, LineNoise):
             self._on_noise(event.error, now)
-        elif self._pending is not None:  # Receiving: give the rest time to come
+        elif self._pending is not None and self._pending.written:  # Receiving: the rest
             bound = now + self.bus.tx_time(MAX_TELEGRAM) + self.bus.latency
             self._pending.deadline = max(self._pending.deadline, bound)
+
+    def _on_written(self, at: float) -> None:
+        """The oldest unconfirmed telegram was written at ``at``: on the line until its
+        line time after that (1.1); a request's reply wait starts there."""
+        if not self._unwritten:
+            return  # written before a reset: nothing waits for it any more
+        n, pending = self._unwritten.popleft()
+        end = at + self.bus.tx_time(n)
+        self._idle_since = max(self._idle_since, end)
+        if pending is None:  # a broadcast: nobody answers, the line is free TSYN later
+            self._busy_until = max(self._busy_until, end + self._tsyn)
+        elif pending is self._pending:
+            pending.sent_at = at
+            pending.deadline = end + self._reply_wait
+            pending.written = True
 
     def count_noise(self, error: FdlDecodeError, address: int | None = None) -> None:
         """Count undecodable bytes (line level, and for ``address`` if given)."""
@@ -432,7 +497,7 @@ class Master:
     def _on_noise(self, error: FdlDecodeError, now: float) -> None:
         pending = self._pending
         self.count_noise(error, pending.address if pending is not None else None)
-        if pending is not None:
+        if pending is not None and pending.written:
             pending.garbled = True
             # wait until the line is quiet again before repeating
             pending.deadline = max(pending.deadline, now + self.bus.reply_wait)
@@ -441,13 +506,16 @@ class Master:
         pending = self._pending
         if isinstance(telegram, DataTelegram) and telegram.is_request:
             return  # our own echo (half-duplex converters) or another station's request
-        if pending is None or isinstance(telegram, TokenTelegram):
+        if pending is None or not pending.written or isinstance(telegram, TokenTelegram):
             self.stats.unexpected += 1
             return
         if isinstance(telegram, DataTelegram) and not _answers_request(
             pending, telegram, self.address
         ):
             self.stats.unexpected += 1  # e.g. a late reply to an earlier request
+            return
+        if isinstance(telegram, ShortAck) and not self._takes_short_ack(pending):
+            self.stats.unexpected += 1  # E5 has no address: a late answer to another request
             return
         self._pending = None
         # never before the end of our own request: a stray reply seen while it was still
@@ -459,6 +527,12 @@ class Master:
         sl = self._slaves[pending.address]
         self._answered(sl, pending, now)
         _REPLY_HANDLERS[pending.purpose](self, sl, pending, telegram, now)
+
+    def _takes_short_ack(self, pending: _Pending) -> bool:
+        """Whether E5 may answer ``pending`` (1.2: an acknowledgement without data)."""
+        if pending.purpose is Purpose.DATA:
+            return self._slaves[pending.address].params.input_len == 0
+        return pending.purpose in _SHORT_ACK_PURPOSES
 
     def _answered(self, sl: _Slave, pending: _Pending, now: float) -> None:
         sl.stats.response.add(now - pending.sent_at)
@@ -491,7 +565,11 @@ class Master:
         data exchange; at the end of the cycle, with no line task due, the cycle ends and
         the next begins the same way. False: ``_send_next`` decides, nothing changed but
         what it would change first itself (an ended and a begun cycle)."""
-        if self._cycle_started is None or now < self._busy_until:
+        if (
+            self._cycle_started is None
+            or now < self._busy_until
+            or now < self._idle_since + self._tsyn
+        ):
             return False
         if not self._queue:
             if self._line_done or self._line_due(now):
@@ -510,6 +588,7 @@ class Master:
         """The slave whose plain Data_Exchange reply ``t`` is, if nothing else waits."""
         if (
             p is None
+            or not p.written
             or p.purpose is not Purpose.DATA
             or self._jobs
             or self._timed
@@ -538,12 +617,44 @@ class Master:
         if pending.tries < pending.max_tries:
             for c in counters:
                 c.retries += 1
-            self._transmit(pending, now)
+            self._retry = pending  # repeated once the line was idle TSYN (1.1)
             return
         for c in counters:
             c.timeouts += 1
         sl.fcb = FcbState.reset()
+        if pending.purpose in _DPV1_PURPOSES and sl.state is SlaveState.DATA_EXCHANGE:
+            self._dpv1_unanswered(sl, pending, now)
+            return
         self._gave_up(sl, pending, now)
+
+    def _dpv1_unanswered(self, sl: _Slave, pending: _Pending, now: float) -> None:
+        """A DP-V1 telegram unanswered after every try (1.10): the slave keeps its data
+        exchange (the next Data_Exchange tells whether it is still there); DP-V1 to it is
+        held for a back-off; the fault is reported once."""
+        low, high = DPV1_BACKOFF
+        sl.dpv1_backoff = min(2 * sl.dpv1_backoff, high) if sl.dpv1_backoff else low
+        sl.dpv1_hold_until = now + sl.dpv1_backoff
+        tries = pending.max_tries
+        text = (
+            f"slave {sl.address} left a DP-V1 {pending.purpose.value} (MSAC_C1) unanswered "
+            f"after {tries} {'try' if tries == 1 else 'tries'}; data exchange goes on, DP-V1 "
+            f"held for {sl.dpv1_backoff:g} s"
+        )
+        for job in list(sl.jobs):
+            self._finish(job, RecordFailure.TIMEOUT, text)
+        if not sl.dpv1_reported:
+            sl.dpv1_reported = True
+            self._out.append(SlaveFault(sl.address, FaultKind.DPV1_UNANSWERED, text))
+
+    def _held_text(self, sl: _Slave, now: float) -> str:
+        return (
+            f"DP-V1 to slave {sl.address} is held for {sl.dpv1_hold_until - now:.1f} s more: "
+            "it left a DP-V1 request unanswered"
+        )
+
+    def _dpv1_answered(self, sl: _Slave) -> None:
+        sl.dpv1_backoff = 0.0
+        sl.dpv1_reported = False
 
     def _gave_up(self, sl: _Slave, pending: _Pending, now: float) -> None:
         """No (valid) reply after every try (1.5 step 7)."""
@@ -552,7 +663,15 @@ class Master:
             sl.retry_at = now + self.bus.absent_retry
             self._enter(sl, SlaveState.ABSENT, now, what)
             return
-        self._enter(sl, SlaveState.WAIT_DIAG, now, f"{what} to {pending.purpose.value}")
+        wait = (pending.deadline - pending.sent_at) * 1000
+        tries = f"{pending.tries} {'try' if pending.tries == 1 else 'tries'}"
+        self._enter(
+            sl,
+            SlaveState.WAIT_DIAG,
+            now,
+            f"{what} to {_REQUEST_NAMES[pending.purpose]} after {tries} "
+            f"(waited {wait:.1f} ms for each)",
+        )
 
     # ------------------------------------------------------------------ replies
 
@@ -583,13 +702,15 @@ class Master:
 
     def _reply_get_cfg(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         sent = describe_cfg(sl.params.cfg)
+        slave_cfg: bytes | None = None
         if isinstance(t, DataTelegram) and t.ssap == SlaveSap.GET_CFG:
-            has = describe_cfg(bytes(t.data))
+            slave_cfg = bytes(t.data)
+            has = describe_cfg(slave_cfg)
             text = f"Cfg_Fault: the slave refused the configuration {sent}; it has {has}"
         else:
             text = f"Cfg_Fault: the slave refused the configuration {sent} (Get_Cfg: {_show(t)})"
-        text += _slave_words(sl.last_diag)
-        self._fault(sl, FaultKind.CFG_FAULT, text, now)
+        text += _origin(sl.params) + _slave_words(sl.last_diag)
+        self._fault(sl, FaultKind.CFG_FAULT, text, now, slave_cfg)
 
     def _reply_data(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
         """Data_Exchange reply (1.5 step 6): DL with inputs, E5 without, DH: diag waits."""
@@ -615,6 +736,7 @@ class Master:
         self._out.append(InputsReceived(sl.address, data))
 
     def _reply_record(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
+        self._dpv1_answered(sl)
         job = p.job
         if job is None:
             return  # cancelled meanwhile
@@ -629,6 +751,7 @@ class Master:
             self._finish(job, RecordFailure.REFUSED, _refusal_text(status))
 
     def _reply_poll(self, sl: _Slave, p: _Pending, t: Reply, now: float) -> None:
+        self._dpv1_answered(sl)
         job = p.job
         if job is None:
             return
@@ -746,21 +869,24 @@ class Master:
         p = sl.params
         text = (
             f"Prm_Fault: the slave refused the parameters (Ident_Number 0x{p.ident_number:04X}, "
-            f"{len(p.user_prm)} bytes of user parameters)"
+            f"{len(p.user_prm)} bytes of user parameters"
+            + (f": {p.user_prm.hex(' ').upper()})" if p.user_prm else ")")
         )
         if diag.ident_number != p.ident_number:
             text += f"; the slave reports Ident_Number 0x{diag.ident_number:04X}"
-        return text + _slave_words(diag)
+        return text + _origin(p) + _slave_words(diag)
 
     # ------------------------------------------------------------------ state changes
 
-    def _fault(self, sl: _Slave, kind: FaultKind, text: str, now: float) -> None:
+    def _fault(
+        self, sl: _Slave, kind: FaultKind, text: str, now: float, slave_cfg: bytes | None = None
+    ) -> None:
         changed = sl.fault != text
         sl.fault = text
         sl.retry_at = now + self.bus.fault_retry
         self._enter(sl, SlaveState.FAULT, now, text)
         if changed:
-            self._out.append(SlaveFault(sl.address, kind, text))
+            self._out.append(SlaveFault(sl.address, kind, text, slave_cfg))
 
     def _enter(self, sl: _Slave, new: SlaveState, now: float, reason: str = "") -> None:
         old = sl.state
@@ -792,7 +918,8 @@ class Master:
         if limit is None or sl.state not in _TIMED_STATES:
             return
         limit = max(limit, 4 * self.bus.cycle_time, 4 * self._retry_bound())
-        if now - sl.since <= limit or (self._pending and self._pending.address == sl.address):
+        busy = [p.address for p in (self._pending, self._retry) if p is not None]
+        if now - sl.since <= limit or sl.address in busy:
             return
         if sl.state is SlaveState.WAIT_READY:
             self._fault(
@@ -822,8 +949,9 @@ class Master:
         sl = self._slaves[job.address]
         if job in sl.jobs:
             sl.jobs.remove(job)
-        if self._pending is not None and self._pending.job is job:
-            self._pending.job = None
+        for p in (self._pending, self._retry):
+            if p is not None and p.job is job:
+                p.job = None
         self._out.append(RecordDone(job.id, job.address, data, error, failure, text))
 
     def _check_jobs(self, now: float) -> None:
@@ -837,7 +965,13 @@ class Master:
     # ------------------------------------------------------------------ sending
 
     def _send_next(self, now: float) -> None:
-        if now < self._busy_until:
+        # 1.1: a request only after the line was idle TSYN (counted from the last byte
+        # written or received), and only once the previous telegram was confirmed written
+        if self._unwritten or now < self._busy_until or now < self._idle_since + self._tsyn:
+            return
+        if self._retry is not None:
+            retry, self._retry = self._retry, None
+            self._transmit(retry, now)
             return
         for _ in range(len(self._slaves) + 8):  # bounded: each pass ends or starts a cycle
             if self._cycle_started is None:
@@ -907,7 +1041,12 @@ class Master:
             return Purpose.DATA
         if sl.diag_pending and not turn.diag:
             return Purpose.DIAG
-        if sl.jobs and turn.acyclic < MAX_ACYCLIC_PER_TURN and not turn.acyclic_wait:
+        if (
+            sl.jobs
+            and turn.acyclic < MAX_ACYCLIC_PER_TURN
+            and not turn.acyclic_wait
+            and now >= sl.dpv1_hold_until
+        ):
             return Purpose.POLL if sl.jobs[0].requested else Purpose.RECORD
         return None
 
@@ -953,9 +1092,10 @@ class Master:
         if not fresh:
             pending.tries += 1
         pending.sent_at = not_before
-        sent = not_before + self.bus.tx_time(len(pending.data))
-        self._idle_since = sent  # 1.1: the line is ours until the request's last bit
-        pending.deadline = sent + self._reply_wait
+        # the reply wait starts when the driver confirms the write (Written), not now
+        pending.deadline = math.inf
+        pending.written = False
+        self._unwritten.append((len(pending.data), pending))
         self._pending = pending
         self._cycle_sent += 1
         self.stats.telegrams += 1
@@ -964,8 +1104,7 @@ class Master:
     def _broadcast(self, control: GlobalControl, now: float) -> None:
         data = global_control_request(control, sa=self.address).encode()
         not_before = max(now, self._idle_since + self._tsyn)
-        self._idle_since = not_before + self.bus.tx_time(len(data))
-        self._busy_until = self._idle_since + self._tsyn
+        self._unwritten.append((len(data), None))  # busy until Written + line time + TSYN
         self._cycle_sent += 1
         self.stats.telegrams += 1
         self._out.append(Transmit(data, not_before, False))
@@ -1046,6 +1185,21 @@ class Master:
 # ---------------------------------------------------------------------------------------
 # Tables and helpers
 
+_SHORT_ACK_PURPOSES: Final = frozenset(
+    {Purpose.SET_PRM, Purpose.CHK_CFG, Purpose.RECORD, Purpose.POLL}
+)  # requests that E5 may answer (Data_Exchange: only a slave without inputs)
+_DPV1_PURPOSES: Final = frozenset({Purpose.RECORD, Purpose.POLL})
+_REQUEST_NAMES: Final[Mapping[Purpose, str]] = {
+    Purpose.DIAG: "Slave_Diag",
+    Purpose.SET_PRM: "Set_Prm",
+    Purpose.CHK_CFG: "Chk_Cfg",
+    Purpose.GET_CFG: "Get_Cfg",
+    Purpose.DATA: "Data_Exchange",
+    Purpose.RECORD: "a DP-V1 request",
+    Purpose.POLL: "a DP-V1 poll",
+    Purpose.STATUS: "FDL status",
+}
+
 _DATA_OK: Final = frozenset(
     {
         ResponseStatus.OK,
@@ -1101,6 +1255,11 @@ _REFUSALS: Final[dict[ResponseStatus, str]] = {
     ResponseStatus.UE: "the slave answered UE (user error)",
     ResponseStatus.RR: "the slave has no resources (RR)",
 }
+
+
+def _origin(p: SlaveParams) -> str:
+    """Where the bytes sent come from, when not from the profile (a GSD file and module)."""
+    return f"; sent as {p.origin} says" if p.origin else ""
 
 
 def _slave_words(diag: SlaveDiag | None) -> str:

@@ -23,19 +23,38 @@ Bus (``[buses.<name>]`` with ``adapter = "profibus"``)::
     live_list_period = 1.0       s between FDL status probes of unconfigured addresses (0 = off)
 
 Drive: the profile's keys (delegated to its ``parse_options``) plus ``watchdog`` (s, this
-slave's own DP watchdog instead of the bus's).
+slave's own DP watchdog instead of the bus's), and what the slave is sent at start-up::
+
+    gsd = "TEST_CFW11.gsd"       a GSD file (relative to the config file's directory)
+    module = "<module name>"     the GSD module (a compact station), or
+    modules = ["<name>", ...]    the modules of a modular station, in slot order
+    prm = { "<name>" = value }   ExtUserPrmData values by name (a number or a PrmText text)
+
+or, without a GSD, explicit values instead of the profile's built-in ones::
+
+    cfg = [0xF1]                 Chk_Cfg identifier bytes
+    ident_number = 0x0C11        Ident_Number (also a profile key)
+    user_prm = [...]             Set_Prm user data (after the DP-V1 status bytes)
+
+The I/O sizes these give must be the ones the profile's telegram has (``words``, ``frame``,
+the MCD 600 ``mode``): a difference is a config error saying both.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Final
 
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
 from gateway.schema import Table
 
+from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
+from .errors import ProfibusDecodeError
+from .gsd import Gsd, GsdError, GsdSetupError, build_setup
+from .gsd import load as load_gsd
 from .link import URL_SCHEMES, Rs485, is_url
 from .timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 
@@ -83,11 +102,25 @@ class ProfibusOptions:
 
 
 @dataclass(frozen=True)
+class SetupOverride:
+    """What replaces the profile's built-in start-up values (None: the profile's)."""
+
+    ident_number: int | None = None
+    cfg: bytes | None = None
+    user_prm: bytes | None = None  # after the DP-V1 status bytes (as SlaveSetup carries it)
+    dpv1: bool | None = None
+    origin: str = ""  # "GSD <file>, module '...'" or "cfg/ident_number/user_prm of the config"
+    gsd: Gsd | None = None
+    modules: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class ProfibusDriveOptions:
     """A drive's options: its profile's own, and the master's per-slave settings."""
 
     profile: Any = None
     watchdog: float | None = None  # None: the bus's watchdog
+    setup: SetupOverride | None = None  # None: the profile's built-in setup
 
 
 def parse_bus_options(t: Table) -> ProfibusOptions:
@@ -121,7 +154,42 @@ def parse_bus_options(t: Table) -> ProfibusOptions:
     for key, reason in bus_problems(options.bus_params()):
         raise t.error(key, reason)
     _check_addresses(t, options.master_address)
+    _check_gsd_bus(t, options)
     return options
+
+
+def _check_gsd_bus(t: Table, options: ProfibusOptions) -> None:
+    """Each drive's GSD must support the line's baud rate, and its MaxTsdr at that rate
+    must fit the line's max_tsdr (the master waits that long for a reply)."""
+    drives = t.data.get("drives", [])
+    if not isinstance(drives, list):
+        return
+    for i, drive in enumerate(drives):
+        name = drive.get("gsd") if isinstance(drive, Mapping) else None
+        if not isinstance(name, str):
+            continue
+        try:
+            gsd = load_gsd(_gsd_path(t, name))
+        except GsdError:
+            continue  # the drive's own keys report it
+        key = f"{t.key('drives')}[{i}].gsd"
+        if not gsd.supports(options.baudrate):
+            rates = ", ".join(str(b) for b, _ in gsd.baud_rates) or "none"
+            raise ConfigError(
+                t.file, key, f"{gsd.path} does not support {options.baudrate} baud "
+                f"(its *_supp keys: {rates})",
+            )  # fmt: skip
+        tsdr = gsd.max_tsdr(options.baudrate)
+        if tsdr is not None and tsdr > options.max_tsdr:
+            raise ConfigError(
+                t.file, key, f"{gsd.path} gives MaxTsdr = {tsdr} bit times at "
+                f"{options.baudrate} baud, above the line's max_tsdr = {options.max_tsdr}",
+            )  # fmt: skip
+
+
+def _gsd_path(t: Table, name: str) -> Path:
+    path = Path(name)
+    return path if path.is_absolute() else Path(t.file).parent / path
 
 
 def _port(t: Table, simulate: bool) -> str | None:
@@ -167,6 +235,127 @@ def _check_addresses(t: Table, master_address: int) -> None:
             )
 
 
-def parse_drive_options(t: Table, drive: DriveConfig, profile_options: Any) -> ProfibusDriveOptions:
-    """The master's per-drive keys; ``profile_options`` come from the profile's parser."""
-    return ProfibusDriveOptions(profile=profile_options, watchdog=_watchdog(t, "watchdog", None))
+def parse_drive_options(
+    t: Table, drive: DriveConfig, profile_options: Any, builtin: Any = None
+) -> ProfibusDriveOptions:
+    """The master's per-drive keys; ``profile_options`` come from the profile's parser.
+
+    ``builtin`` is the profile's own :class:`~adapters.profibus.profile.SlaveSetup` (its
+    ``input_len`` and ``output_len`` are checked against a GSD module or ``cfg``).
+    """
+    setup = _gsd_setup(t) if t.has("gsd") else _explicit_setup(t)
+    if setup is not None and builtin is not None and setup.cfg is not None:
+        _check_sizes(t, setup, builtin, profile_options)
+    return ProfibusDriveOptions(
+        profile=profile_options, watchdog=_watchdog(t, "watchdog", None), setup=setup
+    )
+
+
+_GSD_ONLY: Final = ("module", "modules", "prm")
+_NOT_WITH_GSD: Final = ("cfg", "user_prm", "ident_number")
+
+
+def _gsd_setup(t: Table) -> SetupOverride:
+    path = _gsd_path(t, t.string("gsd"))
+    for key in _NOT_WITH_GSD:
+        if t.has(key):
+            t.raw(key)
+            raise t.error(key, f"the GSD file gives it (gsd = {t.data['gsd']!r}): remove {key}")
+    try:
+        gsd = load_gsd(path)
+    except GsdError as exc:
+        raise t.error("gsd", str(exc)) from None
+    modules = _modules(t, gsd)
+    prm = t.table("prm")
+    values: dict[str, int | str] = {}
+    for name in prm.data:
+        value = prm.raw(name)
+        if isinstance(value, bool) or not isinstance(value, int | str):
+            raise prm.error(name, "must be a number or a PrmText text")
+        values[name] = value
+    try:
+        built = build_setup(gsd, modules, values)
+    except GsdSetupError as exc:
+        raise t.error(exc.key, exc.reason) from None
+    return SetupOverride(
+        ident_number=built.ident_number,
+        cfg=built.cfg,
+        user_prm=built.user_prm_after_dpv1,
+        dpv1=built.dpv1,
+        origin=built.origin,
+        gsd=gsd,
+        modules=tuple(modules),
+    )
+
+
+def _modules(t: Table, gsd: Gsd) -> list[str]:
+    if t.has("module") and t.has("modules"):
+        t.raw("modules")
+        raise t.error("modules", "give module (one) or modules (a list), not both")
+    if t.has("module"):
+        return [t.string("module")]
+    if t.has("modules"):
+        names: list[str] = list(t.str_list("modules"))
+        return names
+    known = ", ".join(repr(m.name) for m in gsd.modules)
+    raise t.error("module", f"is required with gsd (the modules of {gsd.path}: {known})")
+
+
+def _explicit_setup(t: Table) -> SetupOverride | None:
+    for key in _GSD_ONLY:
+        if t.has(key):
+            t.raw(key)
+            raise t.error(key, 'needs gsd = "<file>" (the GSD file it names)')
+    cfg = t.int_list("cfg", None, minimum=0, maximum=255)
+    user_prm = t.int_list("user_prm", None, minimum=0, maximum=255)
+    if cfg is None and user_prm is None and not t.has("ident_number"):
+        return None
+    ident = t.integer("ident_number", None, minimum=0, maximum=0xFFFF)
+    if cfg is not None:
+        try:
+            decode_identifiers(bytes(cfg))
+        except ProfibusDecodeError as exc:
+            raise t.error("cfg", f"not Chk_Cfg identifiers: {exc.message}") from None
+        if not cfg:
+            raise t.error("cfg", "is empty (give at least one identifier)")
+    given = [k for k in ("cfg", "ident_number", "user_prm") if t.has(k)]
+    return SetupOverride(
+        ident_number=ident,
+        cfg=None if cfg is None else bytes(cfg),
+        user_prm=None if user_prm is None else bytes(user_prm),
+        origin=f"{' and '.join(given)} of the drive's config",
+    )
+
+
+def _check_sizes(t: Table, setup: SetupOverride, builtin: Any, profile_options: Any) -> None:
+    """The module's (or cfg's) I/O bytes must be the profile telegram's, both ways."""
+    ids = decode_identifiers(setup.cfg or b"")
+    have = (total_input_bytes(ids), total_output_bytes(ids))
+    want = (int(builtin.input_len), int(builtin.output_len))
+    if have == want:
+        return
+    key = "cfg" if setup.gsd is None else ("modules" if t.has("modules") else "module")
+    what = setup.origin if setup.gsd is not None else f"cfg = [{_hex(setup.cfg or b'')}]"
+    raise t.error(
+        key,
+        f"{what} gives {have[0]} bytes in and {have[1]} out; the drive's profile "
+        f"({telegram_text(profile_options)}) has {want[0]} in and {want[1]} out",
+    )
+
+
+def _hex(data: bytes) -> str:
+    return ", ".join(f"0x{b:02X}" for b in data)
+
+
+def telegram_text(profile_options: Any) -> str:
+    """The profile setting that fixes the telegram, as an operator knows it."""
+    mode = getattr(profile_options, "mode", None)
+    if mode is not None:
+        return f"MCD 600 mode = {getattr(mode, 'value', mode)!r}"
+    frame = getattr(profile_options, "frame", None)
+    words = getattr(profile_options, "words", None)
+    if frame == 20:
+        return f"frame 20, {words} words (P0922 = 5)"
+    if words is not None:
+        return f"words = {words}, P0922 (CFW320: P751) = {words - 1}"
+    return "its built-in telegram"

@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol
 
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError
@@ -62,6 +62,40 @@ class SlaveSetup:
     output_len: int = 0  # bytes of the output telegram (master -> slave)
     dpv1: bool = True  # DP-V1 enabled in the Set_Prm DP-V1 status bytes
     group: int = 0  # Global_Control group bits
+    origin: str = ""  # where cfg/ident/user_prm come from when not built in (GSD file, module)
+
+
+DP_STATIONS: Final = (0, 125)  # fact sheet 1.2: station addresses must be <= 125
+SET_SLAVE_ADD_DEFAULT: Final = 126  # a station waiting for Set_Slave_Add, never in exchange
+
+
+@dataclass(frozen=True, slots=True)
+class AddressRange:
+    """The slave addresses a device accepts, as its manual gives them (``source`` cites it).
+
+    A profile declares it as ``addresses``; the adapter refuses a drive configured outside
+    it, and outside the DP station addresses a master can exchange data with (1.2: <= 125;
+    a manual's 126 is the Set_Slave_Add default address, see docs/devices.md).
+    """
+
+    low: int
+    high: int
+    source: str
+
+    def refusal(self, device: str, address: int) -> str | None:
+        """None when ``address`` is usable, else the reason, naming the range and its source
+        (the config error's key names the drive: ``drives[<id>].address``)."""
+        low, high = max(self.low, DP_STATIONS[0]), min(self.high, DP_STATIONS[1])
+        if low <= address <= high:
+            return None
+        text = f"{address} is outside the {device} range {self.low}-{self.high}"
+        if self.low <= address <= self.high:
+            text = (
+                f"{address} is in the {device} range {self.low}-{self.high} "
+                f"but {SET_SLAVE_ADD_DEFAULT} is the Set_Slave_Add default address, never in "
+                f"data exchange"
+            )
+        return f"{text} ({self.source}); use {low}-{high}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,7 +103,7 @@ class DiagEvent:
     """Something a profile read from the slave's extended diagnosis, worth an event."""
 
     text: str
-    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info"
+    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info", "config", "safety"
     data: Mapping[str, Any] = field(default_factory=dict)
 
 

@@ -6,7 +6,9 @@ Parâmetros - WEG", CFW700 5.2.5 and CFW320 5.2.4 "Data Structure for Parameter 
 * change: DS_Write with 4 data bytes, parameter number then value, most significant byte
   first; the write reply says whether the change was made;
 * read: DS_Write with 2 data bytes (the parameter number), then DS_Read whose reply holds
-  2 bytes, the parameter value;
+  2 bytes, the parameter value. The DS_Read asks for 240 bytes: the record 48 sections use
+  "the telegrams described in the section 4.2.3" (CFW-11, CFW700; CFW320 5.2.3), whose
+  DS_Read request has "Tamanho 240 (solicita o número máximo de bytes de leitura)";
 * errors come back as DP-V1 error PDUs with the Error_Code_1 values of
   :data:`adapters.profibus.dpv1.WEG_ERROR_CODE_1_TEXTS`.
 
@@ -18,12 +20,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
-from .dpv1 import WEG_ERROR_CODE_1_TEXTS, ReadRequest, WriteRequest
+from .dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS, ReadRequest, WriteRequest
 from .errors import DecodeFailure, WegRecordDecodeError, require_range
 
 WEG_RECORD_INDEX: Final = 48
 WEG_SLOT: Final = 0
 VALUE_LENGTH: Final = 2  # the DS_Read reply carries 2 bytes
+READ_LENGTH: Final = MAX_DATA  # the DS_Read request asks for 240 bytes (4.2.3 telegram)
 ERROR_TEXTS: Final = WEG_ERROR_CODE_1_TEXTS
 
 
@@ -90,8 +93,8 @@ def select_request(number: int, slot: int = WEG_SLOT) -> WriteRequest:
 
 
 def read_request(slot: int = WEG_SLOT) -> ReadRequest:
-    """Read, step 2: DS_Read(slot 0, index 48, 2 bytes)."""
-    return ReadRequest(slot, WEG_RECORD_INDEX, VALUE_LENGTH)
+    """Read, step 2: DS_Read(slot 0, index 48, 240 bytes); the reply holds 2."""
+    return ReadRequest(slot, WEG_RECORD_INDEX, READ_LENGTH)
 
 
 def write_request(number: int, value: int, slot: int = WEG_SLOT) -> WriteRequest:

@@ -68,7 +68,10 @@ class CommandWord:
     @classmethod
     def from_register(cls, raw: int) -> CommandWord:
         if not 0 <= raw <= 0xFFFF:
-            raise WriteRefused(ExceptionCode.ILLEGAL_DATA_VALUE, f"{raw} is not a register value")
+            raise WriteRefused(
+                ExceptionCode.ILLEGAL_DATA_VALUE,
+                f"command word: {raw} is not a register value (limit 0-65535)",
+            )
         if raw & ~DEFINED_MASK:
             raise WriteRefused(
                 ExceptionCode.ILLEGAL_DATA_VALUE,
@@ -137,17 +140,23 @@ def build_command(last: CommandWord, write: HoldingWrite, desired: DesiredComman
 
 
 class ClientMemory:
-    """The last command word each client wrote for each unit, bounded (oldest evicted).
+    """The last command word each client wrote for each unit.
 
     A client is its peer address (not the TCP connection): a PLC that reconnects
     is the same client, so reconnecting does not turn a held run bit into an edge.
+    The words of a client with a connection open are never evicted: they are
+    bounded by ``modbus.max_connections`` (and the unit count) instead, so no
+    number of other addresses can make a connected PLC's run edge disappear
+    (issue 17). The words of clients with no connection open are kept too, the
+    oldest dropped first beyond ``limit``.
     """
 
     def __init__(self, limit: int = 4096) -> None:
         self._limit = limit
-        self._words: collections.OrderedDict[tuple[str, int], CommandWord] = (
-            collections.OrderedDict()
-        )
+        self._words: dict[tuple[str, int], CommandWord] = {}
+        self._units: dict[str, set[int]] = {}
+        self._open: collections.Counter[str] = collections.Counter()
+        self._idle: collections.OrderedDict[tuple[str, int], None] = collections.OrderedDict()
 
     def last(self, client: str, unit: int) -> CommandWord:
         return self._words.get((client, unit), UNKNOWN_CLIENT_WORD)
@@ -155,9 +164,40 @@ class ClientMemory:
     def remember(self, client: str, unit: int, word: CommandWord) -> None:
         key = (client, unit)
         self._words[key] = word
-        self._words.move_to_end(key)
-        while len(self._words) > self._limit:
-            self._words.popitem(last=False)
+        self._units.setdefault(client, set()).add(unit)
+        if not self._open[client]:
+            self._idle[key] = None
+            self._idle.move_to_end(key)
+            self._evict()
+
+    def connected(self, client: str) -> None:
+        """A connection from ``client`` is open: its words are kept while it lasts."""
+        self._open[client] += 1
+        for unit in self._units.get(client, ()):
+            self._idle.pop((client, unit), None)
+
+    def disconnected(self, client: str) -> None:
+        """A connection from ``client`` closed; with its last, its words may age out."""
+        self._open[client] -= 1
+        if self._open[client] > 0:
+            return
+        del self._open[client]
+        for unit in self._units.get(client, ()):
+            self._idle[client, unit] = None
+        self._evict()
+
+    def peer(self, client: str, opened: bool) -> None:
+        """The server's hook: :meth:`connected` or :meth:`disconnected`."""
+        (self.connected if opened else self.disconnected)(client)
+
+    def _evict(self) -> None:
+        while len(self._idle) > self._limit:
+            (client, unit), _ = self._idle.popitem(last=False)
+            del self._words[client, unit]
+            units = self._units[client]
+            units.discard(unit)
+            if not units:
+                del self._units[client]
 
     def __len__(self) -> int:
         return len(self._words)

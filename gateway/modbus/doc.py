@@ -14,6 +14,7 @@ from typing import Any
 from gateway.config import ModbusSection
 from gateway.modbus.command import COMMAND_BITS, DEFINED_MASK
 from gateway.modbus.health import GATEWAY_INPUTS
+from gateway.modbus.limits import EVICT_MIN_IDLE
 from gateway.modbus.map import (
     COMM_CODES,
     CONTROL_CODES,
@@ -255,8 +256,13 @@ _CONNECTIONS = [
     "- `modbus.read_only`: reads only; every write to a writable register gets exception 1.",
     f"- `modbus.max_connections` (default {_MODBUS.max_connections}, 1-1000): connections"
     " open at once. One more",
-    "  is disconnected at accept, before it can send anything, and counted in",
-    "  `connections_over_limit`; once a connection closes, a new one is accepted again.",
+    "  makes room by closing the connection idle longest (no complete request for at",
+    f"  least {EVICT_MIN_IDLE:g} s or `modbus.idle_timeout` if shorter), counted in the log; if",
+    "  every connection is busier than that, the new one is disconnected at accept, before",
+    "  it can send anything, and counted in `connections_over_limit`. A client that polls",
+    "  is never locked out by connections that send nothing.",
+    f"- `modbus.idle_timeout` (s, default {_MODBUS.idle_timeout:g}, 0 = never): a connection",
+    "  with no complete request for this long is closed.",
     f"  Every connection has TCP keepalive ({KEEPALIVE_IDLE} s idle, then {KEEPALIVE_COUNT}"
     f" probes {KEEPALIVE_INTERVAL} s apart):",
     "  a client gone without closing its connection (power cut) frees its place.",
@@ -265,8 +271,7 @@ _CONNECTIONS = [
     f"- `modbus.frame_timeout` (s, default {_MODBUS.frame_timeout}): once part of a frame"
     " has arrived, its rest",
     "  must arrive within it (a request may come in several TCP segments), else the",
-    "  connection is closed and counts in `bad_frames` and `frame_timeouts`. A connection",
-    "  with no frame begun may stay idle for any time.",
+    "  connection is closed and counts in `bad_frames` and `frame_timeouts`.",
     "- None of these affects other clients.",
 ]
 

@@ -172,14 +172,14 @@ class DriveUnit:
             try:
                 cmd = build_command(last, write, hub.desired(self.drive_id))
                 if cmd.is_empty:
-                    hub.check(self.drive_id, Source.MODBUS, cmd)
+                    hub.check(self.drive_id, Source.MODBUS, cmd, client)
                 else:
-                    hub.submit(self.drive_id, Source.MODBUS, cmd)
+                    hub.submit(self.drive_id, Source.MODBUS, cmd, client)
             except CommandRejected as exc:
                 self.shared.counters.commands_refused += 1
                 raise WriteRefused(ExceptionCode.SERVER_DEVICE_FAILURE, exc.reason) from None
             self.shared.counters.commands_accepted += 1
-        hub.refresh(self.drive_id, Source.MODBUS)
+        hub.refresh(self.drive_id, Source.MODBUS, client)  # only the client in control
 
 
 class GatewayUnit:
@@ -288,7 +288,9 @@ class ModbusFrontEnd:
             limits=ConnectionLimits(
                 frame_timeout=self.section.frame_timeout,
                 max_connections=self.section.max_connections,
+                idle_timeout=self.section.idle_timeout,
             ),
+            on_peer=self.shared.memory.peer,
         )
         self.address = await server.start()
         self._server = server

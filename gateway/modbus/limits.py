@@ -8,15 +8,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+EVICT_MIN_IDLE = 5.0  # s: a connection idle this long may make room for a new client
 OVER_LIMIT_LOG_INTERVAL = 60.0  # s: at most one WARNING per interval for refusals over the limit
 
 
 @dataclass(frozen=True, slots=True)
 class ConnectionLimits:
-    """``modbus.frame_timeout`` and ``modbus.max_connections``."""
+    """``modbus.frame_timeout``, ``modbus.max_connections`` and ``modbus.idle_timeout``."""
 
     frame_timeout: float  # s from the first byte of a frame to its last
-    max_connections: int  # connections open at once; one more is closed at accept
+    max_connections: int  # connections open at once (see evictable)
+    idle_timeout: float = 0.0  # s with no complete request before closing; 0: never
+
+    @property
+    def evict_after(self) -> float:
+        """How long a connection must have been idle to make room for a new client
+        at the limit: a client polling more often than this is never evicted."""
+        if self.idle_timeout:
+            return min(EVICT_MIN_IDLE, self.idle_timeout)
+        return EVICT_MIN_IDLE
 
 
 class WarningRateLimit:

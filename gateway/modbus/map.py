@@ -405,7 +405,10 @@ def decode_holding_write(
                 ExceptionCode.ILLEGAL_DATA_ADDRESS, f"holding register {addr} is not writable"
             )
         if not 0 <= raw <= 0xFFFF:
-            raise WriteRefused(ExceptionCode.ILLEGAL_DATA_VALUE, f"{raw} is not a register value")
+            raise WriteRefused(
+                ExceptionCode.ILLEGAL_DATA_VALUE,
+                f"holding register {addr}: {raw} is not a register value (limit 0-65535)",
+            )
         regs[addr] = raw
     word = CommandWord.from_register(regs[0]) if 0 in regs else None
     rpm = _speed_value(regs[1], 1.0) if 1 in regs else None
@@ -431,12 +434,14 @@ def _check_speed(rpm: float | None, pct: float | None, scale: SpeedScale | None)
     if rpm is not None and abs(rpm) > scale.max_rpm + 1e-9:
         raise WriteRefused(
             ExceptionCode.ILLEGAL_DATA_VALUE,
-            f"speed {rpm:g} rpm is beyond the drive's scale (±{scale.max_rpm:g} rpm)",
+            f"holding register 1 (speed_rpm): speed {rpm:g} rpm is beyond the drive's scale"
+            f" (limit ±{scale.max_rpm:g} rpm)",
         )
     if pct is not None and abs(pct) > scale.max_pct + 1e-9:
         raise WriteRefused(
             ExceptionCode.ILLEGAL_DATA_VALUE,
-            f"speed {pct:g} % is beyond the drive's scale (±{scale.max_pct:g} %)",
+            f"holding register 2 (speed_pct): speed {pct:g} % is beyond the drive's scale"
+            f" (limit ±{scale.max_pct:g} %)",
         )
 
 

@@ -38,10 +38,11 @@ import asyncio
 import collections
 import contextlib
 import contextvars
+import errno
 import ipaddress
 import logging
 import socket
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,7 +55,7 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import SimDevice
 from pymodbus.transaction import TransactionManager
 
-from gateway.errors import GatewayError
+from gateway.errors import StartupError
 from gateway.modbus.limits import OVER_LIMIT_LOG_INTERVAL, ConnectionLimits, WarningRateLimit
 from gateway.modbus.mbap import HEADER_SIZE, MbapError, parse_header
 from gateway.modbus.regs import ExceptionCode
@@ -92,8 +93,45 @@ def keep_alive(sock: Any) -> None:
                 sock.setsockopt(socket.IPPROTO_TCP, option, value)
 
 
-class ModbusBindError(GatewayError, OSError):
-    """The server could not listen on ``modbus.bind``."""
+class ModbusBindError(StartupError, OSError):
+    """The server could not listen on ``modbus.bind``: the cause and the fix."""
+
+
+_BIND_FIXES = {
+    errno.EADDRINUSE: (
+        "address already in use",
+        "another drive-gateway instance (or another Modbus server) listens there: stop it, "
+        "or choose another address with --modbus-bind HOST:PORT or [modbus] bind",
+    ),
+    errno.EACCES: (
+        "permission denied",
+        "ports below 1024 need CAP_NET_BIND_SERVICE: under systemd uncomment the unit's "
+        "CapabilityBoundingSet=CAP_NET_BIND_SERVICE and AmbientCapabilities="
+        "CAP_NET_BIND_SERVICE lines (config/drive-gateway.service), or use a port above "
+        "1023 with --modbus-bind HOST:PORT",
+    ),
+    errno.EADDRNOTAVAIL: (
+        "this machine has no such address",
+        "choose one of its addresses (or 0.0.0.0) with --modbus-bind HOST:PORT or [modbus] bind",
+    ),
+}
+
+
+def _drop_bind_failure(record: logging.LogRecord) -> bool:
+    return not record.getMessage().startswith("Failed to start server")
+
+
+def bind_error(host: str, port: int, exc: OSError | None) -> ModbusBindError:
+    """The one-line reason the server cannot listen on ``host:port``, with the fix."""
+    code = exc.errno if exc is not None else None
+    cause, fix = _BIND_FIXES.get(
+        code or 0,
+        (
+            (exc.strerror or str(exc)).lower() if exc is not None else "listen failed",
+            "check the address with --modbus-bind HOST:PORT or [modbus] bind",
+        ),
+    )
+    return ModbusBindError("modbus", f"cannot listen on {host}:{port}: {cause}", fix)
 
 
 @dataclass
@@ -109,6 +147,8 @@ class Counters:
     bad_frames: int = 0  # a bad MBAP header, or a frame not finished in time
     frame_timeouts: int = 0  # frames not finished within modbus.frame_timeout
     connections_over_limit: int = 0  # closed at accept: modbus.max_connections were open
+    idle_closed: int = 0  # closed: no complete request for modbus.idle_timeout
+    idle_evicted: int = 0  # the idlest closed at the limit, to make room for a new client
 
 
 class AccessPolicy:
@@ -162,6 +202,7 @@ class GatewayRequestHandler(ServerRequestHandler):
         super().__init__(owner, *args)  # type: ignore[no-untyped-call]
         self.gateway = owner
         self.client = ""
+        self._peer_open = False  # counted in the owner's peer_changed
         # requests (PDUs) and ready exception replies, in the order they came
         self._queue: collections.deque[tuple[ModbusPDU, tuple[Any, ...] | None]] = (
             collections.deque()
@@ -170,18 +211,24 @@ class GatewayRequestHandler(ServerRequestHandler):
         self._paused = False
         self._rx = b""  # bytes of a request not complete yet (see the module docstring)
         self._frame_timer: asyncio.TimerHandle | None = None
+        self._idle_timer: asyncio.TimerHandle | None = None
+        self.last_request = 0.0  # loop time of the last complete request (or the accept)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         peer = transport.get_extra_info("peername")
         host = str(peer[0]) if peer else ""
-        if not self.gateway.admit(host):
+        self.last_request = self.loop.time()
+        if not self.gateway.admit(host, self):
             self.close()  # forget this handler (the transport is not ours yet)
             transport.abort()  # type: ignore[attr-defined]
             return
         self.client = host
+        self._peer_open = True
+        self.gateway.peer_changed(host, True)
         self.gateway.counters.connections_accepted += 1
         keep_alive(transport.get_extra_info("socket"))
         super().connection_made(transport)
+        self._arm_idle(self.gateway.limits.idle_timeout)
 
     def data_received(self, data: bytes) -> None:
         """Frame the complete requests of the stream, up to :data:`PIPELINE_LIMIT` waiting
@@ -193,13 +240,45 @@ class GatewayRequestHandler(ServerRequestHandler):
         self._time_frame(restart=used > 0)
 
     def connection_lost(self, exc: Exception | None) -> None:
+        if self._peer_open:
+            self._peer_open = False
+            self.gateway.peer_changed(self.client, False)
         super().connection_lost(exc)
         self._stop_frame_timer()
         self._queue.clear()  # nobody is left to read the replies
         if self._worker is not None:
             self._worker.cancel()
 
+    def _arm_idle(self, delay: float) -> None:
+        if self.gateway.limits.idle_timeout > 0:
+            self._idle_timer = self.loop.call_later(delay, self._idle_check)
+
+    def _idle_check(self) -> None:
+        """Close the connection once no complete request came for ``modbus.idle_timeout``
+        (one timer per connection, re-armed for the rest of the time, not per request)."""
+        self._idle_timer = None
+        if self.transport is None:
+            return
+        timeout = self.gateway.limits.idle_timeout
+        idle = self.loop.time() - self.last_request
+        if idle < timeout:
+            self._arm_idle(timeout - idle)
+            return
+        self.gateway.counters.idle_closed += 1
+        log.debug(
+            "Modbus client %s: no complete request for %g s (modbus.idle_timeout); closing",
+            self.client,
+            timeout,
+        )
+        self.close()
+
+    def idle_for(self) -> float:
+        return self.loop.time() - self.last_request
+
     def close(self, reconnect: bool = False) -> None:
+        if self._idle_timer is not None:
+            self._idle_timer.cancel()
+            self._idle_timer = None
         self._stop_frame_timer()
         self._rx = b""
         super().close(reconnect)
@@ -247,6 +326,7 @@ class GatewayRequestHandler(ServerRequestHandler):
             if size == 0:
                 break  # the rest of a frame is still to come
             used += size
+            self.last_request = self.loop.time()
         if len(self._queue) >= PIPELINE_LIMIT and self.transport is not None:
             self._paused = True
             self.transport.pause_reading()  # type: ignore[attr-defined]
@@ -269,8 +349,16 @@ class GatewayRequestHandler(ServerRequestHandler):
         if refusal is None:
             try:
                 used: int = TransactionManager.callback_data(self, data, addr)
-            except ModbusIOException:
+            except ModbusIOException as exc:
                 refusal = ExceptionCode.ILLEGAL_DATA_VALUE  # a served function, malformed PDU
+                log.debug(
+                    "Modbus client %s, unit %d, function %d: exception 3, the PDU does not"
+                    " decode (%s)",
+                    self.client,
+                    header.unit,
+                    function_code,
+                    exc,
+                )
             else:
                 pdu = self.last_pdu
                 self.last_pdu = None
@@ -357,8 +445,10 @@ class GatewayServer(ModbusTcpServer):
         policy: AccessPolicy,
         counters: Counters,
         limits: ConnectionLimits,
+        on_peer: Callable[[str, bool], None] | None = None,
     ) -> None:
         super().__init__(devices, address=(host, port))
+        self._on_peer = on_peer
         self.policy = policy
         self.counters = counters
         self.limits = limits
@@ -368,19 +458,51 @@ class GatewayServer(ModbusTcpServer):
     def callback_new_connection(self) -> GatewayRequestHandler:
         return GatewayRequestHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
 
+    def peer_changed(self, host: str, opened: bool) -> None:
+        """A connection from ``host`` was admitted (``opened``) or is gone."""
+        if self._on_peer is not None:
+            self._on_peer(host, opened)
+
     @property
     def connections_open(self) -> int:
         return len(self.active_connections)
 
-    def admit(self, host: str) -> bool:
+    def admit(self, host: str, new: Any = None) -> bool:
         """Whether a new connection from ``host`` may stay (it is already among
-        ``active_connections``); a refusal is counted and logged."""
+        ``active_connections``); a refusal is counted and logged. At the limit, the
+        connection idle longest makes room, if it has been idle ``evict_after``."""
         if not self.policy.admits(host):
             self.refused(host)
             return False
         if len(self.active_connections) > self.limits.max_connections:
+            if self._evict_idlest(host, new):
+                return True
             self.over_limit(host)
             return False
+        return True
+
+    def _evict_idlest(self, host: str, new: Any) -> bool:
+        others = [
+            c
+            for c in self.active_connections.values()
+            if c is not new and isinstance(c, GatewayRequestHandler) and c.transport is not None
+        ]
+        if not others:
+            return False
+        idlest = max(others, key=lambda c: c.idle_for())
+        idle = idlest.idle_for()
+        if idle < self.limits.evict_after:
+            return False
+        self.counters.idle_evicted += 1
+        log.info(
+            "Modbus client %s: connection idle for %.0f s closed to make room for %s"
+            " (modbus.max_connections %d open)",
+            idlest.client,
+            idle,
+            host,
+            self.limits.max_connections,
+        )
+        idlest.close()
         return True
 
     def refused(self, host: str) -> None:
@@ -408,8 +530,26 @@ class GatewayServer(ModbusTcpServer):
     async def start(self) -> tuple[str, int]:
         """Listen; returns the bound address. Raises :class:`ModbusBindError`."""
         host, port = self.comm_params.source_address or ("", 0)
-        if not await self.listen():
-            raise ModbusBindError(f"cannot listen for Modbus TCP on {host}:{port}")
+        create = self.call_create  # pymodbus logs the OSError and drops it: keep it
+        failure: list[OSError] = []
+
+        async def create_and_keep_the_error() -> Any:
+            try:
+                return await create()
+            except OSError as exc:
+                failure.append(exc)
+                raise
+
+        self.call_create = create_and_keep_the_error
+        pymodbus_log = logging.getLogger("pymodbus.logging")
+        pymodbus_log.addFilter(_drop_bind_failure)  # ModbusBindError says it, with the fix
+        try:
+            listening = await self.listen()
+        finally:
+            self.call_create = create
+            pymodbus_log.removeFilter(_drop_bind_failure)
+        if not listening:
+            raise bind_error(host, port, failure[0] if failure else None)
         sockets = getattr(self.transport, "sockets", None) or ()
         if sockets:
             bound = sockets[0].getsockname()

@@ -64,7 +64,7 @@ from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
-from gateway.zenoh.link import Incoming, ZenohLink
+from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
 from gateway.zenoh.requests import (
     Answer,
     BadRequest,
@@ -77,6 +77,7 @@ from gateway.zenoh.requests import (
     param_result,
     parse_command,
     parse_param_request,
+    too_large,
 )
 from gateway.zenoh.session import zenoh_config
 from gateway.zenoh.worker import Worker, WorkerStopped
@@ -90,6 +91,11 @@ PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a clien
 CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
 HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
 SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
+HANDOVER_LIMIT = 1024
+"""Puts and queries handed from Zenoh's threads to the loop and not yet taken; beyond
+it they are dropped (and counted in ``overflow``): a flood queues without a bound nowhere."""
+PARAM_REQUEST_LIMIT = 64
+"""Parameter requests under way at once; one more is refused as busy."""
 _ONLINE = CommState.ONLINE  # a module constant: an Enum class attribute is slow to look up
 DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
@@ -155,6 +161,9 @@ class ZenohFrontEnd:
             drive_id: collections.deque(maxlen=DEFER_LIMIT) for drive_id in self._drive_ids
         }
         self._wake = asyncio.Event()
+        self._handover_lock = threading.Lock()
+        self._handover_waiting = 0  # puts and queries handed to the loop, not yet taken
+        self.overflow = 0  # puts and queries dropped: HANDOVER_LIMIT were waiting
         self._pending: set[_Pending] = set()
         self._requests: set[asyncio.Task[None]] = set()
         self._handlers: dict[KeyKind, Callable[[_Pending], None]] = {
@@ -301,17 +310,30 @@ class ZenohFrontEnd:
     # ------------------------------------------------------------ Zenoh threads
 
     def _to_loop(self, callback: Callable[..., None], *args: Any) -> bool:
+        """Hand a put or query over to the loop; False when it is not taken: the
+        gateway is gone, or :data:`HANDOVER_LIMIT` are already waiting for the loop
+        (nothing the network sends queues without a bound; the overflow is counted)."""
         loop = self._loop
         if loop is None:
             return False
+        with self._handover_lock:
+            if self._handover_waiting >= HANDOVER_LIMIT:
+                self.overflow += 1
+                return False
+            self._handover_waiting += 1
         try:
-            loop.call_soon_threadsafe(callback, *args)
+            loop.call_soon_threadsafe(self._taken, callback, args)
         except RuntimeError:  # the loop is closed: the gateway is gone
             return False
         return True
 
-    def _command_from_zenoh(self, key: str, payload: bytes) -> None:
-        self._to_loop(self._on_command_put, key, payload)
+    def _taken(self, callback: Callable[..., None], args: tuple[Any, ...]) -> None:
+        with self._handover_lock:
+            self._handover_waiting -= 1
+        callback(*args)
+
+    def _command_from_zenoh(self, key: str, payload: Payload, client: str) -> None:
+        self._to_loop(self._on_command_put, key, payload, client)
 
     def _query_from_zenoh(self, incoming: Incoming) -> None:
         if not self._to_loop(self._on_query, incoming):
@@ -474,33 +496,37 @@ class ZenohFrontEnd:
 
     # ------------------------------------------------------------ commands (loop)
 
-    def _on_command_put(self, key: str, payload: bytes) -> None:
+    def _on_command_put(self, key: str, payload: Payload, client: str = ANONYMOUS) -> None:
         if not self._serving:
             return
         parsed = self.keys.parse(key)
         if parsed is None or parsed.kind != KeyKind.COMMAND.value or parsed.rest:
             log.warning("zenoh command put on %s ignored: not a drive's command key", key)
             return
-        body = self._apply_command(parsed.drive_id, payload)
-        if not body["accepted"]:
-            log.info("zenoh command put on %s refused: %s", key, body["error"])
+        self._apply_command(parsed.drive_id, payload, client)  # the hub logs a refusal
 
-    def _apply_command(self, drive_id: str, payload: bytes | None) -> dict[str, Any]:
-        """Parse and submit a command; refusals are reported on the drive's events key."""
+    def _apply_command(
+        self, drive_id: str, payload: Payload, client: str = ANONYMOUS
+    ) -> dict[str, Any]:
+        """Parse and submit a command; refusals are reported on the drive's events key
+        (and logged by the hub, rate-limited per client and reason)."""
         if drive_id not in self._drive_ids:
             return command_refused(f"no drive {drive_id!r}")
         try:
+            if isinstance(payload, Oversize):
+                raise CommandRejected(too_large(payload.size))
             cmd = parse_command(payload)
         except CommandRejected as exc:
             self.hub.event(
                 drive_id,
                 EventKind.COMMAND_REFUSED,
-                f"command from {Source.ZENOH.value} refused: {exc.reason}",
+                f"command from {Source.ZENOH.value} {client} refused: {exc.reason}",
                 source=Source.ZENOH.value,
+                client=client,
             )
             return command_refused(exc.reason)
         try:
-            self.hub.submit(drive_id, Source.ZENOH, cmd)  # reports its own refusals
+            self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
             return command_refused(exc.reason)
         except UnknownDrive:
@@ -555,7 +581,7 @@ class ZenohFrontEnd:
         if not is_concrete(incoming.key) or parsed is None:
             self._refuse(pending, "a command names one drive: <prefix>/drives/<id>/command")
             return
-        body = self._apply_command(parsed.drive_id, incoming.payload)
+        body = self._apply_command(parsed.drive_id, incoming.payload, incoming.client)
         self._answer(pending, [Answer.reply(incoming.key, body)])
 
     def _query_param(self, pending: _Pending) -> None:
@@ -564,8 +590,14 @@ class ZenohFrontEnd:
         if not is_concrete(incoming.key) or parsed is None:
             self._refuse(pending, "a parameter query names one drive and one parameter")
             return
+        if len(self._requests) >= PARAM_REQUEST_LIMIT:
+            self._refuse(pending, f"busy: {PARAM_REQUEST_LIMIT} parameter requests are under way")
+            return
         try:
-            req = parse_param_request(parsed.rest, incoming.payload)
+            payload = incoming.payload
+            if isinstance(payload, Oversize):
+                raise BadRequest(too_large(payload.size))
+            req = parse_param_request(parsed.rest, payload)
         except BadRequest as exc:
             self._refuse(pending, exc.text)
             return
@@ -580,18 +612,19 @@ class ZenohFrontEnd:
 
     async def _serve_param(self, pending: _Pending, drive_id: str, req: ParamRequest) -> None:
         key = pending.incoming.key
+        info = self.hub.capabilities(drive_id).params.get(req.number)
         try:
             if req.value is not None:
                 await asyncio.wait_for(
                     self.hub.write_param(drive_id, req.number, req.value, req.subindex),
                     PARAM_TIMEOUT,
                 )
-                body = param_result(req, req.value)
+                body = param_result(req, req.value, info)
             else:
                 value = await asyncio.wait_for(
                     self.hub.read_param(drive_id, req.number, req.subindex), PARAM_TIMEOUT
                 )
-                body = param_result(req, value)
+                body = param_result(req, value, info)
         except asyncio.CancelledError:
             self._refuse(pending, "the gateway is shutting down")
             raise

@@ -77,12 +77,16 @@ KEYS: tuple[KeySpec, ...] = (
         "{prefix}/drives/{id}/params/{number}[/{subindex}]",
         (Role.QUERYABLE,),
         'query payload: none (read) or `{"value": V}` (write)',
-        'reply: `{"number": N, "subindex": S, "value": V}`; '
+        'reply: `{"number": N, "subindex": S, "value": V}` plus, where the drive\'s '
+        'parameter table knows it, `"code"`, `"name"`, `"unit"`, `"scaled"`; '
         'error reply: `{"error": "device text", "code": C}`',
         'A query without payload reads the parameter; with `{"value": V}` it writes it '
         "(only the drive's `writable_params`). Device and gateway refusals come back as an "
         "error reply (`Reply.err`) carrying the device's own text and code, never as a "
-        "timeout. Subindex defaults to 0. The key must name one drive and one parameter.",
+        "timeout. Subindex defaults to 0. The key must name one drive and one parameter. "
+        "`value` is the raw word; `scaled` is it in `unit` (P0100 = 20 is 2.0 s), with the "
+        "parameter's `code` as the manual writes it and its `name` (docs/devices.md lists the "
+        "tables).",
     ),
     KeySpec(
         KeyKind.EVENTS,
@@ -174,6 +178,8 @@ STATE_FIELD_DOC: dict[str, str] = {
     "control_source": '"none", "zenoh", "modbus", "gateway"',
     "speed_base": "what 100 % speed is, or null",
     "values": "named raw values the profile does not model",
+    "control_client": "the client in control within `control_source` (a Modbus peer address, "
+    'a Zenoh session id, "anonymous"), or null',
 }
 """One line per DriveState JSON field; a test checks it names exactly the model's fields."""
 
@@ -182,9 +188,13 @@ EVENT_KIND_DOC: dict[EventKind, str] = {
     EventKind.FAULT: "fault (with code and the device's text), fault cleared, reset sent",
     EventKind.TRIP: "soft starter trip (with code and text)",
     EventKind.ALARM: "alarm raised",
-    EventKind.COMMAND_REFUSED: "a command was refused (field `source` says from where)",
+    EventKind.COMMAND: "a command was accepted and changed the desired command (the audit "
+    "trail: fields `source`, `client` and `changes`)",
+    EventKind.COMMAND_REFUSED: "a command was refused (fields `source` and `client` say from "
+    "where)",
     EventKind.SAFETY: "a safety action of the gateway (watchdog, shutdown, run cleared)",
-    EventKind.CONTROL: "control passed from one source to another",
+    EventKind.CONTROL: "control passed from one client to another (rule 1: run needs a new "
+    "run command)",
     EventKind.PARAMETER: "a parameter was written",
     EventKind.CONFIG: "configuration",
     EventKind.BUS: "bus-level event",
@@ -313,8 +323,23 @@ def render_markdown() -> str:
         "session, declarations, BLOCK puts of states (through a latest-per-drive slot: a "
         "newer state replaces one not yet sent), events and diagnostics, query replies and "
         "liveliness tokens. Events are put in order with CongestionControl.BLOCK.",
+        "- Events wait for the I/O thread in a queue of 1000. When it is full (a flood of "
+        "refused commands faster than the network takes them), a new event is dropped and "
+        "counted, and the next event put carries `dropped`: how many were lost before it. "
+        "A fault, a trip, a safety action and a comm change are never dropped. The log "
+        "writes a refusal repeated by the same client for the same reason once per 10 s, "
+        "with the count.",
         "- Zenoh callbacks only copy the key and payload and hand them to the event loop; "
-        "every query gets exactly one reply (an error reply if the gateway stops first).",
+        "every query gets exactly one reply (an error reply if the gateway stops first). "
+        "At most 1024 puts and queries wait for the loop; more are dropped (a query "
+        "dropped gets no reply) rather than queued without a bound.",
+        "- A command or parameter payload over 4096 bytes is refused before it is copied "
+        "or parsed (`payload of N bytes is over the limit of 4096 bytes`); JSON nested "
+        "too deeply to parse is refused like any other bad command. At most 64 parameter "
+        "requests are under way at once; one more is refused as busy.",
+        "- Shared memory is off in the gateway's session (Zenoh turns it on by default, and "
+        "then same-host clients' large payloads map 16 MB segments in the gateway that "
+        "are never given back), unless `zenoh.config_file` sets `transport.shared_memory`.",
         "",
     ]
     return "\n".join(out)

@@ -18,13 +18,32 @@ from typing import Any
 import zenoh
 
 from gateway.zenoh.keys import KeyKind, KeySpace
-from gateway.zenoh.requests import Answer
+from gateway.zenoh.requests import MAX_PAYLOAD, Answer
+from gateway.zenoh.session import open_session
 
 log = logging.getLogger(__name__)
 
 JSON = zenoh.Encoding.APPLICATION_JSON
 BLOCK = zenoh.CongestionControl.BLOCK
 DROP = zenoh.CongestionControl.DROP
+
+
+@dataclass(frozen=True, slots=True)
+class Oversize:
+    """A payload over :data:`MAX_PAYLOAD`, not copied out of Zenoh: only its size."""
+
+    size: int
+
+
+Payload = bytes | Oversize | None
+
+
+def _payload(zbytes: Any) -> Payload:
+    """Copy a payload out of Zenoh, unless it is over the limit (then only its size)."""
+    if zbytes is None:
+        return None
+    size = len(zbytes)
+    return Oversize(size) if size > MAX_PAYLOAD else zbytes.to_bytes()
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,12 +56,29 @@ class Incoming:
 
     kind: KeyKind
     key: str
-    payload: bytes | None
+    payload: Payload
     query: Any  # zenoh.Query: replied to and dropped on the I/O thread
     targets: tuple[str, ...] = ()
+    client: str = ""  # the querier's session id (client_of)
 
 
-CommandSink = Callable[[str, bytes], None]
+ANONYMOUS = "anonymous"
+"""The client id of a put or query that carries no source info (docs/operations.md)."""
+
+
+def client_of(source_info: Any) -> str:
+    """The client behind a sample or query: its session's id from the source info
+    (``put(..., source_info=SourceInfo(publisher.id, sn))``), or :data:`ANONYMOUS`.
+
+    Every Zenoh client that sends no source info is the same, anonymous client to
+    the gateway: they share control of a drive and feed one command watchdog.
+    """
+    if source_info is None:
+        return ANONYMOUS
+    return str(source_info.source_id.zid)
+
+
+CommandSink = Callable[[str, Payload, str], None]
 QuerySink = Callable[[Incoming], None]
 
 
@@ -94,7 +130,7 @@ class ZenohLink:
         on_command: CommandSink,
         on_query: QuerySink,
     ) -> ZenohLink:
-        session = zenoh.open(config)
+        session = open_session(config)  # StartupError names the cause and the fix
         try:
             return cls(session, keys, drive_ids, on_command, on_query)
         except BaseException:
@@ -112,7 +148,9 @@ class ZenohLink:
     def _command_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:  # PyO3 enums: compare by value, not identity
             return
-        self._on_command(str(sample.key_expr), sample.payload.to_bytes())
+        self._on_command(
+            str(sample.key_expr), _payload(sample.payload), client_of(sample.source_info)
+        )
 
     def _query(self, kind: KeyKind, query: zenoh.Query) -> None:
         try:
@@ -122,9 +160,9 @@ class ZenohLink:
             if kind is KeyKind.STATE:
                 asked = query.key_expr
                 targets = tuple(d for d, k in self._state_keys.items() if asked.intersects(k))
-            self._on_query(
-                Incoming(kind, key, None if payload is None else payload.to_bytes(), query, targets)
-            )
+            body = _payload(payload)
+            client = client_of(query.source_info)
+            self._on_query(Incoming(kind, key, body, query, targets, client))
         except Exception:
             log.exception("zenoh query on %s could not be handed over", query.key_expr)
             query.drop()

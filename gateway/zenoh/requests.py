@@ -15,7 +15,7 @@ from typing import Any
 
 import orjson
 
-from gateway.adapter import ParamValue
+from gateway.adapter import ParamInfo, ParamValue
 from gateway.errors import CommandRejected, GatewayError, ParameterError
 from gateway.model import (
     DriveCommand,
@@ -101,12 +101,26 @@ def encode_state(state: DriveState) -> bytes:
 _STATUS_TEXT = {m: m.label for m in DriveStatus}
 
 
+MAX_PAYLOAD = 4096
+"""Bytes: a command or parameter payload above this is refused before it is copied
+or parsed (a command is under 200 bytes; docs/zenoh-keys.md)."""
+
+
+def too_large(size: int) -> str:
+    """The refusal of a payload of ``size`` bytes over :data:`MAX_PAYLOAD`."""
+    return f"payload of {size} bytes is over the limit of {MAX_PAYLOAD} bytes"
+
+
 def decode_json(payload: bytes) -> Any:
     """Parse a JSON payload; raises ValueError with a short reason."""
+    if len(payload) > MAX_PAYLOAD:
+        raise ValueError(too_large(len(payload)))
     try:
         return json.loads(payload.decode("utf-8"))
     except UnicodeDecodeError:
         raise ValueError("payload is not UTF-8") from None
+    except RecursionError:
+        raise ValueError("invalid JSON: nested too deeply") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"invalid JSON: {exc.msg} at position {exc.pos}") from None
 
@@ -187,8 +201,16 @@ def _write_value(payload: bytes | None) -> ParamValue | None:
     return value
 
 
-def param_result(req: ParamRequest, value: ParamValue) -> dict[str, Any]:
-    return {"number": req.number, "subindex": req.subindex, "value": value}
+def param_result(
+    req: ParamRequest, value: ParamValue, info: ParamInfo | None = None
+) -> dict[str, Any]:
+    """The reply: number, subindex and raw value, and where the drive's parameter table
+    knows the parameter, its ``code`` as the manual writes it, ``name``, ``unit`` and the
+    value in that unit (``scaled``)."""
+    body: dict[str, Any] = {"number": req.number, "subindex": req.subindex, "value": value}
+    if info is not None:
+        body.update(code=info.label, name=info.name, unit=info.unit, scaled=info.scaled(value))
+    return body
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:

@@ -292,6 +292,14 @@ def test_capabilities_per_pair() -> None:
     assert "no quick stop" in c100.unsupported["quick_stop"]
 
 
+def test_only_20_70_refuses_a_reverse() -> None:
+    # Seed table 5: assembly 20 has Run Fwd only (issue 17 item 5).
+    reason = capabilities(S20).reverse_refused
+    assert reason is not None and "20/70 has no reverse" in reason
+    assert capabilities(S21).reverse_refused is None  # Run Rev (seed table 6)
+    assert capabilities(S100).reverse_refused is None  # Sentido de Giro (seed table 7)
+
+
 def test_fault_texts_are_never_invented() -> None:
     assert fault_text(None) is None
     assert fault_text(37) is not None and "timed out" in fault_text(37)  # type: ignore[operator]

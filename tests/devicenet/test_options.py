@@ -62,7 +62,7 @@ def test_every_key(tmp_path: Path) -> None:
     assert opts.sim == SimOptions(p313=1, p710=2, ramp_time=0.5, max_rpm=3600.0)
 
 
-D = "buses.dn.drives[0]"
+D = "buses.dn.drives[d]"
 BROKEN = [
     (BUS + "interface = 'udp_multicast'\n",
      "buses.dn.interface: udp_multicast is not supported: it sends multicast out of the network "
@@ -96,7 +96,7 @@ BROKEN = [
     (BUS + DRIVE + "startup_params = [313, 1]\n", f"{D}.startup_params: must be a table, not an array"),
     (BUS + DRIVE + "sim_p313 = 4\n", f"{D}.sim_p313: 4 is above the maximum 3"),
     (BUS + DRIVE + "weg_speed_scale = 0\n", f"{D}.weg_speed_scale: 0 is below the minimum 1"),
-    (BUS + DRIVE + "vendor = 853\n", f"{D}.vendor: unknown key"),
+    (BUS + DRIVE + "vendor = 853\n", f"{D}.vendor: unknown key (did you mean 'vendor_id'?)"),
 ]  # fmt: skip
 
 

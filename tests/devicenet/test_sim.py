@@ -449,6 +449,57 @@ def test_fault_reset_takes_the_node_offline_for_a_moment(master: Master) -> None
     assert master.node.phase is SimPhase.ONLINE and master.node.allocation == 0
 
 
+def phase(n: Cfw08Node) -> SimPhase:
+    """The node's phase, read through a call (it changes under mypy's eyes)."""
+    return n.phase
+
+
+def test_keypad_reset_clears_the_fault_through_the_same_reset(master: Master) -> None:
+    """The keypad's reset, behind the master's back: offline for a moment (seed 3.4), then
+    back with its commands cleared; the master's run bit, sent again, runs the drive."""
+    master.allocate()
+    run = Out21(run_fwd=True, net_ctrl=True, net_ref=True, speed_rpm=900).encode()
+    master.frame(POLL, run)
+    master.node.inject_fault(21, master.now)
+    assert master.node.keypad_reset(master.now) == []
+    assert phase(master.node) is SimPhase.RESETTING and master.node.drive.fault_code is None
+    assert master.node.keypad_reset(master.now) == []  # nothing more to reset
+    master.advance(0.8)
+    assert phase(master.node) is SimPhase.ONLINE and master.node.drive.motor.speed == 0.0
+    assert not master.node.drive.run_fwd  # cleared by the restart
+    master.allocate()
+    for _ in range(10):
+        master.frame(POLL, run)
+        master.advance(0.05)
+    assert master.node.drive.motor.speed > 0.0  # the held run bit, sent again, runs it
+
+
+def test_auto_reset_after_p206_seconds(master: Master) -> None:
+    master.node.drive.params[206] = 2
+    master.allocate(epr_ms=1000)
+    master.node.inject_fault(21, master.now)
+    fault_at = master.now
+    assert master.node.auto_reset_due() == pytest.approx(fault_at + 2.0)
+    assert master.node.next_deadline() == pytest.approx(fault_at + 2.0)
+    master.advance(1.9, step=0.05)
+    assert master.node.drive.fault_code == 21 and master.node.phase is SimPhase.ONLINE
+    master.advance(0.2, step=0.05)
+    assert master.node.drive.fault_code is None and master.node.phase is SimPhase.RESETTING
+    assert any("auto-reset of E21" in n for n in master.node.figures.notes)
+    off = Master(node())  # P206 = 0: no auto-reset
+    off.node.inject_fault(21, off.now)
+    off.advance(5.0, step=0.1)
+    assert off.node.drive.fault_code == 21 and off.node.auto_reset_due() is None
+
+
+def test_power_cycle_clears_a_fault() -> None:
+    master = Master(node())
+    master.node.inject_fault(21, master.now)
+    master.node.power_off()
+    master.node.power_on(master.now)
+    assert master.node.drive.fault_code is None
+
+
 def test_identity_reset_service(master: Master) -> None:
     master.allocate()
     assert master.ask(Reset(1, 1)) == SuccessResponse(0x05)
@@ -488,3 +539,47 @@ def test_p701_and_p700_take_effect_after_a_reset(master: Master) -> None:
     assert master.advance(1.0) == []  # not DeviceNet any more: silent
     phase: SimPhase = master.node.phase  # (not the phase mypy narrowed above)
     assert phase is SimPhase.NOT_DEVICENET and master.node.next_deadline() is None
+
+
+def _paths(master: Master, instance: int = 2) -> tuple[str, str]:
+    """Connection attributes 14 and 16 (seed tables 13-14), as hex."""
+    out = []
+    for attribute in (14, 16):
+        reply = master.ask(GetAttributeSingle(5, instance, attribute))
+        assert isinstance(reply, SuccessResponse)
+        out.append(reply.data.hex(" "))
+    return out[0], out[1]
+
+
+def test_p710_takes_effect_after_a_reset_and_the_paths_show_the_pair_in_force(
+    master: Master,
+) -> None:
+    """Seed 4.1.8 note: a P710 change counts only after a reset; the I/O connection's
+    produced/consumed paths (tables 13-14) name the assembly in force."""
+    master.allocate()
+    assert _paths(master) == ("20 04 24 47 30 03", "20 04 24 15 30 03")  # 71 and 21
+    p710 = SetAttributeSingle(0x6B, 1, 110, encode_parameter(0))  # P710 = 0: 20/70
+    assert master.ask(p710) == SuccessResponse(0x10)
+    assert master.node.drive.params[710] == 0
+    assert _paths(master) == ("20 04 24 47 30 03", "20 04 24 15 30 03")  # still 21/71
+    out = master.frame(POLL, Out21(run_rev=True, speed_rpm=300).encode())
+    assert len(out[0].data) == 4 and master.node.drive.run_rev  # 21 is decoded as 21
+    assert master.ask(Reset(1, 1)) == SuccessResponse(0x05)
+    master.advance(0.8)
+    master.allocate()
+    assert _paths(master) == ("20 04 24 46 30 03", "20 04 24 14 30 03")  # 70 and 20
+    assert _paths(master, 4) == ("20 04 24 46 30 03", "20 04 24 14 30 03")  # COS/cyclic too
+
+
+def test_a_p710_changed_but_not_reset_at_start() -> None:
+    """Config ``p710_stored``: the drive powers up with ``p710`` in force and P710 reads
+    the other value until the next power cycle."""
+    master = Master(node(p710=0, p710_stored=1))
+    master.allocate()
+    assert master.ask(GetAttributeSingle(0x6B, 1, 110)) == SuccessResponse(0x0E, b"\x01\x00")
+    assert _paths(master) == ("20 04 24 46 30 03", "20 04 24 14 30 03")  # 20/70 in force
+    master.node.power_off()
+    master.sent.extend(master.node.power_on(master.now))
+    master.advance(0.2)
+    master.allocate()
+    assert _paths(master) == ("20 04 24 47 30 03", "20 04 24 15 30 03")  # now 21/71

@@ -28,7 +28,7 @@ from tests.zenoh.client import Client
 T = TypeVar("T")
 
 PREFIX = "e2e"
-TIMEOUT = scaled(8.0)  # s, times the suite's time scale (tests/support/timing.py)
+TIMEOUT = scaled(30.0)  # a bound on waits for events: tests/support/timing.py
 RUN, REVERSE, RESET, QUICK_STOP, COAST_STOP = 0x01, 0x02, 0x04, 0x08, 0x10  # docs/modbus-map.md
 
 

@@ -3,16 +3,18 @@ DeviceNet line (``simulate = true``), commanded and read through Zenoh and Modbu
 
 from __future__ import annotations
 
+import logging
 import time
 import uuid
 from collections.abc import AsyncIterator
 from pathlib import Path
 
+import pytest
 import pytest_asyncio
 
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.cfw08 import AssemblyPair
-from adapters.devicenet.sim import SimRunner
+from adapters.devicenet.sim import Cfw08Node, SimRunner
 from gateway.config import DEFAULT_CONFIG, load
 from gateway.model import CommState, Device
 from tests.e2e.harness import PREFIX, RESET, REVERSE, RUN, TIMEOUT, Gateway, parsed, running_gateway
@@ -23,7 +25,7 @@ EPR = 0.05
 POLL = 0.01
 
 
-def buses(channel: str) -> str:
+def buses(channel: str, assembly: int = 21, extra: str = "") -> str:
     return f"""
 [buses.dn]
 adapter = "devicenet"
@@ -41,11 +43,11 @@ id = "cfw08"
 device = "CFW-08"
 address = {MAC}
 modbus_unit = {UNIT}
-assembly = 21
+assembly = {assembly}
 max_rpm = 1800
 writable_params = [100, 313]
 sim_ramp_time = 0.3
-"""
+{extra}"""
 
 
 @pytest_asyncio.fixture
@@ -186,3 +188,71 @@ async def test_the_demo_line_comes_online(tmp_path: Path) -> None:
         assert (regs[19], regs[20]) == (4, 5)  # CFW-08 at MAC 5
         diag = gw.adapter("devicenet").diagnostics()["drives"]["cfw08"]
         assert diag["assembly"] == "21/71" and diag["state"] == "online"
+
+
+async def test_20_70_refuses_a_reverse_by_zenoh_and_modbus(tmp_path: Path) -> None:
+    """Issue 17 item 5: on 20/70 (Run Fwd only, seed table 5) a negative speed used to be
+    accepted and sent as Run Fwd = 0, so the running drive ramped to a stop while the
+    published reference said -900. Now it is refused with the reason, and the drive
+    keeps running forward."""
+    channel = f"e2e-{uuid.uuid4().hex[:8]}"
+    async with running_gateway(tmp_path, lambda: buses(channel, 20), ["cfw08"]) as gw:
+        with gw.client.subscribe(state_key()) as states:
+            await gw.client.settled(PREFIX)
+            await gw.command("cfw08", {"run": True, "speed_rpm": 900})
+            await states.auntil(lambda g: parsed(g).speed_rpm == 900.0, TIMEOUT)
+            reason = await gw.refused("cfw08", {"run": True, "speed_rpm": -900})
+            assert reason == (
+                "speed_rpm -900 asks for reverse: assembly 20/70 has no reverse "
+                "(Run Fwd only); use 21/71 or 100/150"
+            )
+            assert "no reverse" in await gw.refused("cfw08", {"speed_pct": -25})
+            refused = await gw.modbus.write_register(1, -900 & 0xFFFF, device_id=UNIT)
+            assert refused.isError() and refused.exception_code == 4
+            polls = sim(gw).node(MAC).figures.polls
+            await sim(gw).until(lambda: sim(gw).node(MAC).figures.polls > polls + 5)
+            assert sim(gw).node(MAC).drive.run_fwd
+            s = parsed(await states.auntil(lambda g: parsed(g).at_reference, TIMEOUT))
+            assert (s.speed_rpm, s.speed_ref_rpm, s.status.label) == (900.0, 900.0, "running")
+            regs = await gw.inputs(UNIT)
+            assert regs[0] & 0b10111 == 0b10111  # online, ready, running, at reference
+
+
+def _p710_not_reset(channel: str) -> str:
+    """P710 already selects 21/71, but the drive has run 20/70 since its last reset."""
+    return buses(channel, 21, "sim_p710 = 0\nsim_p710_stored = 1\n")
+
+
+async def test_the_assembly_in_force_keeps_the_drive_offline_until_a_reset(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue 17 item 6: P710 counts only after a reset (seed 4.1.8). With P710 changed and
+    not reset the drive used to pass the check and its 70 bytes were read as 71 (a
+    running drive published as not_ready). The I/O connection's paths (seed tables
+    13-14) show 20/70 in force: the drive is not brought online, with the reason in the
+    diagnostics and the log, until a reset applies P710."""
+    caplog.set_level(logging.WARNING, logger="adapters.devicenet.adapter")
+    channel = f"e2e-{uuid.uuid4().hex[:8]}"
+    async with running_gateway(tmp_path, lambda: _p710_not_reset(channel), []) as gw:
+        with (
+            gw.client.subscribe(f"{PREFIX}/drives/cfw08/diag") as diags,
+            gw.client.subscribe(state_key()) as states,
+        ):
+            await gw.client.settled(PREFIX)
+            diag = (await diags.auntil(lambda g: g.json().get("problem"), TIMEOUT)).json()
+            assert diag["problem"] == (
+                "the drive's I/O uses assembly 20/70 (Connection 05h instance 2 paths), the "
+                "config says 21/71; P710 = 1 selects 21/71 but takes effect only after a "
+                "reset of the drive (seed 4.1.8): reset or power-cycle it"
+            )
+            assert diag["assembly_in_force"] == "20/70" and not diag["configured"]
+            assert diag["problem"] in caplog.text
+            assert gw.daemon.hub.state("cfw08").comm is CommState.CONNECTING
+            assert "connecting" in await gw.refused("cfw08", {"run": True, "speed_rpm": 900})
+            assert not (await gw.inputs(UNIT))[0] & 0b1  # not online on Modbus
+            assert sim(gw).node(MAC).drive.idle  # idle I/O only: nothing commands it
+            sim(gw).call(MAC, Cfw08Node.reset)  # the reset applies P710 = 1: 21/71
+            await states.auntil(lambda g: parsed(g).online, TIMEOUT)
+            await gw.command("cfw08", {"run": True, "speed_rpm": -900})
+            s = parsed(await states.auntil(lambda g: parsed(g).speed_rpm == -900.0, TIMEOUT))
+            assert s.status.label == "running" and s.direction.value == "reverse"

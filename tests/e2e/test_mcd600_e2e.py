@@ -256,8 +256,10 @@ async def test_injected_trip_shows_its_text_needs_a_reset_and_does_not_restart(
         assert (regs[1], regs[11]) == (6, MOTOR_OVERLOAD) and regs[0] & 0b100000  # tripped
         assert not gateway.daemon.hub.desired(ID).run  # the trip cleared the run command
 
-        # a run while tripped does not start it: the trip needs a reset first
-        await gateway.command(ID, {"run": True})
+        # a run while tripped is refused with the reason, never held (rule 1)
+        reason = await gateway.refused(ID, {"run": True})
+        assert "tripped" in reason and "Motor overload" in reason, reason
+        assert not gateway.daemon.hub.desired(ID).run
         await bus_cycles(gateway, 20)
         assert gateway.daemon.hub.state(ID).status is DriveStatus.TRIPPED and sim.starts == 1
 

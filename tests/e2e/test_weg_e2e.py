@@ -267,8 +267,16 @@ async def test_run_reverse_stop_by_modbus(gw: Gateway, model: Model) -> None:
 async def test_parameters_through_zenoh(gw: Gateway, model: Model) -> None:
     ok, read = await gw.param(model.id, 100)
     assert ok and read["value"] == RAMP_P0100, read  # written at connect (startup_params)
+    # the manual's table names it and scales it (P0750 / P746: "5.0 s is sent as 50")
+    code = "P100" if model.device == "CFW320" else "P0100"
+    assert (read["code"], read["name"], read["unit"]) == (code, "Acceleration time", "s"), read
+    assert read["scaled"] == RAMP_P0100 / 10, read
     ok, answer = await gw.param(model.id, 101, {"value": 7})  # 0.7 s
-    assert ok, answer
+    assert ok and (answer["value"], answer["scaled"], answer["name"]) == (
+        7,
+        0.7,
+        "Deceleration time",
+    ), answer
     ok, read = await gw.param(model.id, 101)
     assert ok and read["value"] == 7, read
     assert drive(gw, model).values[101] == 7
@@ -343,6 +351,39 @@ async def test_power_cycle_comes_back_stopped(gw: Gateway, model: Model) -> None
         assert gw.daemon.hub.state(model.id).status is DriveStatus.READY
 
         await ramp(gw, model, states, run_command(gw, model), start=0.0, target=900.0)
+
+
+# ----------------------------------------------------------------------- manual checks
+
+
+async def test_cfw320_set_to_profidrive_is_refused_and_its_status_bits_are_published(
+    gateway: Gateway,
+) -> None:
+    """Issue 20: fire mode (P680 bit 2) reaches the Zenoh state; P741 = 0 set at the HMI and a
+    power cycle: the connect reads P741 and refuses (CFW320 Table 4.6 note), with an event on
+    the drive's events key, and the drive is never online on a misread profile."""
+    gw, cfw320 = gateway, MODELS[2]
+    c = gw.client
+    events_key = f"{PREFIX}/drives/{cfw320.id}/events"
+    with c.subscribe(gw.state_key(cfw320.id)) as states, c.subscribe(events_key) as events:
+        await c.settled(PREFIX)
+        drive(gw, cfw320).fire_mode = True
+        await states.auntil(lambda g: parsed(g).values.get("fire_mode") == 1, TIMEOUT)
+        drive(gw, cfw320).fire_mode = False
+        drive(gw, cfw320).values[741] = 0
+        slave(gw, cfw320).power_cycle(now(), off_time=0.2)
+        event = await events.auntil(lambda e: "P741 = 0" in e.json()["text"], TIMEOUT)
+        assert event.json()["kind"] == "config"
+        assert event.json()["text"] == (
+            "not configured: P741 = 0 (profidrive), the config's data_profile is manufacturer "
+            "(P741 = 1): its words would be misread"
+        )
+        await bus_cycles(gw, cfw320, 10)
+        assert gw.daemon.hub.state(cfw320.id).comm is CommState.CONNECTING
+        reason = await gw.refused(cfw320.id, {"run": True, **cfw320.speed})
+        assert reason == f"drive {cfw320.id} is connecting"
+        drive(gw, cfw320).values[741] = 1  # set back at the HMI: the next attempt connects
+        await states.auntil(lambda g: parsed(g).online, TIMEOUT)
 
 
 # ----------------------------------------------------------------------- the demo line

@@ -1,13 +1,20 @@
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from gateway import __version__
 from gateway.cli import main
+from tests.support.net import zenoh_endpoint
+from tests.zenoh.client import client_config
+
+PREFIX = "clitest"
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -36,3 +43,99 @@ def test_run_defaults_to_the_demo_config() -> None:
 
     args = build_parser().parse_args(["run"])
     assert args.config.endswith("config/demo.toml")
+
+
+# ------------------------------------------------------------------ cmd against a gateway
+
+
+class FakeGateway:
+    """A Zenoh peer listening on a loopback endpoint with a command queryable that answers
+    as told and records each query's source info."""
+
+    def __init__(self, answer: tuple[bool, dict[str, object]]) -> None:
+        self.endpoint = zenoh_endpoint()
+        self.answer = answer
+        self.sources: list[tuple[str, int] | None] = []
+        self.payloads: list[object] = []
+        self.session = zenoh.open(client_config(self.endpoint, listen=True))
+        self.queryable = self.session.declare_queryable(f"{PREFIX}/drives/d1/command", self._on)
+
+    def _on(self, query: zenoh.Query) -> None:
+        info = query.source_info
+        if info is None:
+            self.sources.append(None)
+        else:
+            self.sources.append((str(info.source_id.zid), int(info.source_sn)))
+        self.payloads.append(json.loads(query.payload.to_string()) if query.payload else None)
+        ok, body = self.answer
+        if ok:
+            query.reply(query.key_expr, json.dumps(body))
+        else:
+            query.reply_err(json.dumps(body))
+
+    def close(self) -> None:
+        self.queryable.undeclare()
+        self.session.close()
+
+
+@pytest.fixture
+def fake_gateway() -> Iterator[Callable[[bool, dict[str, object]], FakeGateway]]:
+    made: list[FakeGateway] = []
+
+    def make(ok: bool, body: dict[str, object]) -> FakeGateway:
+        made.append(FakeGateway((ok, body)))
+        return made[-1]
+
+    yield make
+    for gw in made:
+        gw.close()
+
+
+REASON = "drive d1 is faulted (F071): a run needs the fault cleared first"
+
+
+@pytest.mark.parametrize(
+    ("ok", "body"),
+    [
+        (True, {"accepted": False, "error": REASON}),  # the hub's refusal
+        (False, {"error": REASON}),  # an error reply (e.g. from the front end)
+    ],
+)
+def test_cmd_prints_the_refusal_reason_and_fails(
+    fake_gateway: Callable[[bool, dict[str, object]], FakeGateway],
+    capsys: pytest.CaptureFixture[str],
+    ok: bool,
+    body: dict[str, object],
+) -> None:
+    gw = fake_gateway(ok, body)
+    code = main(["cmd", "--connect", gw.endpoint, "--prefix", PREFIX, "d1", "run"])
+    out = capsys.readouterr()
+    assert code == 1
+    assert out.err.strip() == f"d1: refused: {REASON}"
+    assert out.out == ""
+    assert gw.payloads == [{"run": True}]
+
+
+def test_cmd_accepted_exits_0_and_carries_the_session_source_info(
+    fake_gateway: Callable[[bool, dict[str, object]], FakeGateway],
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    gw = fake_gateway(True, {"accepted": True})
+    argv = [
+        "cmd",
+        "--connect",
+        gw.endpoint,
+        "--prefix",
+        PREFIX,
+        "d1",
+        "speed",
+        "--speed-rpm",
+        "900",
+    ]
+    assert main(argv) == 0
+    assert capsys.readouterr().out.strip() == 'd1: accepted {"speed_rpm": 900.0}'
+    assert main(argv) == 0  # a second run: another session, another id
+    assert len(gw.sources) == 2 and None not in gw.sources
+    first, second = gw.sources
+    assert first is not None and second is not None
+    assert first[0] != second[0] != str(gw.session.zid())  # one id per client session

@@ -9,7 +9,7 @@ from gateway.config import DEFAULT_CONFIG, load
 from gateway.errors import ConfigErrors
 from gateway.model import ControlMode, Device, StopAction
 
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 
 GOOD = f"""
 [gateway]
@@ -74,7 +74,7 @@ def test_overrides(tmp_path: Path) -> None:
 
 
 BROKEN = [
-    ("[gateway]\nnmae = 'x'\n", "site.toml: gateway.nmae: unknown key"),
+    ("[gateway]\nnmae = 'x'\n", "site.toml: gateway.nmae: unknown key (did you mean 'name'?)"),
     ("[gateway\n", "site.toml: not valid TOML: Expected ']' at the end of a table declaration (at line 1, column 9)"),
     ("[gateway]\nshutdown_timeout = 'soon'\n", "site.toml: gateway.shutdown_timeout: must be a number, not a string"),
     ("[gateway]\nlog_level = 'LOUD'\n", "site.toml: gateway.log_level: 'LOUD' is not one of 'DEBUG', 'INFO', 'WARNING', 'ERROR'"),
@@ -83,27 +83,27 @@ BROKEN = [
     ("[zenoh]\nconfig_file = 'nope.json5'\n", "site.toml: zenoh.config_file: 'nope.json5' does not exist"),
     ("[modbus]\nbind = 'localhost'\n", "site.toml: modbus.bind: 'localhost' is not HOST:PORT"),
     ("[modbus]\nallow = ['10.0.0.300/8']\n", "site.toml: modbus.allow[0]: '10.0.0.300/8' is not an address or CIDR network"),
-    ("[buses.l]\nadapter = 'canbus'\n", "site.toml: buses.l.adapter: unknown adapter 'canbus' (known: devicenet, profibus, or 'module:Class')"),
+    ("[buses.l]\nadapter = 'canbus'\n", "site.toml: buses.l.adapter: unknown adapter 'canbus' (known: devicenet, echo-profibus, fake, held, profibus)"),
     ("[buses.l]\ncycle = 1\n", "site.toml: buses.l.adapter: is required"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'CFW-11'\naddress = 1\n",
-     "site.toml: buses.l.drives[0].device: 'CFW-11' is not one of 'MCD 600', 'test'"),
+     "site.toml: buses.l.drives[a].device: 'CFW-11' is not one of 'MCD 600', 'test'"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 126\n",
-     "site.toml: buses.l.drives[0].address: 126 is above the maximum 125"),
+     "site.toml: buses.l.drives[a].address: 126 is above the maximum 125"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a b'\ndevice = 'test'\naddress = 1\n",
      "site.toml: buses.l.drives[0].id: 'a b' must be letters, digits, '-' or '_' (it is a key)"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\ncontrol = 'plc'\n",
-     "site.toml: buses.l.drives[0].control: 'plc' is not one of 'any', 'zenoh', 'modbus'"),
+     "site.toml: buses.l.drives[a].control: 'plc' is not one of 'any', 'zenoh', 'modbus'"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\non_command_timeout = 'brake'\n",
-     "site.toml: buses.l.drives[0].on_command_timeout: 'brake' is not one of 'ramp_stop', 'coast', 'hold'"),
+     "site.toml: buses.l.drives[a].on_command_timeout: 'brake' is not one of 'ramp_stop', 'coast', 'hold'"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nwritable_params = [100, 'P101']\n",
-     "site.toml: buses.l.drives[0].writable_params[1]: must be an integer, not a string"),
+     "site.toml: buses.l.drives[a].writable_params[1]: must be an integer, not a string"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nmodbus_unit = 0\n",
-     "site.toml: buses.l.drives[0].modbus_unit: 0 is below the minimum 1"),
+     "site.toml: buses.l.drives[a].modbus_unit: 0 is below the minimum 1"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nramp = 2\n",
-     "site.toml: buses.l.drives[0].ramp: unknown key"),
+     "site.toml: buses.l.drives[a].ramp: unknown key (did you mean 'ramp_time'?)"),
     ("[extra]\nx = 1\n", "site.toml: extra: unknown key"),
     ("buses = 3\n", "site.toml: buses: must be a table, not an integer"),
-    (f"[buses.l]\nadapter = '{FAKE}'\ncylce = 1\n", "site.toml: buses.l.cylce: unknown key"),
+    (f"[buses.l]\nadapter = '{FAKE}'\ncylce = 1\n", "site.toml: buses.l.cylce: unknown key (did you mean 'cycle'?)"),
     (f"[buses.l]\nadapter = '{FAKE}'\ndrives = {{ id = 'a' }}\n",
      "site.toml: buses.l.drives: must be an array of tables ([[buses.l.drives]])"),
     (f"[modbus]\ngateway_unit = 5\n[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nmodbus_unit = 5\n",
@@ -129,18 +129,18 @@ def drives_toml(*drives: str) -> str:
     [
         (
             ("id='a'\ndevice='test'\naddress=1", "id='a'\ndevice='test'\naddress=2"),
-            "site.toml: buses: duplicate drive id 'a'",
+            "site.toml: buses: drive id 'a' is used by buses.l address 1 and buses.l address 2",
         ),
         (
             ("id='a'\ndevice='test'\naddress=1", "id='b'\ndevice='test'\naddress=1"),
-            "site.toml: buses.l.drives: duplicate address 1",
+            "site.toml: buses.l.drives: address 1 is used by a and b",
         ),
         (
             (
                 "id='a'\ndevice='test'\naddress=1\nmodbus_unit=7",
                 "id='b'\ndevice='test'\naddress=2\nmodbus_unit=7",
             ),
-            "site.toml: buses: duplicate modbus_unit 7 (b)",
+            "site.toml: buses: modbus_unit 7 is used by a and b",
         ),
     ],
 )

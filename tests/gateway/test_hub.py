@@ -14,6 +14,7 @@ from gateway.model import (
     CommState,
     ControlMode,
     Device,
+    Direction,
     DriveCommand,
     DriveState,
     DriveStatus,
@@ -85,12 +86,14 @@ def test_fault_clears_run_and_reset_does_not_restart() -> None:
     assert hub.desired("d").run is False
 
 
-def test_fault_reset_clears_a_run_given_while_faulted() -> None:
+def test_run_given_while_faulted_is_refused_not_held() -> None:
     hub, _ = make_hub()
-    hub.update("d", status=DriveStatus.FAULTED)
-    hub.submit("d", Source.ZENOH, RUN)  # accepted as a level, but...
+    hub.update("d", status=DriveStatus.FAULTED, fault_code=70, fault_text="overcurrent")
+    with pytest.raises(CommandRejected, match=r"faulted 70 \(overcurrent\): reset the fault"):
+        hub.submit("d", Source.ZENOH, RUN)
+    assert hub.desired("d").run is False
     hub.submit("d", Source.ZENOH, DriveCommand(fault_reset=True))
-    assert hub.desired("d").run is False  # ... the reset needs a new run command after it
+    assert hub.desired("d").run is False  # the reset needs a new run command after it
 
 
 def test_run_and_reset_together_is_refused() -> None:
@@ -236,6 +239,35 @@ def test_capabilities_refuse_with_reason() -> None:
     with pytest.raises(CommandRejected, match="has no speed reference"):
         hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=1))
     hub.submit("d", Source.ZENOH, DriveCommand(run=True))
+
+
+def test_a_drive_that_cannot_reverse_refuses_a_reverse_with_the_reason() -> None:
+    # Issue 17 item 5: a negative speed on a drive with no reverse must not be taken as a
+    # stop (or a forward run) while the state says reverse.
+    hub, _ = make_hub()
+    hub.set_capabilities(
+        "d", Capabilities(speed_scale=SpeedScale(1800.0), reverse_refused="forward only")
+    )
+    hub.submit("d", Source.ZENOH, RUN)
+    before = hub.desired("d")
+    refused = {
+        DriveCommand(run=True, speed_rpm=-900): "speed_rpm -900 asks for reverse: forward only",
+        DriveCommand(speed_pct=-0.5): "speed_pct -0.5 asks for reverse: forward only",
+        DriveCommand(direction=Direction.REVERSE): "direction reverse: forward only",
+    }
+    for cmd, reason in refused.items():
+        with pytest.raises(CommandRejected) as caught:
+            hub.submit("d", Source.ZENOH, cmd)
+        assert caught.value.reason == reason
+    assert hub.desired("d") == before
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=0.0, direction=Direction.FORWARD))
+    hub.submit("d", Source.ZENOH, DriveCommand(speed_pct=-0.0))  # no sign to refuse
+
+
+def test_a_reversible_drive_takes_a_negative_speed() -> None:
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True, speed_rpm=-900))
+    assert hub.desired("d").speed_rpm == -900
 
 
 def test_offline_drive_refuses_commands() -> None:

@@ -279,3 +279,21 @@ def test_keypad_change_is_reported_in_the_diagnosis() -> None:
     [event] = loop.diag()
     assert (event.kind, event.data) == ("parameter", {"number": STOP_TIME})
     assert loop.diag() == []
+
+
+@pytest.mark.parametrize("stop", ["quick_stop", "coast_stop"])
+def test_release_of_a_stop_does_not_restart(stop: str) -> None:
+    # issue 17 item 4 / rule 1: the quick stop action (4.2 table 2, byte 0 bit 4) with start
+    # 0; released while the desired command still says run, the starter stays stopped
+    loop = running_loop()
+    loop.command(**{stop: True})
+    loop.run_until(lambda s: not s.running, limit=5.0)
+    assert loop.controls[-1].quick_stop and not loop.controls[-1].start
+    loop.command(**{stop: False})
+    loop.step(40)  # 2 s, the start ramp time
+    assert not any(c.start for c in loop.controls[-40:])
+    assert loop.state.status is DriveStatus.READY and not loop.state.running
+    loop.command(run=False)
+    loop.step()
+    loop.command(run=True)  # a new run command after the release starts it
+    loop.run_until(lambda s: s.status is DriveStatus.RUNNING, limit=5.0)

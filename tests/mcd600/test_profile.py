@@ -75,6 +75,11 @@ def test_coast_and_quick_stop_are_the_quick_stop_action(desired: DesiredCommand)
     word = control(profile, desired)
     # 4.2: bit 4 of byte 0 set = quick stop (coast); never together with a start
     assert word == ControlWord(start=False, quick_stop=True)
+    assert profile.outputs(desired, 1.0) == bytes.fromhex("10 00")
+    # released with run still desired: no start (rule 1, issue 17 item 4) until run is
+    # seen off and given again
+    assert control(profile, DesiredCommand(run=True)) == ControlWord()
+    assert control(profile, DesiredCommand()) == ControlWord()
     assert control(profile, DesiredCommand(run=True)) == ControlWord(start=True)
 
 
@@ -291,3 +296,12 @@ async def test_connection_keeps_the_start_up_diagnosis_and_comm_loss_forgets_it(
 
 def _no_event(text: str, kind: str = "info", **data: object) -> None:
     raise AssertionError(f"unexpected event {text}")
+
+
+@pytest.mark.parametrize("stop", [DesiredCommand(coast_stop=True), DesiredCommand(quick_stop=True)])
+def test_a_run_given_after_a_stop_with_run_off_starts(stop: DesiredCommand) -> None:
+    # the hub clears run with the stop: the next run (even with the release) is a new one
+    profile = Mcd600Profile(drive_config())
+    control(profile, DesiredCommand())
+    assert control(profile, stop) == ControlWord(quick_stop=True)
+    assert control(profile, DesiredCommand(run=True)) == ControlWord(start=True)

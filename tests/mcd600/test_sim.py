@@ -11,6 +11,9 @@ from adapters.mcd600.monitoring import DataRequest, StarterState
 from adapters.mcd600.options import Mcd600Options
 from adapters.mcd600.sim import Mcd600Sim
 from adapters.mcd600.simparams import (
+    AUTO_RESET_ACTION,
+    AUTO_RESET_DELAY,
+    AUTO_RESET_MAX,
     COMMAND_SOURCE,
     CURRENT_LIMIT,
     EXCESS_START_TIME,
@@ -18,6 +21,7 @@ from adapters.mcd600.simparams import (
     PROFIBUS_ADDRESS,
     START_RAMP_TIME,
     STOP_TIME,
+    AutoResetAction,
     CommandSource,
 )
 from adapters.mcd600.trips import EXCESS_START_TIME as EXCESS_START_TRIP
@@ -163,6 +167,72 @@ def test_injected_trip_needs_a_reset_edge() -> None:
         sim.trip(0)
     with pytest.raises(ValueError):
         sim.keypad_change(250, 1)
+
+
+def run_until(sim: Mcd600Sim, word: bytes, start: float, end: float, dt: float = 0.05) -> float:
+    t = start
+    while t < end - 1e-9:
+        t = min(end, t + dt)
+        sim.exchange(word, t)
+    return t
+
+
+def test_keypad_reset_with_start_held_starts_again() -> None:
+    """The LCP's reset clears the trip behind the master's back; start is a level (guide
+    4.2), so a start the master still sends starts the motor again (why the gateway clears
+    it)."""
+    sim = Mcd600Sim(params={START_RAMP_TIME: 1})
+    t = run_until(sim, START, 0.0, 2.0)
+    assert sim.starter.state is StarterState.RUNNING and sim.starts == 1
+    sim.trip(7, t)
+    t = run_until(sim, START, t, t + 1.0)
+    assert sim.starter.tripped and sim.starts == 1
+    assert sim.keypad_reset(t) and not sim.starter.tripped and sim.faults.fault_code is None
+    run_until(sim, START, t, t + 0.1)
+    assert sim.starts == 2 and sim.starter.active and sim.reset_edges == 0
+    stopped = Mcd600Sim()
+    stopped.trip(7, 0.5)
+    assert stopped.keypad_reset(1.0)
+    run_until(stopped, STOP, 1.0, 3.0)  # the master sends stop: it stays ready
+    assert stopped.starts == 0 and stopped.starter.state is StarterState.READY
+    assert not stopped.keypad_reset(3.0)  # nothing to reset
+
+
+def test_auto_reset_after_its_delay_on_the_sim_clock() -> None:
+    params = {AUTO_RESET_ACTION: AutoResetAction.RESET_TRIP, AUTO_RESET_DELAY: 2}
+    sim = Mcd600Sim(params={**params, AUTO_RESET_MAX: 2})
+    sim.exchange(STOP, 1.0)
+    sim.trip(7, 1.0)
+    assert sim.auto_reset_due() == pytest.approx(3.0)
+    run_until(sim, STOP, 1.0, 2.95)
+    assert sim.starter.tripped
+    run_until(sim, STOP, 2.95, 3.05)
+    assert not sim.starter.tripped and sim.auto_resets == 1 and sim.auto_reset_due() is None
+    assert sim.starts == 0  # stop held: it stays ready
+    sim.trip(7, 4.0)
+    sim.tick(10.0)  # one tick past the deadline: reset at 6.0
+    assert not sim.starter.tripped and sim.auto_resets == 2
+    sim.trip(7, 11.0)  # the maximum is reached: a manual reset is needed
+    assert sim.auto_reset_due() is None
+    sim.tick(100.0)
+    assert sim.starter.tripped
+    assert sim.keypad_reset(100.0) and sim.auto_resets == 0
+    off = Mcd600Sim()  # the default: no auto-reset
+    off.trip(7, 0.0)
+    off.tick(1000.0)
+    assert off.starter.tripped and off.auto_reset_due() is None
+
+
+def test_auto_reset_retries_while_the_motor_is_too_hot() -> None:
+    params = {AUTO_RESET_ACTION: AutoResetAction.RESET_TRIP, AUTO_RESET_DELAY: 1}
+    sim = Mcd600Sim(params={**params, AUTO_RESET_MAX: 3})
+    sim.starter.thermal_pct = 150.0
+    sim.starter.trip(2)  # motor overload, still too hot to reset
+    sim.tick(0.0)
+    sim.tick(0.5)
+    sim.tick(1.1)
+    assert sim.starter.tripped and sim.auto_resets == 1
+    assert sim.auto_reset_due() == pytest.approx(2.0)  # tried at 1.0: again a delay later
 
 
 def test_time_scale_runs_the_power_section_faster() -> None:

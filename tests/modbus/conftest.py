@@ -20,9 +20,10 @@ from gateway.model import DriveState
 from gateway.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import free_port
+from tests.support.timing import scaled
 
-FAKE = "tests.support.fake_adapter:FakeAdapter"
-TIMEOUT = 5.0
+FAKE = "fake"  # tests/support/plugins.py
+TIMEOUT = scaled(20.0)
 INPUTS = 21  # registers in a drive's status block
 D1, D2, D4 = 1, 2, 4  # unit ids: d1 test drive, d2 MCD 600, d4 on line2 (d3 has none)
 
@@ -38,11 +39,16 @@ def config_text(
     modbus_enabled: bool = False,
     frame_timeout: float | None = None,
     max_connections: int | None = None,
+    idle_timeout: float | None = None,
 ) -> str:
     allow_list = ", ".join(f'"{a}"' for a in allow)
     limits = "".join(
         f"{key} = {value}\n"
-        for key, value in (("frame_timeout", frame_timeout), ("max_connections", max_connections))
+        for key, value in (
+            ("frame_timeout", frame_timeout),
+            ("max_connections", max_connections),
+            ("idle_timeout", idle_timeout),
+        )
         if value is not None
     )
     return f"""

@@ -183,6 +183,39 @@ def test_client_memory_is_bounded_and_forgets_to_the_safe_side() -> None:
     assert memory.last("10.0.0.1", 2) == UNKNOWN_CLIENT_WORD  # per unit
 
 
+def test_client_memory_never_evicts_a_connected_client() -> None:
+    """Issue 17 item 3: writes from thousands of other addresses cannot evict a
+    connected PLC's last word (its 0 -> 1 run edge would be lost)."""
+    memory = ClientMemory(limit=16)
+    memory.connected("10.0.0.1")
+    memory.remember("10.0.0.1", 1, STOPPED)
+    for i in range(5000):
+        other = f"10.1.{i // 250}.{i % 250}"
+        memory.connected(other)
+        memory.remember(other, 1, RUN)
+        memory.disconnected(other)
+    assert memory.last("10.0.0.1", 1) == STOPPED
+    assert len(memory) == 17  # the connected one, and the newest 16 of the others
+    # a second connection from the same address: the words last until the last one closes
+    memory.connected("10.0.0.1")
+    memory.disconnected("10.0.0.1")
+    memory.remember("10.2.0.1", 1, RUN)
+    assert memory.last("10.0.0.1", 1) == STOPPED
+    memory.disconnected("10.0.0.1")
+    for i in range(16):
+        memory.remember(f"10.3.0.{i}", 1, RUN)
+    assert memory.last("10.0.0.1", 1) == UNKNOWN_CLIENT_WORD  # aged out, to the safe side
+
+
+def test_client_memory_keeps_a_reconnecting_plc() -> None:
+    memory = ClientMemory(limit=16)
+    memory.peer("10.0.0.1", True)
+    memory.remember("10.0.0.1", 1, RUN)
+    memory.peer("10.0.0.1", False)
+    memory.peer("10.0.0.1", True)
+    assert memory.last("10.0.0.1", 1) == RUN  # a held run bit stays no edge
+
+
 # ------------------------------------------------------------------ write decoding
 
 

@@ -1,7 +1,7 @@
 """Scripted exchanges with the master engine: what it sends, what it gets back (fake clock).
 
 ``Script.sent()`` steps until the engine transmits and returns the telegram (checking the
-bytes when given); ``Script.answer()`` feeds a reply; ``Script.silence()`` lets the wait
+bytes when given), confirming the write as the driver does (``Written``, ``write_lag`` late); ``Script.answer()`` feeds a reply; ``Script.silence()`` lets the wait
 run out. The engine's other actions collect in ``Script.actions``.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from adapters.profibus.fdl import DataTelegram, ShortAck, decode_telegram
-from adapters.profibus.master import Action, Master, Received, Transmit
+from adapters.profibus.master import Action, Master, Received, Transmit, Written
 
 h = bytes.fromhex
 
@@ -22,6 +22,8 @@ class Script:
         self.actions: list[Action] = []
         self.transmits: list[Transmit] = []
         self._waiting: list[Transmit] = []
+        self.write_lag = 0.0  # how late the driver writes (a loop callback run late)
+        self.written: list[float] = []  # when each telegram was written (Written.at)
 
     def _collect(self, actions: list[Action]) -> None:
         for a in actions:
@@ -46,7 +48,10 @@ class Script:
                 raise AssertionError("the master sent nothing")
             self.now = max(self.now, deadline)
         t = self._waiting.pop(0)
-        self.now = max(self.now, t.not_before) + self.master.bus.tx_time(len(t.data))
+        at = max(self.now, t.not_before) + self.write_lag
+        self.written.append(at)
+        self._collect(self.master.step(at, Written(at)))  # the driver confirms the write
+        self.now = at + self.master.bus.tx_time(len(t.data))
         if wire is not None:
             assert t.data == h(wire), f"sent {t.data.hex(' ')}, expected {wire}"
         telegram = decode_telegram(t.data)

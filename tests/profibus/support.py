@@ -35,7 +35,7 @@ from gateway.hub import Hub
 from gateway.model import DesiredCommand, Device, Direction, DriveState, DriveStatus, SpeedScale
 from gateway.schema import Table
 
-ADAPTER = "tests.profibus.support:EchoProfibusAdapter"
+ADAPTER = "echo-profibus"  # registered by tests/support/plugins.py
 
 
 @dataclass(frozen=True)

@@ -105,10 +105,23 @@ def test_the_standalone_simulator_and_the_scan_tool_end_to_end(
         # --rs485 on: kernel RS-485 mode insisted on, which a pty is excused from
         scan_json = ["profibus", "scan", "--port", path, "--to", "12", "--json", "--rs485", "on"]
         assert main(scan_json) == 0
-        assert json.loads(capsys.readouterr().out) == {"5": "slave", "9": "slave", "10": "slave"}
+        echo = {"station": "slave", "ident_number": 0xEC00, "master_address": 255}
+        assert json.loads(capsys.readouterr().out) == {
+            "5": {**echo, "cfg": "B3"},
+            "9": {**echo, "cfg": "B7"},
+            "10": {**echo, "cfg": "B7"},
+        }
         assert main(["profibus", "scan", "--port", path, "--from", "4", "--to", "6"]) == 0
-        out = capsys.readouterr().out.splitlines()
-        assert out == [f"{path}: 1 station(s) answered, addresses 4-6", "    5  slave"]
+        captured = capsys.readouterr()
+        assert captured.out.splitlines() == [
+            f"{path}: 1 station(s) answered, addresses 4-6",
+            "    5  slave, Ident_Number 0xEC00, configuration B3 (4 bytes in, 4 bytes out)",
+        ]
+        # progress: plain lines when stderr is not a terminal
+        assert captured.err.splitlines() == [
+            "scanned 0/3 addresses, 0 station(s) answered",
+            "scanned 3/3 addresses, 1 station(s) answered",
+        ]
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0

@@ -34,7 +34,9 @@ def test_read_p2_is_select_then_read() -> None:
     select = weg.select_request(2)
     assert select.encode() == h("5F 00 30 02 00 02")
     assert weg.decode_write_data(h("00 02")) == WegSelect(2)
-    assert weg.read_request().encode() == h("5E 00 30 02")
+    # the DS_Read request of the 4.2.3 telegrams (CFW-11 4.2.3 / CFW700 4.2.3 / CFW320 5.2.3):
+    # "Função 5Eh, Slot 0, Índice, Tamanho 240", here with index 48 (4.2.6 uses those telegrams)
+    assert weg.read_request().encode() == h("5E 00 30 F0")
     reply = dpv1.decode_response(h("5E 00 30 02 00 64"))  # P0002 = 100 rpm
     assert isinstance(reply, dpv1.ReadResponse)
     assert WegValue.decode(reply.data) == WegValue(100)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import select
 import socket
 import termios
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -14,8 +16,9 @@ import pytest
 import serial
 
 from adapters.profibus.driver import SPIN_LIMIT, LineDriver
+from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
-from adapters.profibus.master import Transmit
+from adapters.profibus.master import Received, Transmit, Written
 
 from .support import until
 
@@ -275,6 +278,83 @@ async def test_the_driver_writes_the_next_request_before_handling_the_other_acti
             engine.queue += ["inputs", Transmit(b"\x01\x02", loop.time()), "state"]
             driver.poke()
             assert written_when_handled == [("inputs", 2), ("state", 2)]
+        finally:
+            driver.stop()
+            link.close()
+
+
+@pytest.mark.parametrize("baudrate", [9600, 19200, 500000])
+def test_a_pty_opens_again_at_the_same_rate(baudrate: int) -> None:
+    """The intermittent ``(22, 'Invalid argument')`` of a second scan at 9600 (issue 20).
+
+    A pty drops even parity (PARENB); asked again for the same settings, only the parity
+    differs from what it has, and tcsetattr fails with EINVAL. The fallback used to retry
+    at 9600 with parity still on: at 9600 that is the same request, refused again.
+    """
+    with pty_pair() as (_, path):
+        for _ in range(3):
+            ser = open_port(path, baudrate)
+            ser.close()
+
+
+class _Recorder(_Engine):
+    """Records every step's time and event; forgets its deadline once bytes came."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.events: list[tuple[float, Any]] = []
+
+    def step(self, now: float, event: Any = None) -> list[Any]:
+        self.events.append((now, event))
+        if isinstance(event, Received):
+            self.deadline = None
+        return super().step(now, event)
+
+    def written(self) -> list[float]:
+        return [e.at for _, e in self.events if isinstance(e, Written)]
+
+
+async def test_the_driver_confirms_a_late_write_with_the_time_it_happened() -> None:
+    """The loop stands still past a write's time: the engine learns when the bytes went,
+    not when they were planned (issue 18: idle times counted from the planned time)."""
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (_, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Recorder()
+        driver = LineDriver(engine, link)
+        try:
+            due = loop.time() + 0.02
+            engine.queue.append(Transmit(b"\x01", due))
+            driver.poke()
+            time.sleep(0.05)  # noqa: ASYNC251 - the stalled loop under test: its callback runs late
+            await until(lambda: bool(engine.written()))
+            (at,) = engine.written()
+            assert at >= due + 0.025 and link.bytes_out == 1
+            engine.queue.append(Transmit(b"\x02", loop.time()))  # due now: written at once
+            before = loop.time()
+            driver.poke()
+            assert len(engine.written()) == 2 and engine.written()[1] >= before
+        finally:
+            driver.stop()
+            link.close()
+
+
+async def test_bytes_arriving_during_a_short_wait_are_stepped_before_it_ends() -> None:
+    """A deadline closer than SPIN_LIMIT is waited for on the port: a stray reply arriving
+    meanwhile reaches the engine at once (it restarts the idle time before the next
+    request is decided), not after the wait."""
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (master, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Recorder()
+        driver = LineDriver(engine, link)
+        try:
+            os.write(master, SHORT_ACK.encode())
+            fd = link.ser.fileno()
+            assert select.select([fd], [], [], 5.0)[0]  # arrived, not read yet
+            engine.deadline = loop.time() + SPIN_LIMIT / 2
+            driver.poke()  # no await: the loop's reader had no chance
+            assert any(isinstance(e, Received) for _, e in engine.events)
         finally:
             driver.stop()
             link.close()

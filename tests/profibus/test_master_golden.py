@@ -22,7 +22,7 @@ from adapters.profibus.master import (
     SlaveState,
     SlaveUp,
 )
-from adapters.profibus.scan import Scanner, status_request
+from adapters.profibus.scan import Scanner, SlaveInfo, status_request
 from adapters.profibus.timing import BusParams
 
 from .script import Script, h
@@ -95,8 +95,8 @@ def test_dpv1_read_of_index_47_request_poll_and_answer() -> None:
     master.set_outputs(5, h("04 7F 20 00"))
     script.sent(DATA_1)
     script.answer(INPUTS)
-    job = master.read_record(5, 0, 47, 240, script.now)
     script.sent(DATA_2)
+    job = master.read_record(5, 0, 47, 240, script.now)  # taken in this turn
     script.answer(INPUTS)
     script.sent(READ_47)
     script.answer(SHORT_ACK)  # 1.10: the request is taken, the answer comes on a poll
@@ -111,8 +111,8 @@ def test_dpv1_error_answer_carries_the_codes() -> None:
     start(script, "68 0F 0F 68 85 82 5D 3D 3E 88 01 0A 0B 80 B5 00 80 00 00 32 16")
     script.sent("68 07 07 68 05 02 7D 00 00 00 00 84 16")  # outputs never set: zeros
     script.answer(INPUTS)
-    job = master.read_record(5, 0, 47, 240, script.now)
     script.sent()
+    job = master.read_record(5, 0, 47, 240, script.now)  # taken in this turn
     script.answer(INPUTS)
     script.sent(READ_47)
     script.answer(READ_ERROR)  # answered at once (DL with the error PDU)
@@ -156,8 +156,21 @@ def test_sync_and_freeze_go_out_after_the_slaves() -> None:
 
 def test_fdl_status_request_of_the_scan() -> None:
     assert status_request(5, 2) == h("10 05 02 49 50 16")  # 1.2 example
-    scanner = Scanner(BUS, [5])
+    scanner = Scanner(BUS, [5], identify=False)
     script = Script(scanner)  # type: ignore[arg-type]
     script.sent("10 05 02 49 50 16")
     script.answer("10 02 05 00 07 16")  # FC 00: a slave, OK
     assert scanner.done and set(scanner.found) == {5}
+
+
+def test_the_scan_reads_a_slaves_ident_number_and_configuration() -> None:
+    scanner = Scanner(BUS, [5])
+    script = Script(scanner)  # type: ignore[arg-type]
+    script.sent("10 05 02 49 50 16")
+    script.answer("10 02 05 00 07 16")  # a slave
+    script.sent(FIRST_DIAG)  # 1.8: Slave_Diag, read-only
+    script.answer(DIAG_FRESH)  # Ident_Number 0x80B5, no master (FF)
+    script.sent("68 05 05 68 85 82 6D 3B 3E ED 16")  # 1.7: Get_Cfg to SAP 59
+    script.answer("68 06 06 68 82 85 08 3E 3B F1 79 16")  # F1
+    assert scanner.done and scanner.probed == 1
+    assert scanner.slaves[5] == SlaveInfo(0x80B5, 0xFF, b"\xf1")

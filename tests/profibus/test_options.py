@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -10,6 +11,7 @@ from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.link import Rs485
 from adapters.profibus.options import ProfibusDriveOptions, ProfibusOptions
 from gateway.adapter import load_adapter
+from gateway.cli import main
 from gateway.config import parse
 from gateway.errors import ConfigErrors
 from gateway.model import Device
@@ -35,7 +37,7 @@ def errors(**keys: Any) -> list[str]:
 def test_the_registry_names_this_adapter() -> None:
     assert load_adapter("profibus") is ProfibusAdapter
     assert ProfibusAdapter.devices == {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
-    assert ProfibusAdapter.address_range == (0, 125)
+    assert ProfibusAdapter.address_range == (0, 126)  # each profile narrows it (issue 20)
 
 
 def test_defaults() -> None:
@@ -138,10 +140,45 @@ def test_drive_errors_name_the_drive_key() -> None:
         {"id": "d", "device": "test", "address": 9, "speed": 1},
     ]
     got = errors(adapter=ADAPTER, simulate=True, drives=drives)
-    assert got[0] == f"{FILE}: buses.profibus1.drives[0].address: 126 is above the maximum 125"
-    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[1].device: 'CFW-08' is not one of")
-    assert got[2] == f"{FILE}: buses.profibus1.drives[2].size: 99 is above the maximum 32"
-    assert got[3] == f"{FILE}: buses.profibus1.drives[3].speed: unknown key"
+    assert got[0] == (
+        f"{FILE}: buses.profibus1.drives[a].address: 126 is outside the test range "
+        "0-125 (DP station addresses, fact sheet 1.2); use 0-125"
+    )
+    assert got[1].startswith(f"{FILE}: buses.profibus1.drives[b].device: 'CFW-08' is not one of")
+    assert got[2] == f"{FILE}: buses.profibus1.drives[c].size: 99 is above the maximum 32"
+    assert got[3] == f"{FILE}: buses.profibus1.drives[d].speed: unknown key"
+
+
+@pytest.mark.parametrize(
+    ("device", "good", "bad", "source"),
+    [
+        ("CFW-11", (1, 125), (0, 126), "CFW-11 manual 2.3.2 and P0918 (section 3): 1 a 125"),
+        ("CFW700", (1, 125), (0, 126), "CFW700 manual P0918 (section 4): 1 to 126"),
+        ("CFW320", (1, 125), (0, 126), "CFW320 manual 3.2 and P750 (section 4.2): 1 to 126"),
+        ("MCD 600", (1, 125), (0, 126), "MCD 600 PROFIBUS manual 7.2"),
+    ],
+)
+def test_each_device_takes_the_addresses_its_manual_gives(
+    device: str, good: tuple[int, ...], bad: tuple[int, ...], source: str
+) -> None:
+    """Issue 20: CFW-11 P0918 1-125, CFW700 P0918 1-126, CFW320 P750 1-126, MCD 600 1-125;
+    126 (the Set_Slave_Add default address) never reaches data exchange (1.2: <= 125)."""
+    for address in good:
+        bus(
+            adapter="profibus",
+            simulate=True,
+            drives=[{"id": "m", "device": device, "address": address}],
+        )
+    for address in bad:
+        drives = [{"id": "pump-3", "device": device, "address": address}]
+        [got] = errors(adapter="profibus", simulate=True, drives=drives)
+        assert got.startswith(f"{FILE}: buses.profibus1.drives[pump-3].address: {address} is "), got
+        assert source in got and got.endswith("; use 1-125"), got
+    [over] = errors(
+        adapter="profibus", simulate=True, drives=[{"id": "x", "device": device, "address": 126}]
+    )
+    if device in ("CFW700", "CFW320"):
+        assert f"126 is in the {device} range 1-126 but 126 is the Set_Slave_Add default" in over
 
 
 def test_duplicate_addresses_are_the_cores_error() -> None:
@@ -150,5 +187,19 @@ def test_duplicate_addresses_are_the_cores_error() -> None:
         {"id": "b", "device": "test", "address": 5},
     ]
     assert errors(adapter=ADAPTER, simulate=True, drives=drives) == [
-        f"{FILE}: buses.profibus1.drives: duplicate address 5"
+        f"{FILE}: buses.profibus1.drives: address 5 is used by a and b"
     ]
+
+
+def test_check_config_names_the_drive_and_the_manuals_range(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    site = tmp_path / "site.toml"
+    site.write_text(
+        '[buses.pb]\nadapter = "profibus"\nsimulate = true\n'
+        '[[buses.pb.drives]]\nid = "conveyor"\ndevice = "CFW-11"\naddress = 126\n'
+    )
+    assert main(["check-config", str(site)]) == 2
+    err = capsys.readouterr().err
+    assert "drives[conveyor].address: 126 is outside the CFW-11 range 1-125" in err
+    assert "P0918" in err

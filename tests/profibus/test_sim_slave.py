@@ -162,6 +162,49 @@ def test_the_watchdog_takes_the_slave_out_of_data_exchange() -> None:
     assert slave.master is None
 
 
+def test_time_the_process_stood_still_does_not_count_for_the_watchdog() -> None:
+    """Issue 18: a busy machine froze the demo's process for longer than the watchdog; the
+    simulated slaves (in that process) dropped out though no telegram could have come."""
+    slave, _ = echo_slave()
+    lines = SimLine([slave])
+    m = Master(slave)
+    m.start()  # watchdog 100 ms
+    lines.stood_still(0.3)  # the process was not scheduled for 0.3 s
+    modes = []
+    slave.tick(0.35)
+    modes.append(slave.mode)
+    slave.tick(0.45)  # 150 ms of running time without a telegram: expired
+    modes.append(slave.mode)
+    assert modes == [SlaveMode.DATA_EXCH, SlaveMode.WAIT_PRM]
+
+
+async def test_a_late_tick_tells_the_line_the_process_stood_still() -> None:
+    import asyncio
+    import time
+
+    from adapters.profibus.sim.port import STALL, SimPort
+
+    slave, _ = echo_slave()
+    line = SimLine([slave])
+    m = Master(slave)
+    m.start()
+    slave.watchdog = 1.0  # s
+    port, _path = SimPort.on_pty(line, tick=0.01)
+    loop = asyncio.get_running_loop()
+    slave.last_contact = loop.time()
+    port.start()
+    try:
+        time.sleep(15 * STALL)  # noqa: ASYNC251 - the stalled process under test
+        for _ in range(1000):
+            if port.stalls:
+                break
+            await asyncio.sleep(0.01)
+        assert port.stalls >= 1
+        assert slave.mode is SlaveMode.DATA_EXCH  # watchdog 1 s, stood still 1.5 s
+    finally:
+        port.close()
+
+
 def test_global_control_clear_and_groups() -> None:
     slave, device = echo_slave()
     m = Master(slave)

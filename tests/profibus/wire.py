@@ -1,6 +1,8 @@
 """The master engine wired to the simulated line in fake time (no I/O, no sleeping).
 
-Each Transmit reaches the simulated slaves when its last byte is on the line; their replies
+Each Transmit is confirmed to the master (``Written``, ``write_lag`` after it was due, as a
+driver's late callback would) and reaches the simulated slaves when its last byte is on the
+line; their replies
 come back after ``turnaround`` plus their own transmission time, through the streaming
 decoder, as the link would deliver them.
 """
@@ -27,6 +29,7 @@ from adapters.profibus.master import (
     Received,
     SlaveParams,
     Transmit,
+    Written,
 )
 from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
@@ -71,6 +74,7 @@ class Wire:
         self._queue: deque[Action] = deque()
         self.drop_replies = 0  # lose the next n replies
         self.late_by = 0.0  # extra delay of every reply
+        self.write_lag = 0.0  # how late every write is (the driver's callback run late)
         self.on_action: Callable[[Action], None] | None = None  # the caller, as a driver's
 
     # ------------------------------------------------------------------ driving
@@ -133,8 +137,9 @@ class Wire:
                 if self.on_action is not None:
                     self.on_action(action)
                 continue
-            self.now = max(self.now, action.not_before)
+            self.now = max(self.now, action.not_before) + self.write_lag
             self.sent.append((self.now, action.data))
+            self._queue.extend(self.master.step(self.now, Written(self.now)))
             end = self.now + self.bus.tx_time(len(action.data))
             for out in self.line.receive(action.data, end):
                 if self.drop_replies:

@@ -54,7 +54,7 @@ async def test_the_peer_the_gateway_connects_to_goes_and_comes_back(tmp_path: Pa
                 refresher.cancel()
                 gw.client.close()  # the peer's process ends
                 # the controlling client is silent: the watchdog's ramp stop, once
-                await events.text("cfw11", f"no command from zenoh for {WATCHDOG:g} s")
+                await events.text("cfw11", f"no command from zenoh anonymous for {WATCHDOG:g} s")
                 await gw.wait_for("cfw11", stopped)
                 assert hub.desired("cfw11").source is Source.GATEWAY
                 # a drive without a watchdog keeps its last command (its config's choice)

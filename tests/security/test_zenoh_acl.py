@@ -30,11 +30,12 @@ import zenoh
 
 from tests.security.pki import Identity, TestCA
 from tests.support.net import free_port
+from tests.support.plugins import pythonpath
 from tests.zenoh.client import Client, Got, Inbox
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "config" / "zenoh-secure.json5"
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 PREFIX = "plant/line3"  # the prefix the example's rules name
 PLACEHOLDER_DIR = "/etc/drive-gateway/tls/"
 PLACEHOLDER_LISTEN = "tls/0.0.0.0:7447"
@@ -132,7 +133,7 @@ class SecureGateway:
     """``python -m gateway run --config F`` (nothing overridden on the command line)."""
 
     def __init__(self, config: Path) -> None:
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        env = {**os.environ, "PYTHONPATH": pythonpath()}
         env.pop("NOTIFY_SOCKET", None)
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "gateway", "run", "--config", str(config)],

@@ -1,6 +1,6 @@
 """A test adapter: drives simulated in-process on the shared motor physics.
 
-Used by the daemon tests (``adapter = "tests.support.fake_adapter:FakeAdapter"``)
+Used by the daemon tests (``adapter = "fake"``, registered by tests/support/plugins.py)
 and by the northbound tests. It behaves like a real adapter towards the hub:
 comm goes connecting -> online, commands are followed with ramps, fault reset
 is taken as an edge, parameters are served from a table.
@@ -13,7 +13,14 @@ import logging
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from gateway.adapter import Capabilities, EventKind, HubPort, ParamValue
+from gateway.adapter import (
+    Capabilities,
+    EventKind,
+    HubPort,
+    ParamInfo,
+    ParamValue,
+    param_table,
+)
 from gateway.config import BusConfig, DriveConfig
 from gateway.errors import ParameterError
 from gateway.model import CommState, Device, Direction, DriveStatus, Source, SpeedScale
@@ -39,6 +46,8 @@ class FakeDriveOptions:
 
 
 PARAM_LIMITS: dict[int, tuple[int, int]] = {100: (0, 9999), 101: (0, 9999), 134: (0, 3600)}
+# the fake drives' parameter table (ParamInfo): P100 named, P101 and P134 left unnamed
+PARAM_INFO = param_table([ParamInfo(100, "Acceleration time", "s", 1, 0.0, 999.9, code="P0100")])
 
 
 class FakeAdapter:
@@ -102,7 +111,8 @@ class FakeAdapter:
             unsupported = {}
             if d.device is Device.MCD600:
                 unsupported = {"direction": "a soft starter has no direction", "jog": "no jog"}
-            hub.set_capabilities(d.id, Capabilities(speed_scale=scale, unsupported=unsupported))
+            caps = Capabilities(speed_scale=scale, unsupported=unsupported, params=PARAM_INFO)
+            hub.set_capabilities(d.id, caps)
             hub.update(d.id, comm=CommState.CONNECTING)
             self.reset_seen[d.id] = hub.desired(d.id).fault_reset_seq
         self._record("started")

@@ -140,15 +140,33 @@ class Inbox(Generic[T]):
 class Client:
     """One Zenoh session connected to the gateway under test."""
 
+    _id: Any = None  # a declared entity's id: puts and queries carry it (identified)
+    _sn = 0
+
     def __init__(
         self,
         endpoint: str,
         loop: asyncio.AbstractEventLoop | None = None,
         listen: bool = False,
         rcvbuf: int | None = None,
+        identified: bool = False,
     ) -> None:
         self.loop = loop
         self.session = zenoh.open(client_config(endpoint, listen, rcvbuf))
+        # identified: puts and queries carry a source info with this session's id, so
+        # the gateway tells this client from others (safety rule 3); else anonymous
+        if identified:
+            self._id = self.session.declare_publisher(f"_client/{self.session.zid()}").id
+
+    @property
+    def zid(self) -> str:
+        return str(self.session.zid())
+
+    def _source_info(self) -> Any:
+        if self._id is None:
+            return None
+        self._sn += 1
+        return zenoh.SourceInfo(self._id, self._sn)
 
     def close(self) -> None:
         self.session.close()
@@ -175,7 +193,12 @@ class Client:
 
     def put(self, key: str, payload: Any) -> None:
         data = payload if isinstance(payload, bytes) else json.dumps(payload).encode()
-        self.session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
+        self.session.put(
+            key,
+            data,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            source_info=self._source_info(),
+        )
 
     def _get(self, selector: str, payload: Any, on_done: Callable[[list[Replied]], None]) -> None:
         replies: list[Replied] = []
@@ -187,7 +210,9 @@ class Client:
         handler: zenoh.handlers.Callback[zenoh.Reply] = zenoh.handlers.Callback(
             lambda r: replies.append(_copy_reply(r)), lambda: on_done(replies), indirect=False
         )
-        self.session.get(selector, handler, payload=data, timeout=10.0)
+        self.session.get(
+            selector, handler, payload=data, timeout=10.0, source_info=self._source_info()
+        )
 
     def query(self, selector: str, payload: Any = None, timeout: float = 5.0) -> list[Replied]:
         done = threading.Event()

@@ -14,10 +14,11 @@ from pathlib import Path
 import pytest
 
 from tests.support.net import free_port, zenoh_endpoint
+from tests.support.plugins import pythonpath
 from tests.zenoh.client import Client
 
 ROOT = Path(__file__).resolve().parents[2]
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 PREFIX = "demo"
 HEARTBEAT = 0.2
 READY_LINE = "zenoh front end serving"
@@ -62,7 +63,7 @@ class GatewayProcess:
 
     def __init__(self, config: Path, endpoint: str) -> None:
         self.endpoint = endpoint
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        env = {**os.environ, "PYTHONPATH": pythonpath()}
         env.pop("NOTIFY_SOCKET", None)
         self.proc = subprocess.Popen(
             [

@@ -20,7 +20,7 @@ from gateway.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
 from tests.zenoh.client import Client
 
-FAKE = "tests.support.fake_adapter:FakeAdapter"
+FAKE = "fake"  # tests/support/plugins.py
 PREFIX = "arb"
 UNIT = 1
 DEVICE_FAILURE = 4

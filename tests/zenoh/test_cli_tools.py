@@ -63,7 +63,15 @@ def test_param_read_write_and_refusal(gw: GatewayProcess) -> None:
     assert wrote.returncode == 0, wrote.stderr
     read = tool(gw, "param", "d1", "read", "100")
     assert read.returncode == 0, read.stderr
-    assert read.stdout.strip() == "d1 P100.0 = 85"
+    assert read.stdout.strip() == "P0100 Acceleration time = 8.5 s"  # the drive's table
+    named = tool(gw, "param", "d1", "read", "P0100")  # as the manuals write it
+    assert named.returncode == 0, named.stderr
+    assert named.stdout.strip() == "P0100 Acceleration time = 8.5 s"
+    unnamed = tool(gw, "param", "d1", "read", "p134")  # not in the table: the raw value
+    assert unnamed.returncode == 0, unnamed.stderr
+    assert unnamed.stdout.strip() == "P134 = 1800"
+    bad = tool(gw, "param", "d1", "read", "X100")
+    assert bad.returncode == 2 and "not a parameter number" in bad.stderr
     out_of_range = tool(gw, "param", "d1", "write", "101", "99999")
     assert out_of_range.returncode == 1
     assert "parameter value out of limits" in out_of_range.stderr
@@ -79,3 +87,18 @@ def test_no_gateway_is_a_clear_error(tmp_path: Path) -> None:
     out = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 1
     assert "no answer" in out.stderr or "error" in out.stderr
+
+
+def test_watch_says_why_a_drive_left() -> None:
+    """The last comm event with a reason (not the hub's bare transitions) is in the row."""
+    from gateway.cli_tools import COLUMNS, Board
+
+    board = Board()
+    board.on_state({"id": "cfw11", "device": "CFW-11", "comm": "online", "status": "ready"})
+    reason = "left data exchange: no reply to Data_Exchange after 3 tries (waited 60.4 ms for each)"
+    board.on_event({"drive": "cfw11", "kind": "comm", "text": reason, "reason": "..."})
+    board.on_event({"drive": "cfw11", "kind": "comm", "text": "comm offline -> connecting"})
+    board.on_event({"drive": "cfw11", "kind": "fault", "text": "F070 overcurrent"})
+    (row,) = board.rows(1e9)
+    assert COLUMNS[-1] == "last comm event"
+    assert row[-1].startswith(reason + " (")

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest_asyncio
 
 from gateway.config import load
-from gateway.daemon import Daemon
+from gateway.daemon import READY_BOUND, Daemon
 from gateway.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import zenoh_endpoint
@@ -45,6 +45,9 @@ async def running(tmp_path: Path) -> AsyncIterator[Running]:
     try:
         with client.liveliness(f"{PREFIX}/gateway") as live:
             await live.auntil(lambda g: g.put, 10)
+        # the buses start once the front ends serve (a start-up failure touches no bus)
+        await asyncio.wait_for(daemon.ready.wait(), READY_BOUND + 10)
+        await asyncio.wait_for(daemon.hub.wait_for("d1", lambda s: s.online), 10)
         adapter = next(a for a in reversed(FakeAdapter.instances) if a.bus.drives[0].id == "d1")
         yield Running(daemon, task, client, adapter)
     finally:

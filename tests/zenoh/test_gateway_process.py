@@ -142,7 +142,16 @@ def test_wildcard_command_query_is_refused(client: Client) -> None:
 
 def test_parameters_read_and_write_round_trip(client: Client) -> None:
     read = client.one(key("d2", "params/100"))
-    assert read.ok and read.json() == {"number": 100, "subindex": 0, "value": 50}
+    assert read.ok and read.json() == {
+        "number": 100,
+        "subindex": 0,
+        "value": 50,
+        # the drive's parameter table (Capabilities.params) names P100 and scales it
+        "code": "P0100",
+        "name": "Acceleration time",
+        "unit": "s",
+        "scaled": 5.0,
+    }
     written = client.one(key("d2", "params/101"), {"value": 1234})
     assert written.ok and written.json() == {"number": 101, "subindex": 0, "value": 1234}
     again = client.one(key("d2", "params/101/0"))

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gateway.adapter import ParamInfo
 from gateway.errors import (
     CommandRejected,
     GatewayTimeout,
@@ -167,6 +168,18 @@ def test_any_parameter_request_parses_or_is_a_bad_request(
 def test_replies_and_error_bodies() -> None:
     req = ParamRequest(100, 0, 60)
     assert param_result(req, 60) == {"number": 100, "subindex": 0, "value": 60}
+    info = ParamInfo(100, "Acceleration time", "s", 1, 0.0, 999.0, code="P0100")
+    assert param_result(req, 60, info) == {
+        "number": 100,
+        "subindex": 0,
+        "value": 60,
+        "code": "P0100",
+        "name": "Acceleration time",
+        "unit": "s",
+        "scaled": 6.0,
+    }
+    plain = ParamInfo(227, "Run/stop selection - remote")  # no unit, no decimals
+    assert param_result(ParamRequest(227), 4, plain)["scaled"] == 4
     assert error_body(ParameterError("parameter value out of limits", 2)) == {
         "error": "parameter value out of limits",
         "code": 2,

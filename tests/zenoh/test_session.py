@@ -22,6 +22,7 @@ def test_the_document_names_endpoints_and_turns_scouting_off() -> None:
         "listen": {"endpoints": ["tcp/127.0.0.1:7447"]},
         "connect": {"endpoints": ["tcp/127.0.0.1:7448"]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        "transport": {"shared_memory": {"enabled": False}},  # issue 18
     }
     on = config_document(ZenohSection(multicast_scouting=True, mode="client"))
     assert on["mode"] == "client"

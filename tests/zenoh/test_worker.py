@@ -10,8 +10,9 @@ from functools import partial
 import pytest
 
 from gateway.zenoh.worker import Worker, WorkerStopped
+from tests.support.timing import scaled
 
-WAIT = 5.0
+WAIT = scaled(20.0)
 
 
 @pytest.fixture

@@ -33,6 +33,10 @@ class IdentityCheck:
     vendor_id: int | None = None
     product_code: int | None = None
     product_name: str | None = None
+    product_type: int | None = None  # Identity attribute 2 (e.g. from an EDS's ProdType)
+    # Identity attribute 4 (major, minor): the major must be equal and the minor at least
+    # this one (a compatible revision, as an EDS's MajRev/MinRev; decision, docs/devices.md)
+    revision: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -35,7 +35,12 @@ from adapters.devicenet.cip import (
 )
 from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value, encode_value
 from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
-from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError, InvalidCanId
+from adapters.devicenet.errors import (
+    DataTypeDecodeError,
+    DeviceNetDecodeError,
+    FragmentationError,
+    InvalidCanId,
+)
 from adapters.devicenet.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
@@ -494,6 +499,11 @@ class Scanner:
 
     def _on_own_mac_claimed(self, check: DupMacCheck) -> None:
         who = f"vendor 0x{check.vendor_id:04X} serial {check.serial_number}"
+        if (check.vendor_id, check.serial_number) == (
+            self.config.vendor_id,
+            self.config.serial_number,
+        ):
+            who += ", this scanner's own identity: another instance of this gateway"
         if self.phase in (LinePhase.START, LinePhase.CHECK_1, LinePhase.CHECK_2):
             self.phase = LinePhase.MAC_TAKEN
             text = (
@@ -749,6 +759,12 @@ class Scanner:
         yield _Step("vendor ID", GetAttributeSingle(identity, 1, 1), _check_vendor)
         yield _Step("product code", GetAttributeSingle(identity, 1, 3), _check_product_code)
         yield _Step("product name", GetAttributeSingle(identity, 1, 7), _check_product_name)
+        if node.cfg.identity.product_type is not None:
+            get_type = GetAttributeSingle(identity, 1, IdentityAttribute.DEVICE_TYPE)
+            yield _Step("product type", get_type, _check_product_type)
+        if node.cfg.identity.revision is not None:
+            get_rev = GetAttributeSingle(identity, 1, IdentityAttribute.REVISION)
+            yield _Step("revision", get_rev, _check_revision)
         produced = ConnectionAttribute.PRODUCED_CONNECTION_SIZE
         consumed = ConnectionAttribute.CONSUMED_CONNECTION_SIZE
         yield _Step("produced size", GetAttributeSingle(conn, io, produced), _check_produced)
@@ -1179,6 +1195,27 @@ def _check_product_name(node: Node, data: bytes) -> str | None:
     want = node.cfg.identity.product_name
     if want is not None and node.product_name != want:
         return f"identity mismatch: product name {node.product_name!r}, expected {want!r}"
+    return None
+
+
+def _check_product_type(node: Node, data: bytes) -> str | None:
+    found = decode_value(CipType.UINT, data)
+    want = node.cfg.identity.product_type
+    if want is not None and found != want:
+        return f"identity mismatch: product type {found}, expected {want}"
+    return None
+
+
+def _check_revision(node: Node, data: bytes) -> str | None:
+    if len(data) != 2:  # Identity attribute 4: STRUCT of USINT major, USINT minor
+        raise DataTypeDecodeError(f"revision of {len(data)} bytes (2 expected)", data)
+    major, minor = data[0], data[1]
+    want = node.cfg.identity.revision
+    if want is not None and (major != want[0] or minor < want[1]):
+        return (
+            f"identity mismatch: revision {major}.{minor}, expected {want[0]}.{want[1]} "
+            f"(major {want[0]}, minor {want[1]} or later)"
+        )
     return None
 
 

@@ -26,11 +26,6 @@ class IoTrigger(Enum):
     CYCLIC = "cyclic"
 
 
-def assembly_path(instance: int) -> bytes:
-    """Fact sheet 2.10 step 4: ``20 04 24 <assembly> 30 03``."""
-    return bytes((0x20, 0x04, 0x24, instance, 0x30, 0x03))
-
-
 @dataclass(slots=True)
 class SimConnection:
     instance: int

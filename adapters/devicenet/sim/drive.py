@@ -41,7 +41,10 @@ SPEED_WORD_MAX = 0x7FFF
 @dataclass(frozen=True, slots=True)
 class SimDriveConfig:
     mac: int = 63
-    p710: int = 1  # seed 4.1.8: 0 = 20/70, 1 = 21/71, 2 = 100/150
+    p710: int = 1  # seed 4.1.8: 0 = 20/70, 1 = 21/71, 2 = 100/150 (in force at power-up)
+    # P710 as stored once powered up, changed (keypad, network) and not yet applied: it
+    # takes effect at the next reset or power cycle (seed 4.1.8 note). None: as p710.
+    p710_stored: int | None = None
     p313: int = 2  # seed 4.1.3 default: no action
     max_rpm: float = 1800.0
     ramp_time: float = 5.0  # s, written to P100/P101 (0.1 s units)
@@ -71,6 +74,7 @@ class SimDrive:
             )
         )
         self.pair = AssemblyPair.from_p710(config.p710) or AssemblyPair.BASIC
+        self._p710_unapplied = config.p710_stored
         self.fault_code: int | None = None
         self.comm_error: int | None = None
         self.idle = True  # no run-mode I/O from the master yet (P081)
@@ -98,9 +102,15 @@ class SimDrive:
     # ------------------------------------------------------------ life cycle
 
     def power_up(self) -> None:
-        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands cleared."""
+        """After power-on or a reset: P710 takes effect (seed 4.1.8), commands and any
+        fault cleared (the simulator's faults have no condition that outlives a restart)."""
         self.pair = AssemblyPair.from_p710(self.params[P710]) or AssemblyPair.BASIC
+        # The pair in force changes only here: a P710 written while powered waits for the
+        # next reset or power cycle (config p710_stored: one written and not yet reset).
+        if self._p710_unapplied is not None:
+            self.params[P710], self._p710_unapplied = self._p710_unapplied, None
         self._clear_commands()
+        self.fault_code = None
         self.comm_error = None
         self.idle = True
         self.motor.coast()

@@ -4,12 +4,14 @@
 (fact sheet 2.3) and answers to others', Allocate/Release with the reference slaves'
 error answers (2.5), the explicit services (:mod:`adapters.devicenet.sim.objects`)
 with fragmentation both ways (2.8), polled and change-of-state/cyclic I/O with the
-P710 assembly pair (seed 3, 4.1.8), inactivity at 4 x EPR (2.9) with the P313 action
+P710 assembly pair in force since the last reset (seed 3, 4.1.8), shown in the I/O
+connections' paths (seed tables 13-14), inactivity at 4 x EPR (2.9) with the P313 action
 (seed 4.1.3), and a fault reset that takes the node offline for a moment (seed 3.4).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
@@ -22,7 +24,7 @@ from adapters.devicenet.cip import (
     Service,
     StatusPair,
 )
-from adapters.devicenet.dupmac import WEG_VENDOR_ID, DupMacCheck, DupMacKind
+from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
 from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError, InvalidCanId
 from adapters.devicenet.explicit import (
     AllocateConnectionSet,
@@ -47,14 +49,19 @@ from adapters.devicenet.ids import (
     match_predefined,
     predefined_can_id,
 )
-from adapters.devicenet.objects import NO_MASTER, AllocationChoice, ConnectionInstance
+from adapters.devicenet.objects import (
+    NO_MASTER,
+    AllocationChoice,
+    ConnectionInstance,
+    assembly_path,
+)
 from adapters.devicenet.sim import objects
-from adapters.devicenet.sim.connection import IoTrigger, SimConnection, assembly_path
+from adapters.devicenet.sim.connection import IoTrigger, SimConnection
 from adapters.devicenet.sim.drive import E37_TIMEOUT, SimDrive, SimDriveConfig
 from adapters.devicenet.sim.objects import Identity
 from gateway.sim import FaultInjector
 
-P700, P701, P703 = 700, 701, 703
+P206, P700, P701, P703 = 206, 700, 701, 703
 P700_DEVICENET = 2  # seed 4.1.4: 2 = DeviceNet
 AC = AllocationChoice
 IO_BITS = AC.POLL | AC.COS | AC.CYCLIC
@@ -75,12 +82,17 @@ class SimPhase(Enum):
 class SimNodeConfig:
     mac: int
     p710: int = 1
+    p710_stored: int | None = None  # P710 changed but not applied (SimDriveConfig)
     p313: int = 2
     max_rpm: float = 1800.0
     ramp_time: float = 2.0
     weg_speed_scale: int = 8192
     product_code: int = 8
     serial_number: int | None = None  # default 0x08000000 + MAC
+    identity: Identity | None = None  # vendor, type, code, revision, name (e.g. from an EDS)
+    # The I/O connections' produced/consumed size attributes (e.g. from an EDS);
+    # None: the assembly's 4 bytes (seed table 11).
+    io_sizes: tuple[int, int] | None = None
     dupmac_timeout: float = 1.0
     epr_tick: float = 0.01  # s: EPR is rounded up to this tick
     reset_offline: float = 0.5  # s offline after a reset
@@ -138,6 +150,7 @@ class Cfw08Node:
             SimDriveConfig(
                 mac=config.mac,
                 p710=config.p710,
+                p710_stored=config.p710_stored,
                 p313=config.p313,
                 max_rpm=config.max_rpm,
                 ramp_time=config.ramp_time,
@@ -146,7 +159,8 @@ class Cfw08Node:
                 undervoltage=config.undervoltage,
             )
         )
-        self.identity = Identity(product_code=config.product_code, serial_number=config.serial)
+        base = config.identity or Identity(product_code=config.product_code)
+        self.identity = dataclasses.replace(base, serial_number=config.serial)
         self.store: dict[tuple[int, int], int] = {}
         self.faults = FaultInjector(seed=config.seed)
         self.figures = SimFigures()
@@ -159,6 +173,7 @@ class Cfw08Node:
         self.master = NO_MASTER
         self.connections: dict[int, SimConnection] = {}
         self._reset_requested = False
+        self._fault_at: float | None = None  # when the present fault began (P206 auto-reset)
         self._reassembler = ExplicitReassembler()
         self._sender: ExplicitSender | None = None
         self._cos_last = 0.0
@@ -195,8 +210,27 @@ class Cfw08Node:
         self.drive.motor.coast()
         self.drive.motor.speed = 0.0
 
-    def inject_fault(self, code: int) -> None:
+    def inject_fault(self, code: int, now: float | None = None) -> None:
+        """The drive trips with error ``code`` (at ``now``, default the last step)."""
         self.drive.trip(code)
+        self._fault_at = self._now if now is None else now
+
+    def keypad_reset(self, now: float) -> list[CanFrame]:
+        """The keypad's reset of a faulted drive, behind the network's back: the same reset
+        as the network's (seed 3.4: offline for a moment, then it starts again with its
+        commands cleared). Nothing happens without a fault."""
+        if self.phase in _SILENT or not self.drive.fault_reset():
+            return []
+        self._go_resetting(now)
+        return []
+
+    def auto_reset_due(self) -> float | None:
+        """When the present fault resets by itself: P206 s after it began (0 = off; the
+        CFW-08 user manual's auto-reset, not in the seed)."""
+        seconds = self.drive.params.get(P206, 0)
+        if self.drive.fault_code is None or self._fault_at is None or seconds <= 0:
+            return None
+        return self._fault_at + seconds
 
     def force_owner(self, master_mac: int, now: float) -> None:
         """Tests: the node is already allocated (explicit + poll) by another master."""
@@ -245,6 +279,8 @@ class Cfw08Node:
         if phase is not SimPhase.ONLINE:
             return None
         times = [d for c in self.connections.values() if (d := c.inactivity_deadline())]
+        if (auto := self.auto_reset_due()) is not None:
+            times.append(auto)
         cos = self.connections[ConnectionInstance.COS_CYCLIC]
         if cos.established and cos.epr_ms:
             times.append(self._cos_last + cos.epr_ms / 1000.0)
@@ -298,7 +334,8 @@ class Cfw08Node:
             out.append(self._dupmac(DupMacKind.RESPONSE))  # 2.3 step 5
 
     def _dupmac(self, kind: DupMacKind) -> CanFrame:
-        return DupMacCheck(self.mac, kind, 0, WEG_VENDOR_ID, self.config.serial).to_frame()
+        vendor = self.identity.vendor_id
+        return DupMacCheck(self.mac, kind, 0, vendor, self.config.serial).to_frame()
 
     # ------------------------------------------------------------ unconnected port (2.5)
 
@@ -394,6 +431,7 @@ class Cfw08Node:
         poll_id = predefined_can_id(PredefinedMessage.SLAVE_POLL_RESPONSE, self.mac)
         cos_id = predefined_can_id(PredefinedMessage.SLAVE_COS_CYCLIC, self.mac)
         command_id = predefined_can_id(PredefinedMessage.MASTER_POLL_COMMAND, self.mac)
+        sizes = self.config.io_sizes or (ASSEMBLY_SIZE, ASSEMBLY_SIZE)
 
         def io(instance: int, produced_id: int) -> SimConnection:
             return SimConnection(
@@ -401,8 +439,8 @@ class Cfw08Node:
                 self._clock,
                 produced_id=produced_id,
                 consumed_id=command_id,
-                produced_size=ASSEMBLY_SIZE,
-                consumed_size=ASSEMBLY_SIZE,
+                produced_size=sizes[0],
+                consumed_size=sizes[1],
                 produced_path=assembly_path(pair.input_instance),
                 consumed_path=assembly_path(pair.output_instance),
                 epr_tick_ms=tick,
@@ -595,6 +633,11 @@ class Cfw08Node:
             self._online_timers(now, out)
 
     def _online_timers(self, now: float, out: list[CanFrame]) -> None:
+        auto = self.auto_reset_due()
+        if auto is not None and now >= auto:
+            self.figures.notes.append(f"auto-reset of E{self.drive.fault_code:02d} (P206)")
+            self.keypad_reset(now)
+            return
         for conn in self.connections.values():
             deadline = conn.inactivity_deadline()
             if deadline is not None and now > deadline:

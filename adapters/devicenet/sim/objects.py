@@ -26,6 +26,7 @@ from adapters.devicenet.cfw08_objects import (
     wire_size,
 )
 from adapters.devicenet.cip import CipClass, GeneralStatus, Service
+from adapters.devicenet.eds import Eds
 from adapters.devicenet.errors import AssemblyDecodeError, DataTypeDecodeError
 from adapters.devicenet.explicit import (
     ErrorResponse,
@@ -52,6 +53,19 @@ class Identity:
     revision: tuple[int, int] = (4, 6)  # seed cover: software version 4.6X
     serial_number: int = 0
     product_name: str = "CFW-08"  # seed table 8
+
+
+def identity_from_eds(eds: Eds) -> Identity:
+    """The simulated drive's Identity object from an EDS's [Device] (the serial number
+    stays the simulator's own)."""
+    dev = eds.device
+    return Identity(
+        vendor_id=dev.vendor_code,
+        product_type=dev.product_type,
+        product_code=dev.product_code,
+        revision=(dev.major_rev, dev.minor_rev),
+        product_name=dev.product_name,
+    )
 
 
 class Connection(Protocol):

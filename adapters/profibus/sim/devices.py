@@ -39,6 +39,22 @@ KINDS: Final[Mapping[str, Device]] = {
 """Names of the simulated devices on the command line."""
 
 
+FORWARD_PRM: Final = frozenset({Device.MCD600})
+"""Devices whose simulator reads the Set_Prm user data itself (the MCD 600's timeout byte)."""
+
+
+def with_setup(sim: SimDevice, device: Device, override: Any) -> SimDevice:
+    """``sim`` behind the GSD file of a drive's config (``SetupOverride``), if it has one."""
+    gsd = getattr(override, "gsd", None)
+    if gsd is None:
+        return sim
+    from .gsdsim import GsdSim
+
+    modules = tuple(getattr(override, "modules", ()))
+    wrapped: SimDevice = GsdSim(sim, gsd, forward_prm=device in FORWARD_PRM, modules=modules)
+    return wrapped
+
+
 def sim_class(device: Device, table: Mapping[Device, str] = SIM_DEVICES) -> Any:
     """The SimDevice class of ``device`` (ImportError / LookupError when there is none)."""
     try:

@@ -66,6 +66,12 @@ class SimLine:
         for slave in self.slaves.values():
             slave.tick(now)
 
+    def stood_still(self, seconds: float) -> None:
+        """The process running the line was not scheduled for ``seconds``: no slave counts
+        that time against its DP watchdog (see :mod:`.port`)."""
+        for slave in self.slaves.values():
+            slave.stood_still(seconds)
+
     def idle(self) -> None:
         """The line was quiet: a partial telegram in the buffer will never complete."""
         self.decoder.mark_idle()

@@ -5,6 +5,12 @@ One reader for the whole line (several slaves share it, as on a real bus); repli
 due later (an injected delay) are written by a loop timer. A periodic tick advances the
 devices' physics and the DP watchdogs, and tells the decoder the line went quiet when a
 partial telegram has waited :data:`IDLE_AFTER` (noise may have eaten its end).
+
+A tick that comes more than :data:`STALL` late means the process itself stood still (a busy
+machine): the simulated slaves do not count that time against their DP watchdog
+(:meth:`SimLine.stood_still`). A real slave keeps its own clock, but a simulated one could
+not have seen a telegram meanwhile even from a master that sent one; in the demo the master
+shares the same process and stood still too.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from .line import SimLine
 log = logging.getLogger(__name__)
 
 TICK: Final = 0.01  # s between device ticks
+STALL: Final = 0.1  # s: a tick this late means the process stood still (not scheduled)
 IDLE_AFTER: Final = 0.002  # s of silence that ends a partial telegram
 SETTLE_STEP: Final = 0.001
 
@@ -57,6 +64,8 @@ class SimPort:
         self.failed: BaseException | None = None
         self.bytes_in = 0
         self.bytes_out = 0
+        self.stalls = 0  # ticks that found the process had stood still
+        self._tick_due = 0.0
 
     @classmethod
     def on_pty(cls, line: SimLine, tick: float = TICK) -> tuple[SimPort, str]:
@@ -97,7 +106,13 @@ class SimPort:
     def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._loop.add_reader(self.fd, self._readable)
-        self._ticker = self._loop.call_later(self.tick_interval, self._tick)
+        self._schedule_tick()
+
+    def _schedule_tick(self) -> None:
+        if self._loop is None:
+            return
+        self._tick_due = self._loop.time() + self.tick_interval
+        self._ticker = self._loop.call_at(self._tick_due, self._tick)
 
     def close(self) -> None:
         if self._closed:
@@ -202,11 +217,15 @@ class SimPort:
         if self._closed or self._loop is None:
             return
         now = self._now()
+        late = now - self._tick_due
+        if late > STALL:
+            self.stalls += 1
+            self.line.stood_still(late)
         self.line.tick(now)
         if self.line.decoder.buffered and now - self._last_rx >= IDLE_AFTER:
             self.line.idle()
             self._send(self.line.receive(b"", now), now)
-        self._ticker = self._loop.call_later(self.tick_interval, self._tick)
+        self._schedule_tick()
 
     def _fail(self, exc: BaseException) -> None:
         if self.failed is None:

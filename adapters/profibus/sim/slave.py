@@ -69,6 +69,7 @@ class SlaveFaults:
     prm_req_forever: bool = False  # takes Set_Prm, then asks for parameters again
     silent: bool = False  # answers nothing (a missing or dead station)
     record_delay: float = 0.0  # s before a DP-V1 answer is ready (polls get E5 meanwhile)
+    dpv1_silent: bool = False  # answers no MSAC_C1 telegram (Data_Exchange still answered)
     not_ready: bool = False  # Station_Not_Ready in every diagnosis (its application is down)
     stat_diag: bool = False  # Stat_Diag in every diagnosis: "keep reading it" (1.8 Status_2)
 
@@ -155,6 +156,10 @@ class DpSlave:
                 self._comm_lost(now)
             self.mode = SlaveMode.WAIT_PRM
             self.master = None
+
+    def stood_still(self, seconds: float) -> None:
+        """The simulator's process stood still ``seconds``: the watchdog does not count it."""
+        self.last_contact += seconds
 
     def power_cycle(self, now: float, off_time: float = 0.0) -> None:
         """Power off for ``off_time`` s (silent), then back in Wait_Prm (parameters kept)."""
@@ -344,7 +349,9 @@ class DpSlave:
 
     # 1.10 ----------------------------------------------------------------
 
-    def _msac_c1(self, request: DataTelegram, now: float) -> Reply:
+    def _msac_c1(self, request: DataTelegram, now: float) -> Reply | None:
+        if self.faults.dpv1_silent:
+            return None
         if not self.dpv1_active or self.mode is not SlaveMode.DATA_EXCH:
             return request.reply(status=ResponseStatus.RS)
         if not request.data:  # a poll
@@ -394,7 +401,7 @@ def _lengths(cfg: bytes) -> tuple[int, int]:
     return conf.input_bytes, conf.output_bytes
 
 
-_HANDLERS: Final[dict[int | None, Callable[[DpSlave, DataTelegram, float], Reply]]] = {
+_HANDLERS: Final[dict[int | None, Callable[[DpSlave, DataTelegram, float], Reply | None]]] = {
     None: DpSlave._data_exchange,
     SlaveSap.SLAVE_DIAG: DpSlave._diagnosis,
     SlaveSap.SET_PRM: DpSlave._set_prm,

@@ -22,13 +22,20 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from adapters.profibus.cfg import CompactId, IoDirection
 from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
-from adapters.profibus.profile import DiagEvent, EventSink, RecordChannel, SlaveSetup
+from adapters.profibus.profile import (
+    AddressRange,
+    DiagEvent,
+    EventSink,
+    RecordChannel,
+    SlaveSetup,
+)
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedScale
 
 from . import words as w
 from .options import WegOptions, parse_options
+from .paramtable import PARAM_TABLES
 from .records import RecordParams
 from .spec import SIGNED, DataProfile, ModelSpec, scaled
 
@@ -40,6 +47,11 @@ log = logging.getLogger(__name__)
 
 MAX_13BIT_PCT: Final = 100.0 * w.WORD_MAX / w.SPEED_13BIT_BASE  # 4 x base, saturating (P681)
 MAX_PROFIDRIVE_PCT: Final = 100.0  # the drive limits the speed to P0134 = 4000h
+
+# P0680 bits the model has no field for, published as ``DriveState.values`` entries (0/1)
+# where the model's status word has the bit (docs/devices.md): CFW320 Table 4.2 bit 2 "Fire
+# mode", CFW-11 Table 3.2 bit 14 "PID automatic" (reserved on the CFW700).
+STATUS_VALUES: Final = (("fire_mode", "fire_mode"), ("pid_automatic", "automatic"))
 
 
 class DriveProgrammingMismatch(GatewayError):
@@ -111,6 +123,14 @@ class WegProfile:
 
     device: ClassVar[Device]
     spec: ClassVar[ModelSpec]
+    addresses: ClassVar[AddressRange]  # from the spec, set for each subclass
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        spec: ModelSpec | None = cls.__dict__.get("spec")
+        if spec is not None:
+            low, high = spec.address_range
+            cls.addresses = AddressRange(low, high, spec.address_source)
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
@@ -144,6 +164,11 @@ class WegProfile:
         self._alarm = False
         self._polled_fault: int | None = None
         self._polled_alarm: int | None = None
+        self.control_type: int | None = None  # P0202 as read at connect (CFW-11, CFW700)
+        self._reported_type: int | None = None  # the last P0202 taken
+        self._event: EventSink | None = None
+        self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
+        self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
 
     # ------------------------------------------------------------------ setup
 
@@ -180,7 +205,10 @@ class WegProfile:
         scale = None if self.base is None else self.base.scale()
         # alarm texts of the model's manual (CFW-11 section 5, CFW700 6, CFW320 7)
         return Capabilities(
-            speed_scale=scale, unsupported=unsupported, alarm_texts=self.spec.alarms
+            speed_scale=scale,
+            unsupported=unsupported,
+            alarm_texts=self.spec.alarms,
+            params=PARAM_TABLES[self.spec.device],  # the manual's parameter table
         )
 
     # ------------------------------------------------------------------ connect
@@ -189,10 +217,55 @@ class WegProfile:
         """Write ``startup_params``, check the drive's programming, read the scales."""
         for number, value in self.options.startup_params:
             await self._startup_param(channel, event, number, value)
+        if self.spec.reads_data_profile:
+            await self._check_data_profile(channel)
         if self.options.verify_mapping:
             await self._verify_programming(channel)
         await self._read_ratings(channel)
-        return {"speed_base": None if self.base is None else self.base.label}
+        self._event = event
+        if self.spec.reads_control_type:
+            self._set_control_type(await self.params.read(channel, 202))
+        changes: dict[str, Any] = {"speed_base": None if self.base is None else self.base.label}
+        if self.control_type is not None:
+            changes["values"] = self._own_values()
+        return changes
+
+    # ------------------------------------------------------------------ P0202
+
+    @property
+    def quick_stop_as_ramp(self) -> bool:
+        """True when a quick stop is sent as a ramp stop (P0202 V/f or VVW, see spec)."""
+        ct = self.control_type
+        return ct is not None and self.spec.quick_stop_as_ramp(ct)
+
+    def _set_control_type(self, raw: int) -> None:
+        """Take P0202 (read at connect or written): says once when quick stop falls back."""
+        before = self._reported_type is not None and self.spec.quick_stop_as_ramp(
+            self._reported_type
+        )
+        self.control_type = self._reported_type = raw
+        what = self.spec.control_type_text(raw)
+        if self.quick_stop_as_ramp == before:
+            log.debug("%s: %s", self.drive.id, what)
+            return
+        if self.quick_stop_as_ramp:
+            text = f"quick stop falls back to ramp stop: {what}"
+        else:
+            text = f"quick stop is the drive's quick stop again: {what}"
+        log.warning("%s: %s", self.drive.id, text)
+        if self._event is not None:
+            self._event(
+                text, "safety", control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp
+            )
+
+    def _own_values(self) -> dict[str, float | int]:
+        """The profile's entries of ``DriveState.values`` (docs/devices.md)."""
+        if self.control_type is None:
+            return {}
+        return {
+            self.spec.pname(202): self.control_type,
+            "quick_stop_as_ramp": int(self.quick_stop_as_ramp),
+        }
 
     async def _startup_param(
         self, channel: RecordChannel, event: EventSink, number: int, value: int
@@ -208,6 +281,21 @@ class WegProfile:
             raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
         if back != raw:
             raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
+
+    async def _check_data_profile(self, channel: RecordChannel) -> None:
+        """P741 against the configured data profile (CFW320 Table 4.6 note: the control,
+        status, speed reference and motor speed words depend on it): a mismatch would be
+        misread, so the drive is not brought online."""
+        want = self.options.data_profile
+        got = await self.params.read(channel, 741)
+        if got == want.p0741:
+            return
+        names = {p.p0741: p.value for p in DataProfile}
+        raise DriveProgrammingMismatch(
+            f"{self.spec.pname(741)} = {got} ({names.get(got, 'unknown data profile')}), "
+            f"the config's data_profile is {want.value} ({self.spec.pname(741)} = {want.p0741}): "
+            "its words would be misread"
+        )
 
     def _expected_programming(self) -> list[tuple[int, int]]:
         """(parameter, expected raw value) that the config implies about the drive."""
@@ -342,20 +430,40 @@ class WegProfile:
         Run = run/stop + general enable + remote; coast stop drops general enable; quick
         stop is bit 6 where the model has it. Bit 2 = 1 for forward and 0 for reverse, so
         the sign of the speed (normally positive) keeps the manual's meaning.
+
+        Quick stop and coast stop clear run (bit 0) and JOG (bit 3): a drive that does not
+        execute bit 6 (CFW700 "not allowed" in V/f or VVW) still ramps down, and the
+        release of either stop never restarts the motor. With P0202 V/f or VVW bit 6 is
+        not sent: the quick stop is a ramp stop (docs/devices.md).
         """
         forward = d.direction is Direction.FORWARD
         reference = self._reference(d)
+        run, jog = self._run_jog(d)
         control = w.ManufacturerControl(
-            run=d.run,
+            run=run,
             general_enable=not d.coast_stop,
             forward=forward,
-            jog=d.jog,
+            jog=jog,
             remote=d.remote,
-            quick_stop=d.quick_stop and self.spec.quick_stop,
+            quick_stop=d.quick_stop and self.spec.quick_stop and not self.quick_stop_as_ramp,
             fault_reset=reset,
         )
-        self._sent = _Sent(d.run or d.jog, forward, reference, d.remote)
+        self._sent = _Sent(run or jog, forward, reference, d.remote)
         return control.encode(self.spec.control_bits), reference
+
+    def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
+        """Run and JOG as sent: off with a quick or coast stop, and after its release until
+        the desired command has had run and JOG off (safety rule 1: the release of a stop
+        never restarts the motor on a run that was asked before it). A stop whose desired
+        command has run and JOG off (the hub clears them) holds nothing: the next run is new.
+        """
+        if d.quick_stop or d.coast_stop:
+            self._stop_held = d.run or d.jog
+        elif not d.run and not d.jog:
+            self._stop_held = False
+        if self._stop_held:
+            return False, False
+        return d.run, d.jog
 
     def _profidrive_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
         """STW1 (P0967, Table 3.8 / 4.7) walking the switching-on states, and NSOLL.
@@ -364,9 +472,14 @@ class WegProfile:
         with enable operation, ramp and setpoint (switched on, then operation). A fault is
         acknowledged with one bit-7 pulse and ON = 0. Reverse is a negative reference
         (P0967 note). Reserved bits 5 and 9 are sent as 0.
+
+        Quick stop (bit 2 = 0, OFF3) and coast stop (bit 1 = 0, OFF2) go with ON = 0 and
+        JOG = 0, so their release never switches the drive back on. With P0202 V/f or VVW
+        (bit 2 note: not recommended) a quick stop is OFF1: ON = 0 with bit 2 = 1.
         """
         state = w.ProfidriveState.SWITCHING_ON_INHIBITED if self._zsw is None else self._zsw.state
-        want = (d.run or d.jog) and not d.coast_stop and not d.quick_stop
+        run, jog = self._run_jog(d)
+        want = run or jog
         walkable = state in (
             w.ProfidriveState.READY_TO_SWITCH_ON,
             w.ProfidriveState.SWITCHED_ON,
@@ -379,12 +492,12 @@ class WegProfile:
         control = w.ProfidriveControl(
             on=on,
             no_coast_stop=not d.coast_stop,
-            no_quick_stop=not d.quick_stop,
+            no_quick_stop=not (d.quick_stop and not self.quick_stop_as_ramp),
             enable_operation=True,
             enable_ramp=True,
             enable_setpoint=True,
             fault_ack=reset,
-            jog=d.jog and on,
+            jog=jog and on,
             control_by_plc=d.remote,
         )
         self._sent = _Sent(on, True, reference, d.remote)
@@ -410,6 +523,8 @@ class WegProfile:
             if param:
                 self._mapped_word(param, word, changes, mapped)
         self._resolve_codes(changes, mapped)
+        mapped.values.update(self._own_values())
+        mapped.values.update(self._status_values)
         if mapped.values:
             changes["values"] = dict(mapped.values)
         return changes
@@ -436,6 +551,9 @@ class WegProfile:
     def _manufacturer_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
         """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403)."""
         st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
+        self._status_values = {
+            key: int(getattr(st, bit)) for key, bit in STATUS_VALUES if self._has_status_bit(bit)
+        }
         self._speed_fields(speed, changes)
         if self.spec.device is Device.CFW320:
             commanded = st.run_command  # CFW320 bit 1 "Run command"
@@ -463,6 +581,9 @@ class WegProfile:
             remote=st.remote,
             alarm=st.alarm,
         )
+
+    def _has_status_bit(self, bit: str) -> bool:
+        return any(name == bit for name, _ in self.spec.status_bits)
 
     def _profidrive_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
         """P0968 ZSW1 (Table 3.9 / 4.8) and NIST (4000h = P0134)."""
@@ -662,6 +783,8 @@ class WegProfile:
             "rated_current_a": self.options.rated_current_a,
             "rated_power_kw": self.options.rated_power_kw,
         }
+        if number == 202 and self.spec.reads_control_type:
+            self._set_control_type(raw)
         if name is None or configured[name] is not None or self.base is None:
             return
         value = float(scaled(number, raw))

@@ -3,8 +3,9 @@
 Record 47 (CFW-11 4.2.4, CFW700 5.2.4, CFW320 5.2.4): DS_Write(slot 0, index 47, request),
 then DS_Read(slot 0, index 47, 240) repeated while the drive answers "response not
 available" (Error_Code_1 C3h), several parameters per request. Record 48 (CFW-11 4.2.6,
-CFW700 5.2.5, CFW320 5.2.4): a read is DS_Write of the 2-byte number then DS_Read of the
-2-byte value; a change is one DS_Write of number and value. Values are raw 16-bit words.
+CFW700 5.2.5, CFW320 5.2.4): a read is DS_Write of the 2-byte number then DS_Read
+(240 bytes asked, as in the 4.2.3 telegrams) of the 2-byte value; a change is one DS_Write
+of number and value. Values are raw 16-bit words.
 
 Refusals raise :class:`gateway.errors.ParameterError` with the drive's own text and code:
 the record 47 error number (Table 4.2 / 5.2) or the DP-V1 Error_Code_1 (4.2.3 / 5.2.3).
@@ -137,7 +138,7 @@ class RecordParams:
             raise record_error(exc) from exc
         for _ in range(self.retries + 1):
             data = await self._read_ready(
-                channel, wegrecord.WEG_RECORD_INDEX, wegrecord.VALUE_LENGTH
+                channel, wegrecord.WEG_RECORD_INDEX, wegrecord.READ_LENGTH
             )
             if data is not None:
                 return wegrecord.WegValue.decode(data).value

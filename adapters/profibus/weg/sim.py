@@ -173,6 +173,10 @@ class WegSim:
         self.pinned: dict[int, int] = {}
         self.undervoltage = False
         self.config_mode = False
+        # P0680 bits the simulator does not compute: set by a test or the fault-injection API
+        self.fire_mode = False  # CFW320 Table 4.2 bit 2
+        self.pid_automatic = False  # CFW-11 Table 3.2 bit 14
+        self.record_read_lengths: list[tuple[int, int]] = []  # (index, length) of each DS_Read
         self.saved: dict[int, int] = {}  # CFW320: values before cyclic writes (not saved)
         self._power_up(now)
 
@@ -260,6 +264,7 @@ class WegSim:
         self.comm = specs.COMM_OFFLINE  # "initialized in the offline state" (A139 note)
         self.clear = False
         self.fault = 0
+        self._fault_at = now
         self.alarm = 0
         self.net = NetCommand(remote=self.values[220] != sp.SRC_LOCREM_NET_LOC)
         self.panel = Panel()
@@ -349,13 +354,24 @@ class WegSim:
         return b""  # the manuals define no device-related diagnosis
 
     def tick(self, now: float) -> None:
-        """Advance the motor to ``now`` under the commands in force."""
-        dt = now - self._time
-        if dt <= 0:
+        """Advance the motor to ``now`` under the commands in force (an auto-reset due on
+        the way happens at its own time)."""
+        if now <= self._time:
             return
-        self._time = now
         if self.faults.fault_code is not None and not self.fault:
             self._trip(self.faults.fault_code)
+        due = self.auto_reset_due()
+        if due is not None and due <= now:
+            self._advance_to(due)
+            log.info("%s: auto-reset of F%03d (P0206)", self.spec.device, self.fault)
+            self._reset_fault()
+        self._advance_to(now)
+
+    def _advance_to(self, when: float) -> None:
+        dt = when - self._time
+        if dt <= 0:
+            return
+        self._time = when
         self._drive_motor()
         self.motor.advance(dt)
         self._after_motion()
@@ -375,6 +391,22 @@ class WegSim:
         self.tick(now)
         self.faults.trip(code)
         self._trip(code)
+
+    def keypad_reset(self, now: float) -> None:
+        """The HMI's reset key: the fault clears behind the network's back. The run command
+        in force (P0684 bit 0 is a level) applies again at once, as after any reset."""
+        self.tick(now)
+        if self.fault:
+            log.info("%s: F%03d reset at the HMI", self.spec.device, self.fault)
+        self._reset_fault()
+
+    def auto_reset_due(self) -> float | None:
+        """When the present fault resets by itself: P0206 seconds after the trip (0 = off;
+        the programming manuals' auto-reset, docs/devices.md)."""
+        seconds = self.values.get(206, 0)
+        if not self.fault or seconds <= 0:
+            return None
+        return self._fault_at + seconds
 
     def inject_alarm(self, code: int) -> None:
         self.alarm = code
@@ -398,6 +430,7 @@ class WegSim:
         if self.fault:
             return  # one fault at a time (P0944: at most 1)
         self.fault = code
+        self._fault_at = self._time
         self.motor.coast()
         self.pd_stop = None
 
@@ -618,7 +651,7 @@ class WegSim:
         remote = self._remote()
         run_src, _, _, jog_src = self._sources(remote)
         network = run_src == sp.SRC_RUN_NET
-        quick = network and self.net.quick_stop and self.spec.quick_stop
+        quick = network and self.net.quick_stop and self._executes_quick_stop()
         jog = jog_src == sp.SRC_JOG_NET and self.net.jog
         if not self._general_enabled(remote):
             m.coast()
@@ -635,6 +668,21 @@ class WegSim:
             m.command(True, 0.0)  # ramp down, then the output goes off
         else:
             m.command(False, 0.0)
+
+    def _executes_quick_stop(self) -> bool:
+        """P0684 bit 6 acts: the model has it and, on the CFW700, P0202 is a vector type.
+
+        CFW700 P0684 bit 6: "This function is not allowed with control types (P0202) V/f
+        or VVW": the simulated CFW700 ignores the bit there (the motor keeps the run/stop
+        bit's command). The CFW-11 manual only advises against it: it executes it. The
+        PROFIdrive OFF3 (P0967 bit 2, "not recommended" on both) is always executed.
+        """
+        if not self.spec.quick_stop:
+            return False
+        if self.data_profile is DataProfile.PROFIDRIVE:
+            return True
+        ramp_only = self.spec.quick_stop_as_ramp(self.values.get(202, 0))
+        return not (self.spec.quick_stop_ignored_ramp_only and ramp_only)
 
     def _second_ramp(self) -> bool:
         source = self.values[105]
@@ -690,6 +738,8 @@ class WegSim:
         run_cmd = self._run_command(self._remote())
         status = w.ManufacturerStatus(
             run_command=run_cmd and not self.fault,
+            fire_mode=self.fire_mode,
+            automatic=self.pid_automatic,
             quick_stop_active=self.motor.quick_stopping,
             second_ramp=self._second_ramp(),
             config_mode=self.config_mode,
@@ -786,6 +836,7 @@ class WegSim:
 
     def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
         self.tick(now)
+        self.record_read_lengths = [*self.record_read_lengths[-15:], (index, length)]
         if slot != 0:
             raise access_error(E_SLOT)
         if index == pd.PARAMETER_INDEX:

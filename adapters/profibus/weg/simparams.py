@@ -18,6 +18,8 @@ from typing import Final
 
 from gateway.model import Device
 
+from .spec import CFW11_CONTROL_TYPES, CFW700_CONTROL_TYPES, DEFAULT_CONTROL_TYPE
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -112,11 +114,15 @@ def _motor_and_ramps() -> list[ParamSpec]:
         rw(401, 100, 0, 60000, cfg=True),  # motor rated current, 10.0 A
         rw(402, 1750, 0, 18000, cfg=True),  # motor rated speed, rpm
         rw(403, 60, 0, 300, cfg=True),  # motor rated frequency, Hz
+        # auto-reset time, s, 0 = off: the programming manuals' P0206 / P206 (not among the
+        # seeds; range 0-255 s as there, the simulator resets any fault: docs/devices.md)
+        rw(206, 0, 0, 255),
     ]
 
 
 def _cfw11_like(device: Device) -> list[ParamSpec]:
     cfw11 = device is Device.CFW11
+    control_types = CFW11_CONTROL_TYPES if cfw11 else CFW700_CONTROL_TYPES
     specs = [
         ro(2),  # motor speed (4.2.5 example)
         ro(3),  # motor current (P0742 description)
@@ -125,7 +131,9 @@ def _cfw11_like(device: Device) -> list[ParamSpec]:
         ro(48),  # present alarm (Table 3.2 bit 7)
         ro(49),  # present fault (Table 3.2 bit 15)
         *_motor_and_ramps(),
-        rw(202, 0, 0, 6, cfg=True),  # control type (P0684 bit 6 note)
+        # control type (P0684 bit 6 note), the WEG programming manuals' codes (spec.py):
+        # the simulator starts in sensorless vector (docs/devices.md)
+        rw(202, DEFAULT_CONTROL_TYPE, 0, max(control_types), cfg=True),
         *_sources(),
         rw(313, 0, 0, 5, cfg=True),  # Table 3.3.1 / 4.1: default 0, CFG
         rw(404, 55, 0, 9999, cfg=True),  # motor rated power, 5.5 kW (our reading)
@@ -196,6 +204,10 @@ def _cfw320() -> list[ParamSpec]:
         signed_rw(696),
         signed_rw(697),
         ro(740),
+        # data profile: the CFW320 manual names P741 (Table 4.6 note, 6.2 step 3) without its
+        # table; the CFW-11/CFW700 coding (0 = PROFIdrive, 1 = manufacturer, factory 1) is
+        # taken (docs/devices.md). The simulator's words stay the manufacturer's either way.
+        rw(741, 1, 0, 1),
         *(rw(n, 0, 0, 1199) for n in range(742, 750)),  # P742-P749, 0 to 1199
         rw(750, 1, 1, 126),  # address, 1 to 126, factory setting 1
         rw(751, 1, 1, 5),  # telegram, Table 4.7: 1-5, factory setting 1

@@ -8,7 +8,7 @@ own (the CFW-11's translated from Portuguese where the CFW700 manual has no Engl
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
 from typing import Final
@@ -20,7 +20,11 @@ from .words import BitTable
 
 
 class DataProfile(Enum):
-    """P0741 "Perfil de Dados Profibus" (CFW-11 Table 3.6, CFW700 Table 4.6)."""
+    """P0741 "Perfil de Dados Profibus" (CFW-11 Table 3.6, CFW700 Table 4.6).
+
+    The CFW320 manual names P741 (Table 4.6 note, 6.2 step 3) without its values: the same
+    coding is taken (docs/devices.md).
+    """
 
     PROFIDRIVE = "profidrive"  # P0741 = 0
     MANUFACTURER = "manufacturer"  # P0741 = 1 (factory setting)
@@ -129,6 +133,25 @@ CFW320_ALARMS: Final[Mapping[int, str]] = MappingProxyType(
 )
 
 
+# P0202 "Type of control". The seeds name P0202 and its V/f and VVW types (CFW700 P0684
+# bit 6 note, CFW-11 P0684 bit 6 "Obs.", P0967 bit 2 notes) but not its value table: the
+# codes are those of the WEG programming manuals of the CFW-11 and CFW700 (docs/devices.md).
+_CONTROL_TYPES: Final = {
+    0: "V/f 60 Hz",
+    1: "V/f 50 Hz",
+    2: "V/f adjustable",
+    3: "sensorless vector",
+    4: "vector with encoder",
+    5: "VVW",
+}
+CFW11_CONTROL_TYPES: Final[Mapping[int, str]] = MappingProxyType(
+    {**_CONTROL_TYPES, 6: "PM vector with encoder", 7: "PM sensorless vector"}
+)
+CFW700_CONTROL_TYPES: Final[Mapping[int, str]] = MappingProxyType(dict(_CONTROL_TYPES))
+VECTOR_CONTROL_TYPES: Final[frozenset[int]] = frozenset({3, 4, 6, 7})
+DEFAULT_CONTROL_TYPE: Final = 3  # the simulators' P0202: sensorless vector
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """One model's Profibus DP facts."""
@@ -137,12 +160,13 @@ class ModelSpec:
     pnu_digits: int  # how the manual writes numbers: P0680 (4) or P680 (3)
     address_param: int  # CFW-11/CFW700 P0918; CFW320 P750
     address_range: tuple[int, int]  # CFW-11 P0918 1-125; CFW700 P0918 1-126; CFW320 P750 1-126
+    address_source: str  # where the manual gives the range
     address_needs_power_cycle: bool  # CFW-11 P0918 note; the others: when not exchanging
     telegram_param: int  # CFW-11/CFW700 P0922; CFW320 P751
     max_words: int  # CFW-11/CFW700 10 (P0922 1-9); CFW320 6 (P751 1-5)
     read_map_first: int  # P0742 (input words 3..)
     write_map_first: int  # CFW-11/CFW700 P0750; CFW320 P746 (output words 3..)
-    profiles: frozenset[DataProfile]  # CFW320: no P0741 in its manual
+    profiles: frozenset[DataProfile]  # CFW320: its manual documents only the manufacturer's
     frame20: bool  # PROFIdrive frame type 20 with P0760-P0763 (CFW-11 Table 3.6 only)
     quick_stop: bool  # P0684 bit 6 (reserved on the CFW320)
     control_bits: BitTable
@@ -155,6 +179,29 @@ class ModelSpec:
     comm_action_default: int  # P0313 factory setting: 0 (CFW-11, CFW700), 1 (CFW320)
     interface_fault: int | None  # CFW-11/CFW700 A140/F240; CFW320 F032 (always a fault)
     default_ident: int  # placeholder: the GSD file's Ident_Number is not in the seeds
+    control_types: Mapping[int, str] = field(default_factory=dict)  # P0202 (none: not read)
+    quick_stop_ignored_ramp_only: bool = False  # the drive ignores bit 6 in V/f or VVW
+    # read P741 at connect whatever verify_mapping says: the CFW320's words "depend on the
+    # parameter P741" (Table 4.6 note) and the gateway speaks only its manufacturer's words
+    reads_data_profile: bool = False
+
+    @property
+    def reads_control_type(self) -> bool:
+        """True for the models whose quick stop depends on P0202 (CFW-11, CFW700)."""
+        return bool(self.control_types)
+
+    def quick_stop_as_ramp(self, control_type: int) -> bool:
+        """True when P0202 = ``control_type`` is not a vector mode (V/f, VVW or unknown).
+
+        CFW700 P0684 bit 6: "not allowed with control types (P0202) V/f or VVW"; CFW-11
+        P0684 bit 6 and both P0967 bit 2: not recommended there. A value outside the table
+        is taken as not vector (the ramp stop is the stop every control type allows).
+        """
+        return control_type not in VECTOR_CONTROL_TYPES or control_type not in self.control_types
+
+    def control_type_text(self, control_type: int) -> str:
+        text = self.control_types.get(control_type, "unknown control type")
+        return f"{self.pname(202)} = {control_type} ({text})"
 
     def pname(self, number: int) -> str:
         """A parameter's name as the manual writes it (P0003, or P003 on the CFW320)."""
@@ -195,6 +242,7 @@ CFW11: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 125),
+    address_source="CFW-11 manual 2.3.2 and P0918 (section 3): 1 a 125",
     address_needs_power_cycle=True,
     telegram_param=922,
     max_words=10,
@@ -213,6 +261,7 @@ CFW11: Final = ModelSpec(
     comm_action_default=0,
     interface_fault=240,
     default_ident=0x0C11,
+    control_types=CFW11_CONTROL_TYPES,
 )
 
 CFW700: Final = ModelSpec(
@@ -220,6 +269,7 @@ CFW700: Final = ModelSpec(
     pnu_digits=4,
     address_param=918,
     address_range=(1, 126),
+    address_source="CFW700 manual P0918 (section 4): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=922,
     max_words=10,
@@ -238,6 +288,8 @@ CFW700: Final = ModelSpec(
     comm_action_default=0,
     interface_fault=240,
     default_ident=0x0C70,
+    control_types=CFW700_CONTROL_TYPES,
+    quick_stop_ignored_ramp_only=True,  # P0684 bit 6: "not allowed" (CFW-11: "not recommended")
 )
 
 CFW320: Final = ModelSpec(
@@ -245,6 +297,7 @@ CFW320: Final = ModelSpec(
     pnu_digits=3,
     address_param=750,
     address_range=(1, 126),
+    address_source="CFW320 manual 3.2 and P750 (section 4.2): 1 to 126",
     address_needs_power_cycle=False,
     telegram_param=751,
     max_words=6,
@@ -263,6 +316,7 @@ CFW320: Final = ModelSpec(
     comm_action_default=1,
     interface_fault=32,
     default_ident=0x0C32,
+    reads_data_profile=True,
 )
 
 SPECS: Final[Mapping[Device, ModelSpec]] = MappingProxyType(

@@ -25,8 +25,9 @@ from adapters.devicenet.objects import AllocationChoice
 from adapters.devicenet.scanner import Phase
 from adapters.devicenet.sim import Cfw08Node, SimNodeConfig, SimPhase, SimRunner
 from adapters.devicenet.sim import objects as sim_objects
+from adapters.devicenet.sim.connection import SimConnection
 from gateway.adapter import Event, EventKind
-from gateway.errors import AdapterError, DriveOffline, ParameterError
+from gateway.errors import AdapterError, CommandRejected, DriveOffline, ParameterError
 from gateway.model import CommState, Direction, DriveCommand, DriveStatus, Source
 from tests.devicenet.integration.conftest import DUPMAC, EPR, FAST_BUS, drive, rig
 from tests.support.timing import scaled
@@ -294,8 +295,118 @@ async def test_refused_startup_param_leaves_the_drive_not_configured(can_line: L
 async def test_p710_mismatch_refuses_io(can_line: LinkConfig) -> None:
     async with rig(can_line, [drive(2, assembly=21, sim_p710=0)]) as r:
         ev = await r.event(lambda e: e.kind is EventKind.CONFIG)
-        assert "P710 = 0 selects assembly 20/70, the config says 21/71" in ev.text
+        assert ev.text == (
+            "not configured: the drive's I/O uses assembly 20/70 (Connection 05h instance 2 "
+            "paths), the config says 21/71; P710 = 0 selects assembly 20/70; "
+            "the drive gets no commands (idle I/O)"
+        )
         assert r.hub.state("d2").comm is CommState.CONNECTING
+
+
+def _not_configured(e: Event) -> bool:
+    return e.kind is EventKind.CONFIG and e.text.startswith("not configured")
+
+
+async def test_the_assembly_in_force_is_checked_not_p710(can_line: LinkConfig) -> None:
+    """Issue 17 item 6: P710 already says 21/71 but the drive has not been reset since,
+    so 20/70 is in force (seed 4.1.8 note). Its bytes read as 71 would publish a running
+    drive as not ready: the drive is not brought online until it is reset."""
+    async with rig(can_line, [drive(2, assembly=21, sim_p710=0, sim_p710_stored=1)]) as r:
+        ev = await r.event(_not_configured)
+        assert ev.text == (
+            "not configured: the drive's I/O uses assembly 20/70 (Connection 05h instance 2 "
+            "paths), the config says 21/71; P710 = 1 selects 21/71 but takes effect only "
+            "after a reset of the drive (seed 4.1.8): reset or power-cycle it; "
+            "the drive gets no commands (idle I/O)"
+        )
+        assert r.hub.state("d2").comm is CommState.CONNECTING
+        assert r.sim.node(2).drive.idle  # polled with idle I/O only
+        diag = r.adapter.diagnostics()["drives"]["d2"]
+        assert (diag["assembly_in_force"], diag["configured"]) == ("20/70", False)
+        with pytest.raises(Exception, match="connecting"):
+            r.hub.submit("d2", Z, DriveCommand(run=True, speed_rpm=900.0))
+        r.sim.call(2, Cfw08Node.reset)  # the reset applies P710 = 1
+        await r.wait("d2", online)
+        r.hub.submit("d2", Z, DriveCommand(run=True, speed_rpm=-900.0))
+        state = await r.wait("d2", lambda s: s.speed_rpm == -900.0 and s.at_reference)
+        assert state.direction is Direction.REVERSE and state.status is DriveStatus.RUNNING
+        assert r.adapter.diagnostics()["drives"]["d2"]["assembly_in_force"] == "21/71"
+
+
+async def test_a_p710_changed_while_online_is_refused_after_the_next_reset(
+    can_line: LinkConfig,
+) -> None:
+    """The pair in force is right, P710 is not: reported, the drive keeps running as
+    configured, and is refused when a reset (here the gateway's fault reset) applies it."""
+    async with rig(can_line, [drive(2, assembly=21)]) as r:
+        await r.wait("d2", online)
+        r.sim.node(2).drive.params[710] = 0  # at the keypad: 20/70 after the next reset
+        r.hub.submit("d2", Z, DriveCommand(run=True, speed_rpm=600.0))
+        await r.wait("d2", lambda s: s.at_reference and s.speed_rpm == 600.0)
+        r.sim.node(2).inject_fault(21)
+        await r.wait("d2", lambda s: s.status is DriveStatus.FAULTED)
+        r.hub.submit("d2", Z, DriveCommand(fault_reset=True))
+        ev = await r.event(_not_configured)
+        assert "the drive's I/O uses assembly 20/70" in ev.text
+        assert "P710 = 0 selects assembly 20/70" in ev.text
+        assert r.hub.state("d2").comm is CommState.CONNECTING
+
+
+async def test_a_p710_that_differs_from_the_pair_in_force_is_reported(
+    can_line: LinkConfig,
+) -> None:
+    async with rig(can_line, [drive(2, assembly=21, sim_p710=1, sim_p710_stored=0)]) as r:
+        await r.wait("d2", online)
+        ev = await r.event(lambda e: e.kind is EventKind.CONFIG and "P710 = 0" in e.text)
+        assert ev.text == (
+            "P710 = 0 selects assembly 20/70, the config says 21/71: 21/71 is in force "
+            "until the drive's next reset, then the drive will not be brought online "
+            "(seed 4.1.8)"
+        )
+
+
+async def test_an_unknown_assembly_in_force_is_not_configured(
+    can_line: LinkConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A drive that shows no Assembly in its I/O path: the pair in force is unknown, so
+    no I/O (decision, docs/devices.md)."""
+    real = SimConnection.attribute
+
+    def no_path(self: SimConnection, attribute: int) -> object:
+        return b"" if attribute == 14 else real(self, attribute)
+
+    monkeypatch.setattr(SimConnection, "attribute", no_path)
+    async with rig(can_line, [drive(2, assembly=21)]) as r:
+        ev = await r.event(_not_configured)
+        assert ev.text == (
+            "not configured: the assembly in force is unknown: Connection 05h instance 2 "
+            "attribute 14 names no assembly (empty); the drive gets no commands (idle I/O)"
+        )
+        assert r.hub.state("d2").comm is CommState.CONNECTING
+
+
+async def test_20_70_refuses_a_reverse_and_keeps_running(can_line: LinkConfig) -> None:
+    """Issue 17 item 5: assembly 20 has Run Fwd only (seed table 5). A negative speed used
+    to go out as Run Fwd = 0: the drive ramped to a stop while the state said -900."""
+    async with rig(can_line, [drive(4, assembly=20)]) as r:
+        await r.wait("d4", online)
+        r.hub.submit("d4", Z, DriveCommand(run=True, speed_rpm=900.0))
+        await r.wait("d4", lambda s: s.at_reference and s.speed_rpm == 900.0)
+        before = r.hub.desired("d4")
+        for cmd in (
+            DriveCommand(run=True, speed_rpm=-900.0),
+            DriveCommand(speed_pct=-50.0),
+        ):
+            with pytest.raises(CommandRejected, match="20/70 has no reverse"):
+                r.hub.submit("d4", Z, cmd)
+        assert r.hub.desired("d4") == before
+        ev = await r.event(lambda e: e.kind is EventKind.COMMAND_REFUSED)
+        assert "asks for reverse" in ev.text
+        polls = r.sim.node(4).figures.polls
+        await r.until(lambda: r.sim.node(4).figures.polls > polls + 5)
+        drive4 = r.sim.node(4).drive
+        assert drive4.run_fwd and drive4.motor.speed == 900.0
+        assert r.hub.state("d4").speed_ref_rpm == 900.0
 
 
 async def test_identity_mismatch_is_reported(can_line: LinkConfig) -> None:

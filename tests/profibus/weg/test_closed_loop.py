@@ -124,6 +124,10 @@ async def test_profidrive_switching_on_walk(device: Device) -> None:
     assert loop.step()["status"] is DriveStatus.NOT_READY
     loop.command(coast_stop=False)
     loop.step()  # ON = 0 first, S1 -> S2
+    assert loop.step(5)["status"] is DriveStatus.READY  # released: no restart (rule 1)
+    loop.command(run=False)
+    loop.step()
+    loop.command(run=True)  # a new run command after the release
     assert loop.until(lambda s: s["status"] is DriveStatus.RUNNING, 3.0)["speed_rpm"] == -900
 
     loop.command(quick_stop=True)  # OFF3: quick stop, then switching on inhibited

@@ -71,7 +71,7 @@ def test_profile_to_sim_to_profile_is_consistent(device: Device, d: DesiredComma
     s = p.inputs(sim.exchange(p.outputs(d, 0.05), 0.05), 0.05)
     # the drive holds what the profile meant: run, remote, the effective reference
     quick = d.quick_stop and device is not Device.CFW320
-    assert sim.net.run is d.run
+    assert sim.net.run is (d.run and not d.quick_stop and not d.coast_stop)  # issue 17 item 4
     assert sim.net.general_enable is not d.coast_stop
     assert sim.net.quick_stop is quick
     assert s["remote"] is d.remote
@@ -85,7 +85,7 @@ def test_profile_to_sim_to_profile_is_consistent(device: Device, d: DesiredComma
     # and in the end the motor turns as asked, reported back on the same scale
     for i in range(2, 60):
         s = p.inputs(sim.exchange(p.outputs(d, 0.05 * i), 0.05 * i), 0.05 * i)
-    if d.run and d.remote and not d.coast_stop and not quick:
+    if d.run and d.remote and not d.coast_stop and not d.quick_stop:
         assert abs(sim.motor.speed - wanted) <= 0.12
         assert abs(s["speed_rpm"] - sim.motor.speed) <= 0.12
         if abs(wanted) > 1.0:

@@ -160,7 +160,7 @@ async def test_cfw320_programming_parameters() -> None:
     await loop.connect()
     asked = {n for _, _, data in loop.channel.writes for n in _numbers(data)}
     assert {751, 742, 743, 746, 747} <= asked  # P751, P742-P743, P746-P747
-    assert 741 not in asked  # no P741 in the CFW320 manual
+    assert 741 in asked  # P741 read at connect: the words depend on it (Table 4.6 note)
 
 
 def _numbers(request: bytes) -> list[int]:
@@ -184,7 +184,8 @@ async def test_configured_scales_are_not_read() -> None:
     options = WegOptions(sync_rpm=1800.0, max_rpm=1800.0, verify_mapping=False)
     loop = Loop(Device.CFW11, options)
     assert (await loop.connect())["speed_base"] == "8192 = 1800 rpm synchronous (configured)"
-    assert loop.channel.writes == []
+    # the one record: P0202 (type of control, for the quick stop), never a scale parameter
+    assert loop.channel.writes == [(0, 47, bytes.fromhex("01 01 00 01 10 01 00 ca 00 00"))]
 
 
 async def test_profidrive_scale_follows_a_write_of_p0134() -> None:
@@ -219,3 +220,20 @@ async def test_events_helper_records() -> None:
     events = Events()
     events("x", "parameter", number=1)
     assert events.got == [("x", "parameter", {"number": 1})]
+
+
+async def test_cfw320_p741_profidrive_is_refused_at_connect() -> None:
+    """CFW320 Table 4.6 note: the words "depend on the parameter P741". A drive set to
+    PROFIdrive (P741 = 0) would be misread as the manufacturer's words: refused, even with
+    verify_mapping off."""
+    loop = Loop(Device.CFW320, WegOptions(verify_mapping=False))
+    loop.sim.values[741] = 0
+    with pytest.raises(DriveProgrammingMismatch) as info:
+        await loop.connect()
+    assert str(info.value) == (
+        "P741 = 0 (profidrive), the config's data_profile is manufacturer (P741 = 1): "
+        "its words would be misread"
+    )
+    ok = Loop(Device.CFW320, WegOptions(verify_mapping=False))
+    await ok.connect()
+    assert 741 in {n for _, _, data in ok.channel.writes for n in _numbers(data)}

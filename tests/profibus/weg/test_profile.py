@@ -174,12 +174,14 @@ def test_reverse_is_bit_2_cleared_with_a_positive_reference() -> None:
 def test_stop_coast_quick_stop_local() -> None:
     p = profile(Device.CFW11, SYNC)
     assert out(p, run=False)[0] == 0x0016  # ramp stop keeps general enable
-    assert out(p, run=True, coast_stop=True)[0] == 0x0015  # coast: general enable off
-    assert out(p, run=True, quick_stop=True)[0] == 0x0057  # bit 6
+    # coast: general enable off, and run off (issue 17 item 4: test_quick_stop.py)
+    assert out(p, run=True, coast_stop=True)[0] == 0x0014
+    assert out(p, run=True, quick_stop=True)[0] == 0x0056  # bit 6 with run off
+    assert out(p, run=False)[0] == 0x0016  # run seen off after the stop: run allowed again
     assert out(p, run=True, remote=False)[0] == 0x0007  # bit 4 = 0: local
     assert out(p, jog=True)[0] == 0x001E
     c = profile(Device.CFW320, SYNC)
-    assert out(c, run=True, quick_stop=True)[0] == 0x0017  # CFW320: bit 6 reserved
+    assert out(c, run=True, quick_stop=True)[0] == 0x0016  # CFW320: bit 6 reserved
 
 
 def test_no_speed_scale_sends_zero_reference() -> None:
@@ -281,7 +283,7 @@ def test_mapped_words_fill_the_model_and_values() -> None:
     assert (s["current_a"], s["current_pct_flc"]) == (4.7, 47.0)
     assert (s["alarm"], s["alarm_code"]) == (True, 139)
     assert (s["fault_code"], s["fault_text"]) == (239, "Profibus DP interface offline")
-    assert s["values"] == {"P0002": 1200}
+    assert s["values"] == {"P0002": 1200, "pid_automatic": 0}  # Table 3.2 bit 14
     ok = p.inputs(words(0x1200, 0, 0, 0, 0, 0), 0.0)
     assert (ok["fault_code"], ok["fault_text"], ok["alarm_code"]) == (None, None, None)
 
@@ -293,7 +295,7 @@ def test_unknown_fault_is_shown_as_its_code() -> None:
         "Comm. plug-in module communication lost"
     )
     named = profile(Device.CFW320, WegOptions(words=3, words_in=(742,)))
-    assert named.inputs(words(0, 0, 3), 0.0)["values"] == {"P742": 3}
+    assert named.inputs(words(0, 0, 3), 0.0)["values"] == {"P742": 3, "fire_mode": 0}
 
 
 def test_frame_20_words() -> None:
@@ -373,3 +375,24 @@ async def test_an_alarm_read_through_dpv1_goes_with_the_status_bit() -> None:
     loop.sim.inject_alarm(138)  # the next alarm is read again
     loop.step()
     assert loop.profile.wants_codes
+
+
+@pytest.mark.parametrize(
+    ("device", "bit", "key"),
+    [
+        (Device.CFW320, 2, "fire_mode"),  # CFW320 Table 4.2 bit 2 "Fire mode"
+        (Device.CFW11, 14, "pid_automatic"),  # CFW-11 Table 3.2 bit 14 "PID automático"
+    ],
+)
+def test_fire_mode_and_pid_automatic_bits_are_published_in_values(
+    device: Device, bit: int, key: str
+) -> None:
+    p = profile(device, WegOptions(words=2, sync_rpm=1800))
+    assert p.inputs(words(1 << bit, 0), 0.0)["values"] == {key: 1}
+    assert p.inputs(words(0, 0), 0.0)["values"] == {key: 0}
+
+
+def test_the_cfw700_has_neither_bit() -> None:
+    # CFW700 Table 4.2: bit 14 reserved, no fire mode
+    p = profile(Device.CFW700, WegOptions(words=2, sync_rpm=1800))
+    assert "values" not in p.inputs(words(0xFFFF & ~0x8000, 0), 0.0)

@@ -123,7 +123,7 @@ async def test_record_48_read_is_write_2_bytes_then_read() -> None:
     value = await profile(Device.CFW11, WegOptions(param_record=48)).read_param(ch, 100, 0)
     assert value == 85
     assert ch.writes == [(0, 48, b(0, 100))]
-    assert ch.reads == [(0, 48, 2)]
+    assert ch.reads == [(0, 48, 240)]  # the 4.2.3 DS_Read asks for 240 bytes
 
 
 async def test_record_48_write_is_4_bytes() -> None:

@@ -267,6 +267,61 @@ def test_mapped_input_words_and_signed_values() -> None:
     assert exchange(sim, 0.1, RUN_FWD, 0xF000, 0, 0)[2:] == (0xF000, 0)
 
 
+@pytest.mark.parametrize("model", [Cfw11Sim, Cfw700Sim, Cfw320Sim])
+def test_keypad_reset_with_the_run_bit_held_runs_again(model: type[WegSim]) -> None:
+    """The HMI's reset clears the fault behind the network's back; P0684 bit 0 is a level,
+    so a run bit the master still sends starts the motor again (why the gateway clears it)."""
+    sim = model(params=NET)
+    now = run_for(sim, 0.0, 3.0, RUN_FWD, 4096)
+    sim.inject_fault(71, now)
+    now = run_for(sim, now, 0.5, RUN_FWD, 4096)
+    assert sim.fault == 71 and not sim.motor.enabled
+    sim.keypad_reset(now)
+    assert sim.fault == 0 and sim.faults.fault_code is None and sim.param(49) == 0
+    run_for(sim, now, 0.5, RUN_FWD, 4096)
+    assert sim.motor.enabled and sim.motor.reference > 0
+    stopped = model(params=NET)
+    now = run_for(stopped, 0.0, 1.0, RUN_FWD, 4096)
+    stopped.inject_fault(71, now)
+    stopped.keypad_reset(now + 0.1)
+    run_for(stopped, now + 0.1, 2.0, 0x0016, 4096)  # the master sends stop: it stays stopped
+    assert stopped.fault == 0 and stopped.motor.speed == 0.0 and not stopped.running
+
+
+@pytest.mark.parametrize("model", [Cfw11Sim, Cfw700Sim, Cfw320Sim])
+def test_auto_reset_after_p0206_seconds_on_the_sim_clock(model: type[WegSim]) -> None:
+    sim = model(params={**NET, 206: 2})
+    now = run_for(sim, 0.0, 1.0, 0x0016, 4096)
+    sim.inject_fault(71, now)
+    assert sim.auto_reset_due() == pytest.approx(now + 2.0)
+    exchange(sim, now + 1.95, 0x0016, 4096)
+    assert sim.fault == 71
+    exchange(sim, now + 2.05, 0x0016, 4096)
+    assert sim.fault == 0 and sim.auto_reset_due() is None
+    # a tick that jumps past the deadline resets at the deadline, then runs on the level
+    sim.inject_fault(72, now + 3.0)
+    exchange(sim, now + 3.0, RUN_FWD, 4096)
+    assert sim.fault == 72 and not sim.motor.enabled
+    exchange(sim, now + 5.5, RUN_FWD, 4096)
+    assert sim.fault == 0 and sim.motor.speed > 0  # 0.5 s of ramp since the reset at +5.0
+    off = model(params=NET)  # P0206 = 0 (default): no auto-reset
+    off.inject_fault(71, 0.0)
+    exchange(off, 300.0, 0x0016, 4096)
+    assert off.fault == 71 and off.auto_reset_due() is None
+
+
+def test_profidrive_auto_reset_goes_to_switching_on_inhibited() -> None:
+    """PROFIdrive: after any reset the drive is in S1 and needs ON = 0 before it runs
+    (fact sheet 1.11), so a held ON does not restart it by itself."""
+    sim = Cfw11Sim(data_profile=DataProfile.PROFIDRIVE, params={**NET, 206: 1})
+    exchange(sim, 0.05, 0x047E, 0x2000)
+    now = run_for(sim, 0.05, 1.0, 0x047F, 0x2000)
+    assert state(sim) is PdState.S4 and sim.motor.speed > 0
+    sim.inject_fault(71, now)
+    now = run_for(sim, now, 1.5, 0x047F, 0x2000)
+    assert sim.fault == 0 and state(sim) is PdState.S1 and not sim.motor.enabled
+
+
 def test_profidrive_state_machine_in_the_sim() -> None:
     sim = Cfw700Sim(data_profile=DataProfile.PROFIDRIVE, params=NET)
     assert exchange(sim, 0.05, 0x0000, 0)[0] & 0x0040  # S1: switching on inhibited
