@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 FAKE = "fake"  # tests/support/plugins.py
 PREFIX = "demo"
 HEARTBEAT = 0.2
-READY_LINE = "zenoh front end serving"
+READY_LINE = " running: "  # the daemon's READY line: front ends serve, buses started
 
 
 def gateway_config(heartbeat: float = HEARTBEAT, connect: str | None = None) -> str:
