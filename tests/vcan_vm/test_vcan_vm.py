@@ -103,3 +103,18 @@ def test_modules_load_after_what_they_need(tmp_path: Path) -> None:
         for need in needs:
             assert order.index(vm.module_name(need)) < order.index(vm.module_name(module))
     assert order.index("virtio_ring") < order.index("virtio") and "can_dev" in order
+
+
+def test_the_guest_keeps_the_hosts_tmp_when_the_project_lives_there() -> None:
+    """A CI clone under /tmp: the guest must not hide it under a tmpfs of its own."""
+    guards = [line for line in vm.INIT.splitlines() if line.strip().startswith('case "$root/"')]
+    assert len(guards) == 2
+    script = "\n".join(line.replace("mount -t tmpfs tmpfs", "echo") for line in guards)
+    for root, mounted in (
+        ("/tmp/clone", ["/host/run"]),
+        ("/work/main", ["/host/tmp", "/host/run"]),
+    ):
+        run = subprocess.run(
+            ["sh", "-c", f"root={root}\n{script}"], capture_output=True, text=True, check=True
+        )
+        assert run.stdout.split() == mounted
