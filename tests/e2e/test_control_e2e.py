@@ -26,7 +26,7 @@ from tests.reliability.demo import (
     now,
     stopped,
 )
-from tests.reliability.test_safety import weg
+from tests.reliability.test_safety import plc_run, weg
 from tests.support.timing import scaled
 from tests.zenoh.client import Client
 
@@ -59,13 +59,6 @@ async def modbus_client(gw: Gateway, source: str) -> AsyncIterator[AsyncModbusTc
 async def write(client: AsyncModbusTcpClient, unit: int, address: int, value: int) -> None:
     rr = await client.write_register(address, value, device_id=unit)
     assert not rr.isError(), rr
-
-
-async def plc_run(gw: Gateway, drive: str, rpm: int) -> None:
-    unit = UNITS[drive]
-    await gw.write(unit, 1, rpm)
-    await gw.write(unit, 0, 0)
-    await gw.write(unit, 0, RUN)
 
 
 def zenoh_client(gw: Gateway) -> Client:
