@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import pytest
@@ -58,7 +57,7 @@ def test_a_large_or_deep_command_query_is_refused(
 
 def test_a_deep_command_put_is_refused_with_an_event(client: Client) -> None:
     with client.subscribe(f"{PREFIX}/drives/d2/events") as inbox:
-        time.sleep(0.2)  # the subscriber reaches the gateway
+        client.query(f"{PREFIX}/gateway/health")  # a round trip: the subscriber is declared there
         client.put(CMD, b"[" * 4000)
         got = inbox.until(lambda g: g.json()["kind"] == "command_refused", scaled(10.0))
     assert "nested too deeply" in got.json()["text"]
