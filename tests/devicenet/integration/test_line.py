@@ -97,7 +97,8 @@ async def test_io_both_ways(can_line: LinkConfig, assembly: int, reverse: bool) 
         r.hub.submit("d4", Z, DriveCommand(run=True, speed_rpm=900.0))
         state = await r.wait("d4", lambda s: s.at_reference and s.speed_rpm == 900.0)
         assert state.status is DriveStatus.RUNNING and state.direction is Direction.FORWARD
-        assert r.sim.node(4).drive.motor.speed == 900.0
+        # the speed word is whole rpm (round): a reported 900 means within 0.5 rpm of it
+        assert r.sim.node(4).drive.motor.speed == pytest.approx(900.0, abs=0.5)
         if reverse:
             r.hub.submit("d4", Z, DriveCommand(direction=Direction.REVERSE, speed_pct=25.0))
             state = await r.wait("d4", lambda s: s.speed_rpm == -450.0 and s.at_reference)
@@ -405,7 +406,7 @@ async def test_20_70_refuses_a_reverse_and_keeps_running(can_line: LinkConfig) -
         polls = r.sim.node(4).figures.polls
         await r.until(lambda: r.sim.node(4).figures.polls > polls + 5)
         drive4 = r.sim.node(4).drive
-        assert drive4.run_fwd and drive4.motor.speed == 900.0
+        assert drive4.run_fwd and drive4.motor.speed == pytest.approx(900.0, abs=0.5)
         assert r.hub.state("d4").speed_ref_rpm == 900.0
 
 
