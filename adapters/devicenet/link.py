@@ -14,6 +14,14 @@ behind.
 On real SocketCAN (not ``virtual``) a send fails with ENOBUFS when the interface's transmit
 queue (``txqueuelen``) is full and with ENETDOWN while the interface is down: the first is
 a back-off, the second means every connection on the line is gone (``link_down``).
+
+A SocketCAN socket's receive queue is bounded by SO_RCVBUF; a frame that arrives while the
+queue is full is dropped by the kernel without a word (python-can cannot read the drop
+count, SO_RXQ_OVFL). The default (``net.core.rmem_default``, 208 KiB) holds only about 300
+frames, a quarter of a second of a busy 500 kbit/s line: a garbage-collection pause or a
+loaded machine lost explicit responses that way (docs/decisions.md). The link asks for
+:data:`RX_BUFFER_BYTES` (SO_RCVBUFFORCE with CAP_NET_ADMIN, else SO_RCVBUF, which the
+kernel caps at ``net.core.rmem_max``) and reports what it got as ``rx_buffer_bytes``.
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ import asyncio
 import contextlib
 import errno
 import logging
+import socket
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -37,6 +46,8 @@ from gateway.errors import AdapterError
 
 log = logging.getLogger(__name__)
 
+RX_BUFFER_BYTES = 4 * 1024 * 1024  # asked for; about 5,000 frames, a second of a full line
+SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # Linux: needs CAP_NET_ADMIN
 NOTIFIER_TIMEOUT = 0.05  # s: the reader thread of fd-less buses (virtual) wakes this often
 BITRATE_SET_BY_SYSTEM = frozenset({"socketcan", "virtual"})  # `ip link ... bitrate`, or none
 REFUSED_INTERFACES = {
@@ -160,6 +171,30 @@ def open_problem(config: LinkConfig, exc: BaseException) -> str:
     return text
 
 
+def enlarge_receive_buffer(bus: can.BusABC, size: int = RX_BUFFER_BYTES) -> int | None:
+    """Ask for a ``size`` receive queue on a bus with a kernel socket (SocketCAN); the
+    size the kernel granted (it doubles the figure for its own bookkeeping), or None for
+    a bus without a socket (``virtual``, vendor interfaces)."""
+    sock = getattr(bus, "socket", None)
+    if not isinstance(sock, socket.socket):
+        return None
+    for option in (SO_RCVBUFFORCE, socket.SO_RCVBUF):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, option, size)
+            break
+        except OSError:  # EPERM: no CAP_NET_ADMIN for the forced size
+            continue
+    granted = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+    if granted < size:
+        log.info(
+            "CAN receive queue is %d bytes (asked for %d): raise net.core.rmem_max or "
+            "give the service CAP_NET_ADMIN for a larger one",
+            granted,
+            size,
+        )
+    return granted
+
+
 def convert(msg: can.Message) -> LinkEvent:
     """A python-can message as the codec sees it; never raises."""
     data = bytes(msg.data or b"")
@@ -191,6 +226,7 @@ class CanLink:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
         self._failures: list[RxFailed] = []
+        self._rx_buffer: int | None = None
 
     async def __aenter__(self) -> CanLink:
         self.open(asyncio.get_running_loop())
@@ -217,6 +253,7 @@ class CanLink:
             self._bus = can.Bus(**kwargs)
         except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
             raise AdapterError(open_problem(self.config, exc)) from exc
+        self._rx_buffer = enlarge_receive_buffer(self._bus)
         self._guard_receive(self._bus)
         self._reader = can.AsyncBufferedReader()
         try:
@@ -353,4 +390,5 @@ class CanLink:
             "last_send_error": f.last_send_error,
             "receive_failures": f.receive_failures,
             "last_receive_error": f.last_receive_error,
+            "rx_buffer_bytes": self._rx_buffer,
         }

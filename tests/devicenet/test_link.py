@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import os
+import socket
 import uuid
+from types import SimpleNamespace
 
 import can
 import pytest
@@ -14,6 +17,7 @@ from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
     LINK_DOWN_ERRNOS,
     RX_BATCH,
+    RX_BUFFER_BYTES,
     CanLink,
     LinkConfig,
     RxBad,
@@ -22,6 +26,7 @@ from adapters.devicenet.link import (
     RxFrame,
     _Notifier,
     convert,
+    enlarge_receive_buffer,
     error_number,
     open_problem,
 )
@@ -238,3 +243,17 @@ def test_a_readable_socket_is_drained_not_read_one_frame_per_loop_pass() -> None
     assert len(got) == RX_BATCH and len(waiting) == 3  # bounded: the loop gets its turn
     notifier._on_message_available(Bus())  # type: ignore[arg-type]
     assert len(got) == RX_BATCH + 3 and not waiting
+
+
+def test_a_socket_bus_gets_a_large_receive_queue() -> None:
+    """SocketCAN's queue (a kernel socket) is enlarged; as root past net.core.rmem_max."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as sock:
+        default = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        granted = enlarge_receive_buffer(SimpleNamespace(socket=sock))  # type: ignore[arg-type]
+        assert granted == sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        assert granted >= (RX_BUFFER_BYTES if os.geteuid() == 0 else default)
+
+
+def test_a_bus_without_a_socket_has_no_receive_queue_to_size() -> None:
+    with can.Bus(interface="virtual", channel=channel()) as bus:
+        assert enlarge_receive_buffer(bus) is None

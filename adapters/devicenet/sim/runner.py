@@ -12,6 +12,7 @@ import heapq
 import logging
 import time
 from collections.abc import Callable, Iterable
+from typing import Any
 
 from adapters.devicenet.errors import InvalidCanId
 from adapters.devicenet.frame import CanFrame
@@ -54,6 +55,10 @@ class SimRunner:
 
     def node(self, mac: int) -> Cfw08Node:
         return self.nodes[mac]
+
+    def link_figures(self) -> dict[str, Any]:
+        """The simulator's own link counters (frames sent and received), while it runs."""
+        return {} if self._link is None else self._link.diagnostics()
 
     async def run(self) -> None:
         async with CanLink(self.link_config) as link:

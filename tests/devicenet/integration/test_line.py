@@ -74,7 +74,8 @@ async def test_63_drives_come_online(can_line: LinkConfig) -> None:
                 lost = sum(d["explicit_timeouts"] for d in diag["drives"].values())
                 pytest.fail(
                     f"d{m} not online; line {line}; explicit timeouts {lost}; "
-                    f"simulator send failures {r.sim.send_failures}"
+                    f"simulator send failures {r.sim.send_failures}; "
+                    f"simulator link {r.sim.link_figures()}"
                 )
         diag = r.adapter.diagnostics()
         assert diag["online"] == 63

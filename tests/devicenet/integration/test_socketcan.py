@@ -9,12 +9,14 @@ kernel has no AF_CAN. Waits are on hub states and events, scaled by the suite's 
 from __future__ import annotations
 
 import asyncio
+import os
 import time
 from collections.abc import Callable
 
+import can
 import pytest
 
-from adapters.devicenet.link import LinkConfig
+from adapters.devicenet.link import RX_BUFFER_BYTES, CanLink, LinkConfig, RxFrame
 from gateway.adapter import Event, EventKind
 from gateway.model import CommState, DriveCommand, DriveState, DriveStatus, Source
 from tests.devicenet.integration.conftest import (
@@ -144,3 +146,30 @@ async def test_the_gateway_and_a_simulator_process_share_vcan0(vcan_line: LinkCo
 
 def _event_starting(drive_id: str, text: str) -> Callable[[Event], bool]:
     return lambda e: e.drive_id == drive_id and e.text.startswith(text)
+
+
+BURST = 2000  # frames: several times what the kernel's default receive queue holds (~300)
+
+
+async def test_the_receive_queue_holds_a_burst_while_the_loop_is_busy(
+    vcan_line: LinkConfig,
+) -> None:
+    """A socket's receive queue is all that holds frames while the event loop is busy
+    (a GC pause, a loaded machine); a full queue drops frames in the kernel, silently.
+    The link asks for a queue of about a second of a full line: a burst of 2,000 frames
+    sent while the loop cannot read arrives whole. With the kernel's default queue
+    (208 KiB) only a few hundred arrived, and explicit responses were lost that way."""
+    async with CanLink(vcan_line) as link:
+        with can.Bus(interface="socketcan", channel=vcan_line.channel) as sender:
+            for i in range(BURST):  # the loop is blocked here: nothing is read meanwhile
+                msg_id = 0x400 | (i % 64) << 3 | 3
+                data = i.to_bytes(2, "little")
+                sender.send(can.Message(arbitration_id=msg_id, data=data, is_extended_id=False))
+        got: list[int] = []
+        while events := await link.receive(scaled(1.0)):
+            got.extend(
+                int.from_bytes(e.frame.data, "little") for e in events if isinstance(e, RxFrame)
+            )
+        assert got == list(range(BURST)), f"{len(got)} of {BURST} frames arrived"
+        granted = link.diagnostics()["rx_buffer_bytes"]
+        assert granted is not None and granted >= (RX_BUFFER_BYTES if os.geteuid() == 0 else 1)
