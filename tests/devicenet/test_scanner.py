@@ -33,6 +33,7 @@ from adapters.devicenet.fragment import (
     fragment_io,
 )
 from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.objects import AllocationChoice, ConnectionInstance
 from adapters.devicenet.scanner import (
     BusErrorIn,
     ExplicitResult,
@@ -790,3 +791,36 @@ def test_a_request_in_flight_longer_than_the_keepalive_period_is_not_a_busy_loop
     s.leave(t)
     deadline = s.next_deadline()
     assert deadline is not None and deadline > t  # leaving: stale poll timeouts are gone
+
+
+def test_an_explicit_connection_the_node_deleted_is_allocated_again() -> None:
+    """Fact sheet 2.9: a node deletes its explicit connection after 4 x EPR of silence
+    (auto delete) and keeps its poll connection. Requests waiting too long for the window
+    on a slow machine did that to nodes in the VM; the scanner then sent explicit requests
+    into nothing for good. After two unanswered in a row it allocates explicit again
+    (choice 0x01 on G2 message 6), sets its EPR, and the node stays online throughout."""
+    config = replace(FAST, explicit_epr=10.0)  # the scanner's keep-alive: every 5 s
+    lin = line(2, config=config)
+    lin.run(0.3)
+    assert ups(lin) == [2]
+    node = lin.sims[2]
+    node.connections[ConnectionInstance.EXPLICIT].set_epr(100)  # the node's silence: 0.4 s
+    lin.run(1.0)
+    assert not node.allocation & AllocationChoice.EXPLICIT  # deleted by the node
+    lin.run(12.0)  # two keep-alives unanswered, then the allocation
+    again = [
+        f.data.hex(" ")
+        for _, who, f in lin.frames
+        if who == "scanner" and f.arbitration_id == 0x416 and f.data[1] == 0x4B
+    ]
+    assert again[-1].endswith("4b 03 01 01 00")  # Allocate, choice explicit only, master 0
+    assert node.allocation & AllocationChoice.EXPLICIT
+    diag = lin.scanner.node_diagnostics(2)
+    assert diag["explicit_reallocations"] == 1 and diag["explicit_timeouts"] == 2
+    assert [r.text for r in lin.take(Report) if "again" in r.text] == [
+        "node 2: 2 explicit requests unanswered: allocating its explicit connection again"
+    ]
+    ok = diag["explicit_ok"]
+    lin.run(6.0)  # the next keep-alive is answered
+    assert lin.scanner.node_diagnostics(2)["explicit_ok"] > ok
+    assert not lin.take(NodeDown) and lin.scanner.nodes[2].phase is Phase.ONLINE

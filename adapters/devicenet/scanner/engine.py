@@ -68,6 +68,7 @@ from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import PredefinedId, PredefinedMessage, match_predefined
 from adapters.devicenet.objects import (
     INACTIVITY_EPR_FACTOR,
+    AllocationChoice,
     ConnectionAttribute,
     ConnectionInstance,
     IdentityAttribute,
@@ -99,6 +100,7 @@ from adapters.devicenet.scanner.node import Node, Pending, Phase, Purpose, Trans
 from gateway.errors import FrameEncodeError
 
 MAC_MASK = 0x3F
+EXPLICIT_LOST_AFTER = 2  # explicit requests in a row unanswered: allocate explicit again
 
 
 class LinePhase(Enum):
@@ -630,6 +632,8 @@ class Scanner:
             node.retry_at = now
             self._tick_waiting(node, now)  # allocate it again as soon as it answers
             return
+        if node.unconnected is not None and now >= node.unconnected.deadline:
+            node.unconnected = None  # an explicit re-allocation unanswered: the next miss retries
         idle = not node.queue and node.current is None
         if idle and now >= node.last_explicit + self.config.explicit_epr / 2:
             # keep the explicit connection alive: read the Identity status
@@ -674,7 +678,9 @@ class Scanner:
         node.unconnected = None
         if pending is None:
             return
-        if pending.purpose is Purpose.RELEASE:
+        if pending.purpose is Purpose.EXPLICIT_AGAIN:
+            self._on_explicit_again(node, body)
+        elif pending.purpose is Purpose.RELEASE:
             node.phase = Phase.RELEASED
         elif pending.purpose is Purpose.RELEASE_THEN_ALLOCATE:
             node.released_before_allocate = True
@@ -856,6 +862,7 @@ class Scanner:
             timeout = self.config.explicit_timeout
             text = f"no response within {timeout:g} s"
             self._complete(node, now, current.pending, None, text, timed_out=True)
+            self._explicit_missed(node, now)
         for reassembler in (node.reassembler, node.io_reassembler):
             if reassembler.deadline is not None and now >= reassembler.deadline:
                 try:
@@ -864,6 +871,42 @@ class Scanner:
                     node.figures.bad_frames += 1
         if node.current is None and node.queue and self._explicit_free() and self._tx_ok(now):
             self._start_request(node, now, node.queue.popleft())
+
+    def _explicit_missed(self, node: Node, now: float) -> None:
+        """Explicit requests to an online node go unanswered while its polls are answered:
+        its explicit connection has most likely been deleted (auto delete after 4 x EPR
+        of silence, fact sheet 2.9), e.g. after the requests waited too long for the
+        window on a slow machine. Allocate it again on its own (the node is ours: the
+        I/O connection stays) instead of leaving the node without parameter access."""
+        node.explicit_misses += 1
+        if node.phase is not Phase.ONLINE or node.unconnected is not None:
+            return
+        if node.explicit_misses < EXPLICIT_LOST_AFTER or not self._tx_ok(now):
+            return
+        text = (
+            f"node {node.mac}: {node.explicit_misses} explicit requests unanswered: "
+            "allocating its explicit connection again"
+        )
+        if node.problem(text):
+            self._report(node.mac, ReportKind.TIMEOUT, text)
+        body = AllocateConnectionSet(AllocationChoice.EXPLICIT, self.config.mac)
+        timeout = self.config.allocate_timeout
+        self._start_unconnected(node, now, body, Purpose.EXPLICIT_AGAIN, timeout)
+
+    def _on_explicit_again(self, node: Node, body: Response) -> None:
+        """The reply to an explicit re-allocation: allocated (set its EPR first), or
+        already allocated (it was alive, only slow); anything else waits for the next miss."""
+        if isinstance(body, AllocateResponse):
+            node.explicit_misses = 0
+            node.figures.explicit_reallocations += 1
+            epr = ConnectionAttribute.EXPECTED_PACKET_RATE
+            ms = _epr_ms(self.config.explicit_epr)
+            set_epr = SetAttributeSingle(CipClass.CONNECTION, ConnectionInstance.EXPLICIT, epr, ms)
+            node.queue.appendleft(Pending(set_epr, on_done=_ignore, label="explicit EPR"))
+        elif isinstance(body, ErrorResponse):
+            rejection = allocation_rejection(body.general_status, body.additional_code)
+            if rejection is AllocationRejection.ALREADY_ALLOCATED:
+                node.explicit_misses = 0
 
     def _bringups(self) -> int:
         return sum(1 for n in self.nodes.values() if n.phase in _BRINGUP_PHASES)
@@ -960,6 +1003,7 @@ class Scanner:
             node.figures.stale_responses += 1
             return
         self._end_transaction(node)
+        node.explicit_misses = 0
         node.figures.explicit_rtt_last = now - current.started
         self._complete(node, now, current.pending, body, None)
 

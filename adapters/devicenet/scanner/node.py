@@ -55,6 +55,7 @@ class Purpose(Enum):
     RELEASE_THEN_ALLOCATE = "release before allocate"
     RELEASE = "release"
     RELEASE_REFUSED = "release (I/O refused)"
+    EXPLICIT_AGAIN = "allocate explicit again"
 
 
 @dataclass(slots=True)
@@ -76,6 +77,7 @@ class Figures:
     explicit_timeouts: int = 0
     explicit_ok: int = 0
     explicit_errors: int = 0
+    explicit_reallocations: int = 0
     ack_timeouts: int = 0
     offline_count: int = 0
     frames_tx: int = 0
@@ -106,6 +108,7 @@ class Figures:
             "ack_timeouts": self.ack_timeouts,
             "explicit_ok": self.explicit_ok,
             "explicit_errors": self.explicit_errors,
+            "explicit_reallocations": self.explicit_reallocations,
             "offline_count": self.offline_count,
             "frames_tx": self.frames_tx,
             "frames_rx": self.frames_rx,
@@ -141,6 +144,7 @@ class Node:
     reassembler: ExplicitReassembler = field(default_factory=ExplicitReassembler)
     io_reassembler: IoReassembler = field(default_factory=IoReassembler)  # over 8 bytes in
     last_explicit: float = 0.0
+    explicit_misses: int = 0  # explicit requests in a row without an answer
     vendor_id: int | None = None
     product_code: int | None = None
     product_name: str | None = None

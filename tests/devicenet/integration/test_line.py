@@ -6,6 +6,7 @@ Waits are on hub states and events with timeouts, never sleeps.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import time
 from functools import partial
 
@@ -29,7 +30,7 @@ from adapters.devicenet.sim.connection import SimConnection
 from gateway.adapter import Event, EventKind
 from gateway.errors import AdapterError, CommandRejected, DriveOffline, ParameterError
 from gateway.model import CommState, Direction, DriveCommand, DriveStatus, Source
-from tests.devicenet.integration.conftest import DUPMAC, EPR, FAST_BUS, drive, rig
+from tests.devicenet.integration.conftest import DUPMAC, EPR, FAST_BUS, Rig, drive, rig
 from tests.support.timing import scaled
 
 ONLINE = CommState.ONLINE
@@ -56,6 +57,20 @@ async def test_one_drive_comes_online(can_line: LinkConfig) -> None:
         assert d7["epr_ms"] == round(EPR * 1000) and d7["frames_rx"] > 0
 
 
+def sim_node_summary(r: Rig, mac: int) -> dict[str, object]:
+    """What a simulated node says of itself, for a failure message."""
+    node = r.sim.node(mac)
+    figures = dataclasses.asdict(node.figures)
+    figures["notes"] = figures["notes"][-8:]
+    return {
+        "phase": node.phase.name,
+        "allocation": node.allocation,
+        "master": node.master,
+        "connections": {i: (c.state.name, c.epr_ms) for i, c in node.connections.items()},
+        **figures,
+    }
+
+
 SLOW_63 = {"poll_interval": 0.05, "expected_packet_rate": 0.2, "response_timeout": 0.2}
 
 
@@ -75,7 +90,8 @@ async def test_63_drives_come_online(can_line: LinkConfig) -> None:
                 pytest.fail(
                     f"d{m} not online; line {line}; explicit timeouts {lost}; "
                     f"simulator send failures {r.sim.send_failures}; "
-                    f"simulator link {r.sim.link_figures()}"
+                    f"simulator link {r.sim.link_figures()}; "
+                    f"d{m}: {diag['drives'][f'd{m}']}; simulated node: {sim_node_summary(r, m)}"
                 )
         diag = r.adapter.diagnostics()
         assert diag["online"] == 63
