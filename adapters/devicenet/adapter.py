@@ -132,7 +132,6 @@ from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
-EXPLICIT_EPR = 2.5  # s, fact sheet 2.9: the usual explicit connection EPR
 LEAVE_BOUND = 1.0  # s: the longest wait for Release answers on shutdown
 LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SIM_START_BOUND = 2.0  # s
@@ -273,7 +272,7 @@ class DeviceNetAdapter:
             poll_interval=o.poll_interval,
             response_timeout=o.response_timeout,
             explicit_timeout=o.explicit_timeout,
-            explicit_epr=EXPLICIT_EPR,
+            explicit_epr=o.explicit_epr,
             dupmac_timeout=o.dupmac_timeout,
             allocate_timeout=o.explicit_timeout,
             retry_min=min(0.5, o.retry_max),

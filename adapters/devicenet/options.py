@@ -1,8 +1,8 @@
 """The DeviceNet bus table and its drives' keys (read with gateway.schema.Table).
 
 Bus keys: interface, channel, bitrate, mac, vendor_id, poll_interval,
-expected_packet_rate, response_timeout, explicit_timeout, dupmac_timeout, retry_max,
-status_interval, simulate. Drive keys: assembly, connection, ack, eds, check_identity,
+expected_packet_rate, response_timeout, explicit_timeout, explicit_epr, dupmac_timeout,
+retry_max, status_interval, simulate. Drive keys: assembly, connection, ack, eds, check_identity,
 vendor_id, product_code, product_name, adr, max_rpm, max_rpm_param, weg_speed_scale,
 at_reference_rpm, startup_params, and the simulator's sim_p313, sim_p710,
 sim_p710_stored, sim_ramp_time, sim_max_rpm. See docs/devices.md.
@@ -54,6 +54,7 @@ class BusOptions:
     status_interval: float = 2.0
     simulate: bool = False
     vendor_id: int = SCANNER_VENDOR_ID
+    explicit_epr: float = 2.5  # s, fact sheet 2.9: the usual explicit connection EPR
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +103,14 @@ def parse_bus(t: Table) -> BusOptions:
         raise t.error(
             "expected_packet_rate", f"{epr:g} s is shorter than poll_interval ({poll:g} s)"
         )
+    explicit_timeout = t.number("explicit_timeout", d.explicit_timeout, minimum=0.01, maximum=30.0)
+    # the EPR attribute is 16-bit ms (fact sheet 2.9); a request must fit in a connection's life
+    explicit_epr = t.number("explicit_epr", d.explicit_epr, minimum=0.1, maximum=65.535)
+    if explicit_epr < explicit_timeout:
+        raise t.error(
+            "explicit_epr",
+            f"{explicit_epr:g} s is shorter than explicit_timeout ({explicit_timeout:g} s)",
+        )
     simulate = t.boolean("simulate", d.simulate)
     if simulate and interface != "virtual":
         raise t.error(
@@ -119,9 +128,8 @@ def parse_bus(t: Table) -> BusOptions:
         response_timeout=t.number(
             "response_timeout", d.response_timeout, minimum=0.001, maximum=10.0
         ),
-        explicit_timeout=t.number(
-            "explicit_timeout", d.explicit_timeout, minimum=0.01, maximum=30.0
-        ),
+        explicit_timeout=explicit_timeout,
+        explicit_epr=explicit_epr,
         dupmac_timeout=t.number("dupmac_timeout", d.dupmac_timeout, minimum=0.01, maximum=10.0),
         retry_max=t.number("retry_max", d.retry_max, minimum=0.1, maximum=3600.0),
         status_interval=t.number("status_interval", d.status_interval, minimum=0.1, maximum=3600.0),

@@ -42,7 +42,8 @@ def test_every_key(tmp_path: Path) -> None:
     text = (
         BUS + "interface = 'virtual'\nchannel = 'line-a'\nbitrate = 500000\nmac = 1\n"
         "poll_interval = 0.02\nexpected_packet_rate = 0.1\nresponse_timeout = 0.05\n"
-        "explicit_timeout = 0.5\ndupmac_timeout = 0.1\nretry_max = 5\nstatus_interval = 1\n"
+        "explicit_timeout = 0.5\nexplicit_epr = 4\ndupmac_timeout = 0.1\nretry_max = 5\n"
+        "status_interval = 1\n"
         "simulate = true\n"
         "[[buses.dn.drives]]\nid = 'd'\ndevice = 'CFW-08'\naddress = 5\nassembly = 100\n"
         "connection = 'cos'\nack = false\ncheck_identity = false\nvendor_id = 1\n"
@@ -53,7 +54,7 @@ def test_every_key(tmp_path: Path) -> None:
     )
     bus = load(write(tmp_path, text)).buses[0]
     assert bus.options == BusOptions(
-        "virtual", "line-a", 500_000, 1, 0.02, 0.1, 0.05, 0.5, 0.1, 5.0, 1.0, True
+        "virtual", "line-a", 500_000, 1, 0.02, 0.1, 0.05, 0.5, 0.1, 5.0, 1.0, True, explicit_epr=4.0
     )
     opts: DriveOptions = bus.drives[0].options
     assert opts.assembly is AssemblyPair.WEG and opts.connection is IoKind.COS and not opts.ack
@@ -72,6 +73,9 @@ BROKEN = [
     (BUS + "mac = 64\n", "buses.dn.mac: 64 is above the maximum 63"),
     (BUS + "poll_interval = 0.1\nexpected_packet_rate = 0.05\n",
      "buses.dn.expected_packet_rate: 0.05 s is shorter than poll_interval (0.1 s)"),
+    (BUS + "explicit_timeout = 3\nexplicit_epr = 2\n",
+     "buses.dn.explicit_epr: 2 s is shorter than explicit_timeout (3 s)"),
+    (BUS + "explicit_epr = 70\n", "buses.dn.explicit_epr: 70 is above the maximum 65.535"),
     (BUS + "simulate = true\n",
      "buses.dn.simulate: needs interface = 'virtual' (simulated drives run in-process), not 'socketcan'"),
     (BUS + "simulate = 'yes'\n", "buses.dn.simulate: must be true or false, not a string"),
