@@ -285,7 +285,7 @@ class WebFrontEnd:
             return self.hub.state(drive_id)
         except UnknownDrive:
             raise web.HTTPNotFound(
-                body=orjson.dumps({"error": f"no drive {drive_id!r}"}),
+                text=orjson.dumps({"error": f"no drive {drive_id!r}"}).decode(),
                 content_type="application/json",
             ) from None
 
