@@ -29,7 +29,7 @@ from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 import orjson
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 from gateway.adapter import EventKind
@@ -67,6 +67,7 @@ SECURITY_HEADERS = {
     "Cache-Control": "no-store",
 }
 MAX_BODY = 4096  # bytes of a command request
+SHUTDOWN_TIMEOUT = 2.0  # s open requests and pages get when the gateway stops
 WS_HEARTBEAT = 20.0  # s between pings: a page that went away is noticed
 WS_MAX_MESSAGE = 1024  # bytes a page may send on the feed (it sends nothing we read)
 PAGE_ID = re.compile(r"[A-Za-z0-9-]{1,40}")
@@ -117,6 +118,7 @@ class WebFrontEnd:
         self.address: tuple[str, int] | None = None
         self.ready = asyncio.Event()  # set while the server listens
         self._writers: set[asyncio.Task[None]] = set()
+        self._sockets: set[web.WebSocketResponse] = set()
 
     # ------------------------------------------------------------ life cycle
 
@@ -138,7 +140,9 @@ class WebFrontEnd:
         return app
 
     async def run(self) -> None:
-        runner = web.AppRunner(self.app(), access_log=None, handle_signals=False)
+        runner = web.AppRunner(
+            self.app(), access_log=None, handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT
+        )
         await runner.setup()
         self.feed.open()
         try:
@@ -156,8 +160,19 @@ class WebFrontEnd:
             self.feed.close()
             for task in list(self._writers):
                 task.cancel()
+            await self._close_sockets()
             await runner.cleanup()
             log.info("web front end stopped")
+
+    async def _close_sockets(self) -> None:
+        """Tell every open page the gateway is going (it shows so, and reconnects later)."""
+
+        async def close(ws: web.WebSocketResponse) -> None:
+            with contextlib.suppress(Exception):
+                async with asyncio.timeout(SHUTDOWN_TIMEOUT):
+                    await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway stopping")
+
+        await asyncio.gather(*(close(ws) for ws in list(self._sockets)))
 
     def _bind_error(self, exc: OSError) -> StartupError:
         where = f"{self.section.host}:{self.section.port}"
@@ -229,6 +244,7 @@ class WebFrontEnd:
         ws = web.WebSocketResponse(heartbeat=WS_HEARTBEAT, max_msg_size=WS_MAX_MESSAGE)
         ws.headers.update(SECURITY_HEADERS)
         await ws.prepare(request)
+        self._sockets.add(ws)
         client = self.feed.add()
         self.counters.clients_open += 1
         writer = asyncio.create_task(self._write(ws, client, request), name="web-ws-writer")
@@ -238,6 +254,7 @@ class WebFrontEnd:
                 if msg.type is WSMsgType.ERROR:
                     break  # the page sends nothing the gateway reads
         finally:
+            self._sockets.discard(ws)
             self.counters.clients_open -= 1
             self.feed.remove(client)
             writer.cancel()

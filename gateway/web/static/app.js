@@ -94,7 +94,7 @@ function renderAges() {
 
 function renderHead() {
   const head = $("drives-head");
-  head.replaceChildren(...COLUMNS.map(([, title]) => el("th", null, title)));
+  head.replaceChildren(...COLUMNS.map(([key, title]) => el("th", {"data-col": key}, title)));
   if (S.commands) head.appendChild(el("th", null, "command"));
 }
 
