@@ -212,7 +212,8 @@ async def dropped(http: aiohttp.ClientSession, demo: Demo) -> float:
 
 
 def _median(windows: list[Window], name: str) -> float:
-    return statistics.median(getattr(w, name) for w in windows)
+    values: list[float] = [getattr(w, name) for w in windows]
+    return statistics.median(values)
 
 
 async def _run() -> list[Figure]:
