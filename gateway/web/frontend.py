@@ -100,6 +100,15 @@ def allowed(peer: str | None, networks: tuple[IpNetwork, ...]) -> bool:
     return any(address in net for net in networks)
 
 
+def same_origin(request: web.Request) -> bool:
+    """No Origin (not a browser), or the origin of this very host and port."""
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return True
+    scheme, sep, rest = origin.partition("://")
+    return bool(sep) and scheme in ("http", "https") and rest.lower() == request.host.lower()
+
+
 def _json(body: Any, status: int = 200) -> web.Response:
     return web.Response(body=orjson.dumps(body), status=status, content_type="application/json")
 
@@ -240,7 +249,12 @@ class WebFrontEnd:
     async def _no_icon(self, request: web.Request) -> web.Response:
         return web.Response(status=204)
 
-    async def _ws(self, request: web.Request) -> web.WebSocketResponse:
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        if not same_origin(request):
+            # a WebSocket is not held to the same-origin rule: a page of another site open
+            # in the operator's browser could otherwise read the feed
+            self.counters.refused["origin"] += 1
+            return web.Response(status=403, text="forbidden: the feed serves this page only\n")
         ws = web.WebSocketResponse(heartbeat=WS_HEARTBEAT, max_msg_size=WS_MAX_MESSAGE)
         ws.headers.update(SECURITY_HEADERS)
         await ws.prepare(request)

@@ -76,7 +76,7 @@ METRICS: dict[str, str] = {
     f"{NS}_web_clients": "Web pages connected now (WebSocket).",
     f"{NS}_web_messages_dropped": "Push messages slow pages lost (each replaced by a snapshot).",
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
-    f"{NS}_web_requests_refused": "Web requests refused, by reason (allow, token, commands_off).",
+    f"{NS}_web_requests_refused": "Refused requests (allow, origin, token, commands_off).",
     f"{NS}_web_commands": "Commands from the page, by result (accepted, refused).",
 }
 """Every metric the collector exposes (the process figures come from prometheus_client)."""
@@ -100,7 +100,7 @@ class WebCounters:
     """What the web front end counts itself (besides the feed's counters)."""
 
     def __init__(self) -> None:
-        self.refused: dict[str, int] = {"allow": 0, "token": 0, "commands_off": 0}
+        self.refused: dict[str, int] = {"allow": 0, "origin": 0, "token": 0, "commands_off": 0}
         self.commands: dict[str, int] = {"accepted": 0, "refused": 0}
         self.clients_open = 0
 

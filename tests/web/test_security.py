@@ -6,6 +6,7 @@ from __future__ import annotations
 import ipaddress
 
 import aiohttp
+import pytest
 
 from gateway.adapter import EventKind
 from gateway.model import Source
@@ -103,3 +104,18 @@ async def test_every_answer_carries_the_security_headers() -> None:
                 csp = r.headers["Content-Security-Policy"]
                 assert "script-src 'self'" in csp and "default-src 'none'" in csp
                 assert r.headers["X-Content-Type-Options"] == "nosniff"
+
+
+async def test_the_feed_is_refused_to_a_page_of_another_site() -> None:
+    async with small_gateway(web_section()) as gw:
+        host = gw.url.removeprefix("http://").rstrip("/")
+        with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+            await gw.http.ws_connect(f"{gw.url}ws", origin="http://evil.example")
+        assert refused.value.status == 403
+        assert gw.web.counters.refused["origin"] == 1
+        async with gw.http.ws_connect(f"{gw.url}ws", origin=f"http://{host}") as ws:
+            first = await ws.receive_json(timeout=10)
+            assert first["type"] == "snapshot" and [d["id"] for d in first["drives"]] == [
+                "d1",
+                "d2",
+            ]
