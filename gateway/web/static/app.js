@@ -79,8 +79,10 @@ function renderDrive(d) {
   fault.textContent = d.fault_code === null || d.fault_code === undefined
     ? (d.alarm ? `alarm ${d.alarm_code ?? ""}` : "")
     : `${d.fault_code}${d.fault_text ? ": " + d.fault_text : ""}`;
-  cell(tr, "control").textContent = d.control_source === "none"
+  const control = cell(tr, "control");
+  control.textContent = d.control_source === "none"
     ? "–" : `${d.control_source}${d.control_client ? " " + d.control_client : ""}`;
+  control.title = control.textContent;
   cell(tr, "age").dataset.ts = d.ts;
   cell(tr, "age").textContent = ageText(d.ts);
   if (S.commands) renderCommands(tr, d);
