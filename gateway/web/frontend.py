@@ -218,8 +218,15 @@ class WebFrontEnd:
     async def _push(self) -> None:
         loop = asyncio.get_running_loop()
         next_at = loop.time()
+        failing = False
         while True:
-            self.feed.step()
+            try:
+                self.feed.step()
+                failing = False
+            except Exception:  # a figure that cannot be read this time: the next push tries
+                if not failing:
+                    log.exception("web feed: a push failed (logged once until one succeeds)")
+                failing = True
             next_at += PUSH_PERIOD
             delay = next_at - loop.time()
             if delay < 0:  # the loop was held up: no burst of steps to catch up
