@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test test-vcan lint typecheck pytest bench soak clean venv
+.PHONY: run test test-web test-vcan lint typecheck pytest bench soak clean venv
 
 venv: $(STAMP)
 
@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
+	@echo "drive-gateway demo: the status page will be at http://127.0.0.1:8080/ ([web] bind of config/demo.toml)"
 	$(BIN)/drive-gateway run --config config/demo.toml
 
 lint: $(STAMP)
@@ -29,6 +30,20 @@ pytest: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 test: lint typecheck pytest
+
+# The status page in a real browser: Debian's Chromium driven by Playwright (tests/web,
+# marker `browser`, left out of `make test`). Installs chromium when missing (as root).
+CHROMIUM ?= /usr/bin/chromium
+test-web: $(STAMP)
+	@if [ ! -x "$(CHROMIUM)" ]; then \
+		if [ "$$(id -u)" = 0 ]; then \
+			apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends chromium; \
+		else \
+			echo "make test-web needs Debian's chromium at $(CHROMIUM): run 'sudo apt-get install --no-install-recommends chromium' (or make test-web as root), or set CHROMIUM=..." >&2; \
+			exit 1; \
+		fi; \
+	fi
+	DRIVE_GATEWAY_CHROMIUM=$(CHROMIUM) $(BIN)/python -m pytest -q -m browser tests/web
 
 # The `vcan` tests in a kernel with SocketCAN: this one's, else a qemu VM (tests/vcan_vm).
 test-vcan: $(STAMP)

@@ -97,6 +97,7 @@ def add_run(sub: Any) -> None:
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="config file (default: demo)")
     p.add_argument("--zenoh-endpoint", help="Zenoh endpoint to listen on (overrides config)")
     p.add_argument("--modbus-bind", help="HOST:PORT of the Modbus server (overrides config)")
+    p.add_argument("--web-bind", help="HOST:PORT of the status page (overrides config)")
     p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     p.set_defaults(handler=cmd_run)
 
@@ -106,7 +107,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if config is None:
         return 2
     try:
-        config = config.with_overrides(args.zenoh_endpoint, args.modbus_bind)
+        config = config.with_overrides(args.zenoh_endpoint, args.modbus_bind, args.web_bind)
     except ConfigError as exc:
         _print_config_errors(exc)
         return 2

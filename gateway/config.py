@@ -6,6 +6,7 @@ Layout (see config/site.example.toml for every key)::
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          idle_timeout
+    [web]                bind, allow, commands, token_sha256 (gateway/web/settings.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path, gateway/adapter.py), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -38,6 +39,8 @@ from gateway.errors import AdapterError, ConfigError, ConfigErrors
 from gateway.json5check import Json5Error, check_json5
 from gateway.model import ControlMode, Device, StopAction
 from gateway.schema import Table
+from gateway.web.settings import WebSection, read_web_section
+from gateway.web.settings import web_bind as _web_bind
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "demo.toml"
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
@@ -114,15 +117,19 @@ class Config:
     zenoh: ZenohSection = field(default_factory=ZenohSection)
     modbus: ModbusSection = field(default_factory=ModbusSection)
     buses: tuple[BusConfig, ...] = ()
+    web: WebSection = field(default_factory=WebSection)
 
     @property
     def drives(self) -> tuple[DriveConfig, ...]:
         return tuple(d for b in self.buses for d in b.drives)
 
     def with_overrides(
-        self, zenoh_endpoint: str | None = None, modbus_bind: str | None = None
+        self,
+        zenoh_endpoint: str | None = None,
+        modbus_bind: str | None = None,
+        web_bind: str | None = None,
     ) -> Config:
-        """The command line's --zenoh-endpoint and --modbus-bind."""
+        """The command line's --zenoh-endpoint, --modbus-bind and --web-bind."""
         from dataclasses import replace
 
         cfg = self
@@ -134,6 +141,8 @@ class Config:
         if modbus_bind is not None:
             host, port = parse_host_port(modbus_bind, "--modbus-bind", "--modbus-bind")
             cfg = replace(cfg, modbus=replace(cfg.modbus, host=host, port=port))
+        if web_bind is not None:
+            cfg = replace(cfg, web=_web_bind(cfg.web, web_bind))
         return cfg
 
 
@@ -391,6 +400,7 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     gateway = _section(root, "gateway", _gateway_section)
     zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
     modbus = _section(root, "modbus", _modbus_section)
+    web = _section(root, "web", read_web_section)
     buses: list[BusConfig] = []
     for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
         bus = _read(table, partial(_bus, name), finish=False)
@@ -410,9 +420,11 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
                         f"{modbus.gateway_unit} is also the modbus_unit of drive {d.id!r}",
                     )
                 )
-    if root.errors or gateway is None or zenoh is None or modbus is None:
+    if root.errors or gateway is None or zenoh is None or modbus is None or web is None:
         raise ConfigErrors(root.errors)
-    return Config(file=file, gateway=gateway, zenoh=zenoh, modbus=modbus, buses=tuple(buses))
+    return Config(
+        file=file, gateway=gateway, zenoh=zenoh, modbus=modbus, buses=tuple(buses), web=web
+    )
 
 
 def _depth(data: Any) -> int:

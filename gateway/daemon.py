@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 FRONT_ENDS: dict[str, str] = {
     "zenoh": "gateway.zenoh.frontend:ZenohFrontEnd",
     "modbus": "gateway.modbus.frontend:ModbusFrontEnd",
+    "web": "gateway.web.frontend:WebFrontEnd",
 }
 """Front-end name (its config section) -> "module:Class"."""
 
@@ -91,6 +92,8 @@ class Runtime:
     started: float = field(default_factory=time.monotonic)
     version: str = __version__
     restarts: dict[str, int] = field(default_factory=dict)
+    front_ends: dict[str, FrontEnd] = field(default_factory=dict)
+    """The running instance of each front end (the web front end's metrics read the others)."""
     _diag: dict[str, tuple[float, DriveAdapter, dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False
     )
@@ -176,7 +179,7 @@ class Daemon:
         self._stop = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._adapter_tasks: list[asyncio.Task[None]] = []
-        self.front_ends: dict[str, FrontEnd] = {}
+        self.front_ends: dict[str, FrontEnd] = self.runtime.front_ends
         """The running instance of each front end (a new one after a restart)."""
         self._started_front_ends: list[str] = []
         self.ready = asyncio.Event()
@@ -322,7 +325,11 @@ class Daemon:
             self._stop.set()
 
     def _start_front_ends(self) -> None:
-        enabled = {"zenoh": self.config.zenoh.enabled, "modbus": self.config.modbus.enabled}
+        enabled = {
+            "zenoh": self.config.zenoh.enabled,
+            "modbus": self.config.modbus.enabled,
+            "web": self.config.web.enabled,
+        }
         for name, on in enabled.items():
             if not on:
                 continue

@@ -62,6 +62,8 @@ log = logging.getLogger(__name__)
 
 Clock = Callable[[], float]
 EVENT_QUEUE_LIMIT = 1000
+_WATCHED = (Source.ZENOH, Source.MODBUS, Source.WEB)
+"""The client sources whose command in force the watchdog watches (rule 3)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -564,7 +566,7 @@ class Hub:
     def _check_watchdog(self, drive_id: str, drv: _Drive, now: float) -> None:
         timeout = drv.policy.command_timeout
         source = drv.desired.source
-        if timeout is None or drv.watchdog_expired or source not in (Source.ZENOH, Source.MODBUS):
+        if timeout is None or drv.watchdog_expired or source not in _WATCHED:
             return
         if now - drv.last_refresh < timeout:
             return

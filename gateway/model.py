@@ -69,6 +69,7 @@ class Source(Enum):
     ZENOH = "zenoh"
     MODBUS = "modbus"
     GATEWAY = "gateway"  # a safety action of the gateway itself
+    WEB = "web"  # a user of the web status page (web.commands, gateway/web)
 
 
 class ControlMode(Enum):
@@ -77,10 +78,11 @@ class ControlMode(Enum):
     ANY = "any"
     ZENOH = "zenoh"
     MODBUS = "modbus"
+    WEB = "web"
 
     def admits(self, source: Source) -> bool:
         if self is ControlMode.ANY:
-            return source in (Source.ZENOH, Source.MODBUS)
+            return source in (Source.ZENOH, Source.MODBUS, Source.WEB)
         return bool(source.value == self.value)
 
 

@@ -57,11 +57,13 @@ SOURCE_CODES: dict[Source, int] = {
     Source.ZENOH: 1,
     Source.MODBUS: 2,
     Source.GATEWAY: 3,
+    Source.WEB: 4,
 }
 CONTROL_CODES: dict[ControlMode, int] = {
     ControlMode.ANY: 0,
     ControlMode.ZENOH: 1,
     ControlMode.MODBUS: 2,
+    ControlMode.WEB: 3,
 }
 DEVICE_CODES: dict[Device, int] = {
     Device.CFW11: 1,

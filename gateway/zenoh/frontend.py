@@ -100,6 +100,16 @@ _ONLINE = CommState.ONLINE  # a module constant: an Enum class attribute is slow
 DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
 
+@dataclass
+class ZenohCounters:
+    """Requests taken from Zenoh since start (read by ``/metrics``, gateway/web/metrics.py)."""
+
+    puts: int = 0  # command puts taken on the loop
+    queries: int = 0  # queries taken on the loop (state, command, params, health)
+    commands_accepted: int = 0
+    commands_refused: int = 0
+
+
 @dataclass(eq=False)
 class _Pending:
     """A query waiting for its answer."""
@@ -164,6 +174,7 @@ class ZenohFrontEnd:
         self._handover_lock = threading.Lock()
         self._handover_waiting = 0  # puts and queries handed to the loop, not yet taken
         self.overflow = 0  # puts and queries dropped: HANDOVER_LIMIT were waiting
+        self.counters = ZenohCounters()
         self._pending: set[_Pending] = set()
         self._requests: set[asyncio.Task[None]] = set()
         self._handlers: dict[KeyKind, Callable[[_Pending], None]] = {
@@ -499,6 +510,7 @@ class ZenohFrontEnd:
     def _on_command_put(self, key: str, payload: Payload, client: str = ANONYMOUS) -> None:
         if not self._serving:
             return
+        self.counters.puts += 1
         parsed = self.keys.parse(key)
         if parsed is None or parsed.kind != KeyKind.COMMAND.value or parsed.rest:
             log.warning("zenoh command put on %s ignored: not a drive's command key", key)
@@ -510,6 +522,14 @@ class ZenohFrontEnd:
     ) -> dict[str, Any]:
         """Parse and submit a command; refusals are reported on the drive's events key
         (and logged by the hub, rate-limited per client and reason)."""
+        body = self._submit_command(drive_id, payload, client)
+        if body.get("accepted"):
+            self.counters.commands_accepted += 1
+        else:
+            self.counters.commands_refused += 1
+        return body
+
+    def _submit_command(self, drive_id: str, payload: Payload, client: str) -> dict[str, Any]:
         if drive_id not in self._drive_ids:
             return command_refused(f"no drive {drive_id!r}")
         try:
@@ -542,6 +562,7 @@ class ZenohFrontEnd:
                 incoming.query.drop()
             return
         self._pending.add(pending)
+        self.counters.queries += 1
         try:
             self._handlers[incoming.kind](pending)
         except Exception as exc:

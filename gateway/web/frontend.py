@@ -1,0 +1,394 @@
+"""The web front end: what the daemon runs as ``WebFrontEnd(runtime).run()``.
+
+An aiohttp server on the daemon's own event loop serves, on ``web.bind``:
+
+- ``/`` the status page, ``/app.js`` and ``/style.css`` (package data: gateway/web/static);
+- ``/ws`` the push feed (WebSocket, gateway/web/feed.py);
+- ``/api/health``, ``/api/drives``, ``/api/drives/<id>``, ``/api/buses``, ``/api/events``,
+  ``/api/history`` and ``/api/history/<id>`` (JSON, docs/operations.md);
+- ``POST /api/drives/<id>/command`` only with ``web.commands = true`` and the token;
+- ``/metrics`` (gateway/web/metrics.py).
+
+Every request from an address outside ``web.allow`` is refused (403) before anything
+else runs. A command goes through ``hub.submit`` as source ``web`` and client
+``<peer address> <page id>``, under the same safety rules as Zenoh and Modbus.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import hashlib
+import hmac
+import ipaddress
+import logging
+import re
+from collections.abc import Awaitable, Callable
+from importlib import resources
+from typing import TYPE_CHECKING, Any
+
+import orjson
+from aiohttp import WSCloseCode, WSMsgType, web
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+
+from gateway.adapter import EventKind
+from gateway.errors import CommandRejected, StartupError, UnknownDrive
+from gateway.model import DriveCommand, Source
+from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
+from gateway.web.metrics import WebCounters, make_registry
+from gateway.web.settings import IpNetwork
+from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
+
+if TYPE_CHECKING:
+    from gateway.daemon import Runtime
+
+log = logging.getLogger(__name__)
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+STATIC: dict[str, str] = {
+    "/": "index.html",
+    "/app.js": "app.js",
+    "/style.css": "style.css",
+}
+CONTENT_TYPES = {
+    ".html": "text/html",
+    ".js": "text/javascript",
+    ".css": "text/css",
+}
+SECURITY_HEADERS = {
+    "Content-Security-Policy": (
+        "default-src 'none'; script-src 'self'; style-src 'self'; connect-src 'self'; "
+        "img-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+    ),
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+    "Cache-Control": "no-store",
+}
+MAX_BODY = 4096  # bytes of a command request
+SHUTDOWN_TIMEOUT = 2.0  # s open requests and pages get when the gateway stops
+WS_HEARTBEAT = 20.0  # s between pings: a page that went away is noticed
+WS_MAX_MESSAGE = 1024  # bytes a page may send on the feed (it sends nothing we read)
+PAGE_ID = re.compile(r"[A-Za-z0-9-]{1,40}")
+_BIND_FIXES = {
+    errno.EADDRINUSE: ("the address is in use", "stop what uses it, or set [web] bind"),
+    errno.EACCES: ("permission denied", "use a port above 1023, or set [web] bind"),
+    errno.EADDRNOTAVAIL: ("no such local address", "set [web] bind to an address of this host"),
+}
+
+
+def load_static() -> dict[str, tuple[bytes, str]]:
+    """The page's files, read once: path -> (body, content type)."""
+    folder = resources.files("gateway.web") / "static"
+    out: dict[str, tuple[bytes, str]] = {}
+    for path, name in STATIC.items():
+        suffix = name[name.rfind(".") :]
+        out[path] = (folder.joinpath(name).read_bytes(), CONTENT_TYPES[suffix])
+    return out
+
+
+def allowed(peer: str | None, networks: tuple[IpNetwork, ...]) -> bool:
+    if not peer:
+        return False
+    try:
+        address = ipaddress.ip_address(peer.partition("%")[0])
+    except ValueError:
+        return False
+    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+        address = address.ipv4_mapped
+    return any(address in net for net in networks)
+
+
+def same_origin(request: web.Request) -> bool:
+    """No Origin (not a browser), or the origin of this very host and port."""
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return True
+    scheme, sep, rest = origin.partition("://")
+    return bool(sep) and scheme in ("http", "https") and rest.lower() == request.host.lower()
+
+
+def _json(body: Any, status: int = 200) -> web.Response:
+    return web.Response(body=orjson.dumps(body), status=status, content_type="application/json")
+
+
+class WebFrontEnd:
+    """Serve the status page, the API and the metrics until cancelled."""
+
+    def __init__(self, runtime: Runtime) -> None:
+        self.runtime = runtime
+        self.section = runtime.config.web
+        self.hub = runtime.hub
+        self.feed = Feed(runtime, commands=self.section.commands)
+        self.counters = WebCounters()
+        self.registry = make_registry(runtime, self.feed.counters, self.counters)
+        self.static = load_static()
+        self.address: tuple[str, int] | None = None
+        self.ready = asyncio.Event()  # set while the server listens
+        self._writers: set[asyncio.Task[None]] = set()
+        self._sockets: set[web.WebSocketResponse] = set()
+
+    # ------------------------------------------------------------ life cycle
+
+    def app(self) -> web.Application:
+        app = web.Application(middlewares=[self._guard], client_max_size=MAX_BODY)
+        for path in STATIC:
+            app.router.add_get(path, self._static)
+        app.router.add_get("/favicon.ico", self._no_icon)
+        app.router.add_get("/ws", self._ws)
+        app.router.add_get("/metrics", self._metrics)
+        app.router.add_get("/api/health", self._health)
+        app.router.add_get("/api/drives", self._drives)
+        app.router.add_get("/api/drives/{drive}", self._drive)
+        app.router.add_post("/api/drives/{drive}/command", self._command)
+        app.router.add_get("/api/buses", self._buses)
+        app.router.add_get("/api/events", self._events)
+        app.router.add_get("/api/history", self._history)
+        app.router.add_get("/api/history/{drive}", self._history_of)
+        return app
+
+    async def run(self) -> None:
+        runner = web.AppRunner(
+            self.app(), access_log=None, handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT
+        )
+        await runner.setup()
+        self.feed.open()
+        try:
+            site = web.TCPSite(runner, self.section.host, self.section.port, reuse_address=True)
+            try:
+                await site.start()
+            except OSError as exc:
+                raise self._bind_error(exc) from None
+            self.address = self._bound(site)
+            self._log_serving()
+            self.ready.set()
+            await self._push()
+        finally:
+            self.ready.clear()
+            self.feed.close()
+            for task in list(self._writers):
+                task.cancel()
+            await self._close_sockets()
+            await runner.cleanup()
+            log.info("web front end stopped")
+
+    async def _close_sockets(self) -> None:
+        """Tell every open page the gateway is going (it shows so, and reconnects later)."""
+
+        async def close(ws: web.WebSocketResponse) -> None:
+            with contextlib.suppress(Exception):
+                async with asyncio.timeout(SHUTDOWN_TIMEOUT):
+                    await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway stopping")
+
+        await asyncio.gather(*(close(ws) for ws in list(self._sockets)))
+
+    def _bind_error(self, exc: OSError) -> StartupError:
+        where = f"{self.section.host}:{self.section.port}"
+        cause, fix = _BIND_FIXES.get(
+            exc.errno or 0, ((exc.strerror or str(exc)).lower(), "check [web] bind")
+        )
+        return StartupError("web", f"cannot listen on {where}: {cause}", fix)
+
+    @staticmethod
+    def _bound(site: web.TCPSite) -> tuple[str, int] | None:
+        server: Any = site._server  # aiohttp keeps the asyncio server there
+        sockets = getattr(server, "sockets", None) or ()
+        if not sockets:
+            return None
+        host, port = sockets[0].getsockname()[:2]
+        return str(host), int(port)
+
+    @property
+    def url(self) -> str:
+        host, port = self.address or (self.section.host, self.section.port)
+        shown = f"[{host}]" if ":" in host else host
+        return f"http://{shown}:{port}/"
+
+    def _log_serving(self) -> None:
+        log.info(
+            "web status page on %s (metrics at %smetrics; commands %s)",
+            self.url,
+            self.url,
+            "on, with the token" if self.section.commands else "off",
+        )
+        networks = ", ".join(str(n) for n in self.section.allow)
+        log.info("web clients allowed from %s", networks)
+
+    async def _push(self) -> None:
+        loop = asyncio.get_running_loop()
+        next_at = loop.time()
+        failing = False
+        while True:
+            try:
+                self.feed.step()
+                failing = False
+            except Exception:  # a figure that cannot be read this time: the next push tries
+                if not failing:
+                    log.exception("web feed: a push failed (logged once until one succeeds)")
+                failing = True
+            next_at += PUSH_PERIOD
+            delay = next_at - loop.time()
+            if delay < 0:  # the loop was held up: no burst of steps to catch up
+                next_at = loop.time()
+                delay = 0.0
+            await asyncio.sleep(delay)
+
+    # ------------------------------------------------------------ guard
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        if not allowed(request.remote, self.section.allow):
+            self.counters.refused["allow"] += 1
+            log.debug("web request from %s refused: not in web.allow", request.remote)
+            return web.Response(status=403, text="forbidden: this address is not in web.allow\n")
+        response = await handler(request)
+        if not response.prepared:
+            response.headers.update(SECURITY_HEADERS)
+        return response
+
+    # ------------------------------------------------------------ page and feed
+
+    async def _static(self, request: web.Request) -> web.Response:
+        body, content_type = self.static[request.path]
+        return web.Response(body=body, content_type=content_type, charset="utf-8")
+
+    async def _no_icon(self, request: web.Request) -> web.Response:
+        return web.Response(status=204)
+
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        if not same_origin(request):
+            # a WebSocket is not held to the same-origin rule: a page of another site open
+            # in the operator's browser could otherwise read the feed
+            self.counters.refused["origin"] += 1
+            return web.Response(status=403, text="forbidden: the feed serves this page only\n")
+        ws = web.WebSocketResponse(heartbeat=WS_HEARTBEAT, max_msg_size=WS_MAX_MESSAGE)
+        ws.headers.update(SECURITY_HEADERS)
+        await ws.prepare(request)
+        self._sockets.add(ws)
+        client = self.feed.add()
+        self.counters.clients_open += 1
+        writer = asyncio.create_task(self._write(ws, client, request), name="web-ws-writer")
+        self._writers.add(writer)
+        try:
+            async for msg in ws:
+                if msg.type is WSMsgType.ERROR:
+                    break  # the page sends nothing the gateway reads
+        finally:
+            self._sockets.discard(ws)
+            self.counters.clients_open -= 1
+            self.feed.remove(client)
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await writer
+            self._writers.discard(writer)
+        return ws
+
+    async def _write(
+        self, ws: web.WebSocketResponse, client: ClientQueue, request: web.Request
+    ) -> None:
+        while not ws.closed:
+            message = await client.next(self.feed.snapshot)
+            try:
+                async with asyncio.timeout(SEND_TIMEOUT):
+                    await ws.send_str(message)
+            except TimeoutError:
+                self.feed.counters.clients_stuck += 1
+                log.info(
+                    "web page at %s disconnected: a message took over %g s",
+                    request.remote,
+                    SEND_TIMEOUT,
+                )
+                if request.transport is not None:
+                    request.transport.abort()
+                return
+            except ConnectionError:
+                return
+
+    # ------------------------------------------------------------ API
+
+    async def _metrics(self, request: web.Request) -> web.Response:
+        body = generate_latest(self.registry)
+        return web.Response(body=body, headers={"Content-Type": CONTENT_TYPE_LATEST})
+
+    async def _health(self, request: web.Request) -> web.Response:
+        return _json(health_json(self.runtime))
+
+    async def _drives(self, request: web.Request) -> web.Response:
+        return _json({"drives": drives_json(self.runtime)})
+
+    def _state(self, request: web.Request) -> Any:
+        drive_id = request.match_info["drive"]
+        try:
+            return self.hub.state(drive_id)
+        except UnknownDrive:
+            raise web.HTTPNotFound(
+                text=orjson.dumps({"error": f"no drive {drive_id!r}"}).decode(),
+                content_type="application/json",
+            ) from None
+
+    async def _drive(self, request: web.Request) -> web.Response:
+        return _json(drive_row(self.runtime, self._state(request)))
+
+    async def _buses(self, request: web.Request) -> web.Response:
+        return _json({"buses": buses_json(self.runtime, bus_diagnostics(self.runtime))})
+
+    async def _events(self, request: web.Request) -> web.Response:
+        return _json({"events": list(self.feed.events)})
+
+    async def _history(self, request: web.Request) -> web.Response:
+        return _json(self.feed.history.all_json())
+
+    async def _history_of(self, request: web.Request) -> web.Response:
+        state = self._state(request)
+        history = self.feed.history
+        return _json({"period": history.period, "span": history.span, **history.to_json(state.id)})
+
+    # ------------------------------------------------------------ commands
+
+    def _token_ok(self, request: web.Request) -> bool:
+        expected = self.section.token_sha256
+        scheme, _, token = request.headers.get("Authorization", "").partition(" ")
+        if expected is None or scheme.lower() != "bearer" or not token:
+            return False
+        digest = hashlib.sha256(token.strip().encode()).hexdigest()
+        return hmac.compare_digest(digest, expected)
+
+    def _refuse(self, reason: str, status: int, text: str) -> web.Response:
+        self.counters.refused[reason] += 1
+        return _json({"accepted": False, "error": text}, status)
+
+    async def _command(self, request: web.Request) -> web.Response:
+        if not self.section.commands:
+            return self._refuse(
+                "commands_off", 403, "commands from the web page are off (web.commands)"
+            )
+        if not self._token_ok(request):
+            log.info("web command from %s refused: no valid token", request.remote)
+            return self._refuse("token", 401, "a valid token is needed (Authorization: Bearer)")
+        state = self._state(request)
+        page = request.headers.get("X-Page-Id", "")
+        client = f"{request.remote} {page}" if PAGE_ID.fullmatch(page) else str(request.remote)
+        try:
+            try:
+                data = orjson.loads(await request.read())
+            except (orjson.JSONDecodeError, web.HTTPRequestEntityTooLarge):
+                raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
+            cmd = DriveCommand.from_json(data)
+        except CommandRejected as exc:
+            self.hub.event(
+                state.id,
+                EventKind.COMMAND_REFUSED,
+                f"command from {Source.WEB.value} {client} refused: {exc.reason}",
+                source=Source.WEB.value,
+                client=client,
+            )
+            self.counters.commands["refused"] += 1
+            return _json({"accepted": False, "error": exc.reason}, 400)
+        try:
+            self.hub.submit(state.id, Source.WEB, cmd, client)  # reports its own refusals
+        except CommandRejected as exc:
+            self.counters.commands["refused"] += 1
+            return _json({"accepted": False, "error": exc.reason}, 409)
+        self.counters.commands["accepted"] += 1
+        return _json({"accepted": True})
