@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "watch": "gateway.cli_tools:add_watch",
     "cmd": "gateway.cli_tools:add_cmd",
     "param": "gateway.cli_tools:add_param",
+    "params": "gateway.cli_params:add_params",
     "health": "gateway.cli_tools:add_health",
     "profibus": "adapters.profibus.cli:add_profibus",
     "devicenet": "adapters.devicenet.cli:add_devicenet",
