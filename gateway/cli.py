@@ -33,6 +33,8 @@ COMMANDS: dict[str, str] = {
     "profibus": "adapters.profibus.cli:add_profibus",
     "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.simcli:add_sim",
+    "completion": "gateway.cli_docs:add_completion",
+    "manpage": "gateway.cli_docs:add_manpage",
 }
 """Subcommand -> "module:function(subparsers)"; a module not in this build is skipped."""
 
@@ -98,7 +100,11 @@ def add_run(sub: Any) -> None:
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="config file (default: demo)")
     p.add_argument("--zenoh-endpoint", help="Zenoh endpoint to listen on (overrides config)")
     p.add_argument("--modbus-bind", help="HOST:PORT of the Modbus server (overrides config)")
-    p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    p.add_argument(
+        "--log-level",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="log level (default: the config's gateway.log_level)",
+    )
     p.set_defaults(handler=cmd_run)
 
 
@@ -142,7 +148,7 @@ def _leave_process(status: int) -> NoReturn:
 
 def add_check_config(sub: Any) -> None:
     p = sub.add_parser("check-config", help="validate a config file and list its drives")
-    p.add_argument("file")
+    p.add_argument("file", help="the config file (TOML)")
     p.set_defaults(handler=cmd_check_config)
 
 
@@ -181,6 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         getattr(module, func_name)(sub)
+    from gateway.cli_docs import apply_formatter
+
+    apply_formatter(parser)  # every argument's help shows its default
     return parser
 
 

@@ -90,7 +90,7 @@ FOLLOWS: dict[str, tuple[str, Predicate]] = {
     "jog": ("running", lambda s: bool(s.get("running"))),
     "jog-stop": ("stopping or stopped", lambda s: s.get("status") in _STOPPED),
     "remote": ("in remote", lambda s: s.get("remote") is True),
-    "local": ("not in remote", lambda s: s.get("remote") is False),
+    "local": ("out of remote", lambda s: s.get("remote") is False),
 }
 """Action -> what the drive's state shows once it followed (the others: the state as it is)."""
 
