@@ -128,6 +128,7 @@ def session(endpoint: str) -> Iterator[zenoh.Session]:
     try:
         yield s
     finally:
+        _PUBLISHERS.pop(id(s), None)
         s.close()
 
 
@@ -168,12 +169,18 @@ def _use_config_file(path: str) -> str:
 _SEQUENCE = itertools.count(1)
 
 
+_PUBLISHERS: dict[int, tuple[zenoh.Session, Any]] = {}
+
+
 def source_info(s: zenoh.Session, key: str) -> zenoh.SourceInfo:
     """This session's identity for a put or a query on ``key``: the id of a publisher it
-    declares there (the session's Zenoh id and an entity id; ``EntityGlobalId`` has no
-    constructor) and the next sequence number."""
-    publisher = s.declare_publisher(key.split("?", 1)[0])
-    return zenoh.SourceInfo(publisher.id, next(_SEQUENCE))
+    declares (the session's Zenoh id and an entity id; ``EntityGlobalId`` has no
+    constructor; one per session, kept with the session so an id is never another
+    session's) and the next sequence number."""
+    cached = _PUBLISHERS.get(id(s))
+    if cached is None or cached[0] is not s:
+        cached = _PUBLISHERS[id(s)] = (s, s.declare_publisher(key.split("?", 1)[0]))
+    return zenoh.SourceInfo(cached[1].id, next(_SEQUENCE))
 
 
 def query_in(
