@@ -120,15 +120,7 @@ def test_watch_says_when_the_gateway_is_gone(tmp_path: Path) -> None:
     watch = subprocess.Popen(
         [*argv, "--prefix", PREFIX], cwd=ROOT, stdout=subprocess.PIPE, text=True
     )
-    lines: queue.Queue[str] = queue.Queue()
-
-    def read() -> None:
-        assert watch.stdout is not None
-        for line in watch.stdout:
-            lines.put(line)
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    lines = lines_of(watch)
 
     def until(text: str) -> None:
         while True:
@@ -144,7 +136,36 @@ def test_watch_says_when_the_gateway_is_gone(tmp_path: Path) -> None:
         gateway.kill()
         watch.send_signal(signal.SIGINT)
         assert watch.wait(timeout=30) == 0
-        reader.join(5)
+
+
+def test_watch_json_prints_one_json_line_per_state(gw: GatewayProcess) -> None:
+    argv = [sys.executable, "-m", "gateway", "watch", "--json", "--connect", gw.endpoint]
+    watch = subprocess.Popen(
+        [*argv, "--prefix", PREFIX], cwd=ROOT, stdout=subprocess.PIPE, text=True
+    )
+    lines = lines_of(watch)
+    try:
+        seen: set[str] = set()
+        while seen != {"d1", "d2", "soft"}:
+            doc = json.loads(lines.get(timeout=scaled(30)))
+            if doc["type"] == "state":
+                seen.add(doc["id"])
+    finally:
+        watch.send_signal(signal.SIGINT)
+        assert watch.wait(timeout=30) == 0
+
+
+def lines_of(proc: subprocess.Popen[str]) -> queue.Queue[str]:
+    """The process's stdout lines, read by a thread (a test waits on them with a bound)."""
+    lines: queue.Queue[str] = queue.Queue()
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+
+    threading.Thread(target=read, daemon=True).start()
+    return lines
 
 
 # ------------------------------------------------------------------ what the parser says
