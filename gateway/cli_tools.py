@@ -579,7 +579,7 @@ class Board:
             return f"gateway {where}: no answer yet"
         at = time.strftime("%H:%M:%S", time.localtime(since))
         if alive:
-            return f"gateway {where}: serving (since {at})"
+            return f"gateway {where}: serving (seen at {at})"
         return (
             f"gateway {where}: GONE at {at}: its liveliness token was withdrawn (stopped, or "
             "its process died or lost the network); the rows are its last words"

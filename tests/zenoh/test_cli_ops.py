@@ -129,7 +129,7 @@ def test_watch_says_when_the_gateway_is_gone(tmp_path: Path) -> None:
                 return
 
     try:
-        until(": serving (since")
+        until(": serving (seen at ")
         assert gateway.stop() == 0
         until(": GONE at ")
     finally:
