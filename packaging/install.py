@@ -85,7 +85,7 @@ def hidden_roots(unit_text: str) -> dict[str, str]:
     out = {}
     for setting, roots in HIDDEN_BY.items():
         value = settings.get(setting, "no")
-        if value in ("yes", "true", "tmpfs") or (setting == "ProtectHome" and value != "no"):
+        if value in ("yes", "true", "tmpfs"):  # ProtectHome=read-only still lets it read
             out.update({root: f"{setting}={value}" for root in roots})
     return out
 

@@ -170,6 +170,7 @@ def test_an_interpreter_the_sandbox_hides_is_replaced_or_refused(
     assert roots["/root"] == "ProtectHome=yes" and roots["/tmp"] == "PrivateTmp=yes"
     assert installer.hidden_by("/root/.pyenv/versions/3.11.7/bin/python3.11", roots)
     assert installer.hidden_by("/usr/bin/python3.11", roots) is None
+    assert installer.hidden_roots("ProtectHome=read-only\nPrivateTmp=no\n") == {}
 
     fake = {
         "/root/.pyenv/shims/python3": ((3, 12), ["/root/.pyenv/versions/3.12.1/bin/python3.12"]),
