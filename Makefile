@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test test-web test-vcan lint typecheck pytest bench soak clean venv
+.PHONY: run test test-web test-vcan lint typecheck pytest bench soak clean venv install dist
 
 venv: $(STAMP)
 
@@ -57,5 +57,28 @@ SOAK_SECONDS ?= 180
 soak: $(STAMP)
 	SOAK_SECONDS=$(SOAK_SECONDS) $(BIN)/python -m pytest -q -m slow tests/reliability
 
+# A production install (as root): PREFIX/venv with the runtime dependencies only, the unit,
+# /etc/drive-gateway/site.toml, the user, completions and man page; it prints the next steps
+# (docs/operations.md, "Installing on an edge box"). Every path below can be given.
+PREFIX      ?= /opt/drive-gateway
+SYSCONFDIR  ?= /etc/drive-gateway
+UNITDIR     ?= /etc/systemd/system
+BINDIR      ?= /usr/local/bin
+BASHCOMPDIR ?= /usr/local/share/bash-completion/completions
+ZSHCOMPDIR  ?= /usr/local/share/zsh/site-functions
+MANDIR      ?= /usr/local/share/man
+SERVICE_USER ?= drive-gateway
+CREATE_USER ?= yes
+WHEEL       ?=
+install:
+	$(PYTHON) packaging/install.py --prefix "$(PREFIX)" --sysconfdir "$(SYSCONFDIR)" \
+	    --unitdir "$(UNITDIR)" --bindir "$(BINDIR)" --bashcompdir "$(BASHCOMPDIR)" \
+	    --zshcompdir "$(ZSHCOMPDIR)" --mandir "$(MANDIR)" --user "$(SERVICE_USER)" \
+	    --create-user "$(CREATE_USER)" --python "$(PYTHON)" $(if $(WHEEL),--wheel "$(WHEEL)")
+
+# The wheel and the sdist (in dist/), as `pip install` takes them.
+dist: $(STAMP)
+	$(BIN)/python -m build --outdir dist .
+
 clean:
-	rm -rf $(VENV) build *.egg-info .mypy_cache .pytest_cache .ruff_cache .vcan-vm
+	rm -rf $(VENV) build dist *.egg-info .mypy_cache .pytest_cache .ruff_cache .vcan-vm

@@ -28,10 +28,13 @@ COMMANDS: dict[str, str] = {
     "watch": "gateway.cli_tools:add_watch",
     "cmd": "gateway.cli_tools:add_cmd",
     "param": "gateway.cli_tools:add_param",
+    "params": "gateway.cli_params:add_params",
     "health": "gateway.cli_tools:add_health",
     "profibus": "adapters.profibus.cli:add_profibus",
     "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.simcli:add_sim",
+    "completion": "gateway.cli_docs:add_completion",
+    "manpage": "gateway.cli_docs:add_manpage",
 }
 """Subcommand -> "module:function(subparsers)"; a module not in this build is skipped."""
 
@@ -98,7 +101,11 @@ def add_run(sub: Any) -> None:
     p.add_argument("--zenoh-endpoint", help="Zenoh endpoint to listen on (overrides config)")
     p.add_argument("--modbus-bind", help="HOST:PORT of the Modbus server (overrides config)")
     p.add_argument("--web-bind", help="HOST:PORT of the status page (overrides config)")
-    p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    p.add_argument(
+        "--log-level",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="log level (default: the config's gateway.log_level)",
+    )
     p.set_defaults(handler=cmd_run)
 
 
@@ -141,16 +148,86 @@ def _leave_process(status: int) -> NoReturn:
 
 
 def add_check_config(sub: Any) -> None:
-    p = sub.add_parser("check-config", help="validate a config file and list its drives")
-    p.add_argument("file")
+    p = sub.add_parser(
+        "check-config",
+        help="validate a config file, list its drives and what is left to fill in",
+        description="Check a config file as `run` would and list its drives; then list what "
+        "is left to fill in: a CHANGE-ME, no drive, a line without drives, a serial port or "
+        "CAN interface this machine does not have.",
+        epilog="exit status: 0 ok; 1 valid, but something is left to fill in; 2 errors (each "
+        "with the file, the key and the reason).",
+    )
+    p.add_argument("file", help="the config file (TOML)")
+    p.add_argument(
+        "--errors-only",
+        action="store_true",
+        help="report only what keeps the gateway from starting; exit 0 when it would start "
+        "(the unit's ExecReload)",
+    )
     p.set_defaults(handler=cmd_check_config)
+
+
+PLACEHOLDER = "CHANGE-ME"
+"""What config/site.example.toml marks as left to fill in."""
+
+
+def left_to_fill(config: Config, text: str) -> list[str]:
+    """What a valid config still lacks before it runs a real line (the site template's
+    CHANGE-ME marks, no drives, a port or CAN interface this machine does not have)."""
+    todo = []
+    table = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            table = stripped.strip("[]").strip()
+        elif PLACEHOLDER in line and not stripped.startswith("#"):
+            key = stripped.split("=", 1)[0].strip()
+            todo.append(f"line {number}: {table}.{key}: replace {PLACEHOLDER}")
+    if not config.drives:
+        todo.append(
+            "no drive is configured: uncomment the examples under [buses.<name>] "
+            "(or add [[buses.<name>.drives]] tables)"
+        )
+    for bus in config.buses:
+        if config.drives and not bus.drives:
+            todo.append(f"buses.{bus.name}: no drive on this line (remove it or add drives)")
+        todo += _missing_on_this_machine(bus)
+    return todo
+
+
+def _missing_on_this_machine(bus: Any) -> list[str]:
+    options = bus.options
+    if getattr(options, "simulate", False):
+        return []
+    port = getattr(options, "port", None)
+    if isinstance(port, str) and port.startswith("/") and not Path(port).exists():
+        return [
+            f"buses.{bus.name}.port: {port} does not exist on this machine "
+            "(ls -l /dev/serial/by-id/)"
+        ]
+    channel = getattr(options, "channel", None)
+    if (
+        getattr(options, "interface", None) == "socketcan"
+        and isinstance(channel, str)
+        and not Path("/sys/class/net", channel).exists()
+    ):
+        return [
+            f"buses.{bus.name}.channel: no CAN interface {channel} on this machine "
+            f"(ip link show {channel}; docs/operations.md)"
+        ]
+    return []
 
 
 def cmd_check_config(args: argparse.Namespace) -> int:
     config = _load_or_report(args.file)
     if config is None:
         return 2
-    print(f"{args.file}: ok, {len(config.drives)} drive(s) on {len(config.buses)} bus(es)")
+    if args.errors_only:
+        print(f"{args.file}: ok, the gateway would start")
+        return 0
+    todo = left_to_fill(config, Path(args.file).read_text(encoding="utf-8", errors="replace"))
+    status = "ok" if not todo else "valid, but not ready"
+    print(f"{args.file}: {status}, {len(config.drives)} drive(s) on {len(config.buses)} bus(es)")
     for bus in config.buses:
         print(f"bus {bus.name} ({bus.adapter})")
         for d in bus.drives:
@@ -159,6 +236,11 @@ def cmd_check_config(args: argparse.Namespace) -> int:
                 f"  {d.id:<16} {d.device.value:<8} address {d.address:<4} "
                 f"modbus unit {unit:<4} control {d.control.value}"
             )
+    if todo:
+        print(f"left to fill in ({len(todo)}):")
+        for item in todo:
+            print(f"  {item}")
+        return 1
     return 0
 
 
@@ -181,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         getattr(module, func_name)(sub)
+    from gateway.cli_docs import apply_formatter
+
+    apply_formatter(parser)  # every argument's help shows its default
     return parser
 
 

@@ -24,9 +24,11 @@ the text checked is the text Zenoh gets.
 
 from __future__ import annotations
 
+import importlib.metadata
 import ipaddress
 import os
 import stat
+import sys
 import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -42,7 +44,29 @@ from gateway.schema import Table
 from gateway.web.settings import WebSection, read_web_section
 from gateway.web.settings import web_bind as _web_bind
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "demo.toml"
+SHARE = "share/drive-gateway"
+"""Where a wheel installs config/ (the demo, the site template, the unit): under the
+installation's data directory (``<venv>/share/drive-gateway``)."""
+
+
+def shipped_file(name: str) -> Path:
+    """A file of config/: the source tree's, else the installed copy (a wheel), found
+    through the distribution's record so it works for a venv, ``--user`` or a system
+    install alike; the source tree's path when neither exists (the error names it)."""
+    source = Path(__file__).resolve().parent.parent / "config" / name
+    if source.is_file():
+        return source
+    try:
+        for entry in importlib.metadata.files("drive-gateway") or ():
+            if str(entry).replace("\\", "/").endswith(f"{SHARE}/{name}"):
+                return Path(str(entry.locate())).resolve()
+    except importlib.metadata.PackageNotFoundError:
+        pass
+    installed = Path(sys.prefix) / SHARE / name
+    return installed if installed.is_file() else source
+
+
+DEFAULT_CONFIG = shipped_file("demo.toml")
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 T = TypeVar("T")
 IpNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network

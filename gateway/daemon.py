@@ -134,6 +134,7 @@ class Runtime:
             "version": self.version,
             "uptime_s": round(time.monotonic() - self.started, 3),
             "drives": len(self.config.drives),
+            "drive_ids": [d.id for d in self.config.drives],
             "online": sum(1 for s in self.hub.states() if s.online),
             "buses": buses,
         }

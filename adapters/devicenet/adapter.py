@@ -47,6 +47,7 @@ from adapters.devicenet.cfw08_objects import (
     P702,
     P702_BAUD,
     P710,
+    SEED_PARAMETERS,
     STANDARD_OBJECTS,
     AttributeSpec,
     Value,
@@ -204,6 +205,22 @@ def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
             offset=p.offset,
         )
         for number, p in sorted(params.items())
+    )
+
+
+def seed_param_table() -> ParamTable:
+    """The CFW-08 parameters the DeviceNet manual gives (seed section 4: P070, P081,
+    P220-P231, P313, P700-P710, with their ranges): the drive's table when it has no EDS,
+    so a parameter backup knows what to read (docs/devices.md)."""
+    return param_table(
+        ParamInfo(
+            number=p.number,
+            name=p.name,
+            minimum=p.minimum,
+            maximum=p.maximum,
+            code=f"P{p.number:03d}",
+        )
+        for p in sorted(SEED_PARAMETERS.values(), key=lambda p: p.number)
     )
 
 
@@ -872,8 +889,10 @@ class DeviceNetAdapter:
     @staticmethod
     def _capabilities(d: _Drive, settings: ProfileSettings) -> Capabilities:
         """The profile's capabilities with the parameter table of the drive's EDS (the
-        lookup the front ends name parameter values with, gateway.adapter.ParamInfo)."""
-        return replace(capabilities(settings), params=eds_param_table(d.opts.params))
+        lookup the front ends name parameter values with, gateway.adapter.ParamInfo), or
+        without an EDS the seed's parameters (:func:`seed_param_table`)."""
+        table = eds_param_table(d.opts.params) if d.opts.params else seed_param_table()
+        return replace(capabilities(settings), params=table)
 
     def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
         """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the

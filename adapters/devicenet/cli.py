@@ -101,7 +101,12 @@ def add_sim(sub: Any) -> None:
         help="an EDS file: the drives' identity and I/O sizes come from it",
     )
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
-    p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    p.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="log level (default: %(default)s)",
+    )
     p.set_defaults(handler=cmd_sim)
 
 
@@ -183,14 +188,24 @@ def add_devicenet(sub: Any) -> None:
     scan = tools.add_parser(
         "scan", help="list the MAC IDs answering on a line, with their identity"
     )
-    scan.add_argument("--interface", type=_interface, default="socketcan")
+    scan.add_argument(
+        "--interface", type=_interface, default="socketcan", help="python-can interface"
+    )
     scan.add_argument("--channel", default="can0", help="CAN channel (default can0)")
-    scan.add_argument("--bitrate", type=int, default=125_000, choices=(125_000, 250_000, 500_000))
+    scan.add_argument(
+        "--bitrate",
+        type=int,
+        default=125_000,
+        choices=(125_000, 250_000, 500_000),
+        help="the line's bit rate",
+    )
     scan.add_argument(
         "--nodes", type=parse_nodes, default=list(range(64)), help="MAC IDs (default 0-63)"
     )
     scan.add_argument("--mac", type=int, default=0, help="the scan tool's own MAC ID (default 0)")
-    scan.add_argument("--vendor-id", type=int, default=SCANNER_VENDOR_ID)
+    scan.add_argument(
+        "--vendor-id", type=int, default=SCANNER_VENDOR_ID, help="the scan tool's vendor id"
+    )
     scan.add_argument("--timeout", type=float, default=0.2, help="s per answer (default 0.2)")
     scan.add_argument("--json", action="store_true", help="print JSON")
     scan.set_defaults(handler=cmd_scan)

@@ -401,7 +401,7 @@ def add_sim(sub: Any) -> None:
     _add_rs485(p)
     p.add_argument("--config", help="simulate the drives of this gateway config's Profibus buses")
     p.add_argument("--noise", type=float, default=0.0, help="bit flips per byte (line noise)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the line noise")
     p.set_defaults(handler=cmd_sim)
 
 

@@ -59,7 +59,8 @@ from typing import TYPE_CHECKING, Any
 
 import zenoh
 
-from gateway.adapter import EventKind
+from gateway import paramsbackup
+from gateway.adapter import EventKind, ParamValue
 from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
@@ -67,6 +68,7 @@ from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
 from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
 from gateway.zenoh.requests import (
     Answer,
+    BackupRequest,
     BadRequest,
     ParamRequest,
     command_accepted,
@@ -75,6 +77,7 @@ from gateway.zenoh.requests import (
     encode_state,
     error_body,
     param_result,
+    parse_backup_request,
     parse_command,
     parse_param_request,
     too_large,
@@ -614,6 +617,9 @@ class ZenohFrontEnd:
         if len(self._requests) >= PARAM_REQUEST_LIMIT:
             self._refuse(pending, f"busy: {PARAM_REQUEST_LIMIT} parameter requests are under way")
             return
+        if not parsed.rest:  # <prefix>/drives/<id>/params: the whole backup document
+            self._query_backup(pending, parsed.drive_id)
+            return
         try:
             payload = incoming.payload
             if isinstance(payload, Oversize):
@@ -658,6 +664,60 @@ class ZenohFrontEnd:
             self._answer(pending, [Answer.error(error_body(exc))])
         else:
             self._answer(pending, [Answer.reply(key, body)])
+
+    def _query_backup(self, pending: _Pending, drive_id: str) -> None:
+        """``<prefix>/drives/<id>/params``: the drive's parameter backup document
+        (gateway.paramsbackup); ``?numbers=1-20,100`` chooses the parameters, ``?describe``
+        answers the identity, the table and ``writable_params`` without reading them."""
+        if drive_id not in self._drive_ids:
+            self._refuse(pending, f"no drive {drive_id!r}")
+            return
+        try:
+            request = parse_backup_request(pending.incoming.parameters)
+        except (BadRequest, paramsbackup.BackupError) as exc:
+            self._refuse(pending, str(exc))
+            return
+        task = asyncio.create_task(
+            self._serve_backup(pending, drive_id, request), name=f"zenoh-backup-{drive_id}"
+        )
+        self._requests.add(task)
+        task.add_done_callback(self._requests.discard)
+
+    async def _serve_backup(self, pending: _Pending, drive_id: str, request: BackupRequest) -> None:
+        hub = self.hub
+        table = hub.capabilities(drive_id).params
+
+        async def read(number: int, subindex: int) -> ParamValue:
+            return await asyncio.wait_for(hub.read_param(drive_id, number, subindex), PARAM_TIMEOUT)
+
+        try:
+            state = hub.state(drive_id).to_json()
+            diag = self.runtime.drive_diagnostics(drive_id)
+            drive = await paramsbackup.identify(state, diag, table, read)
+            gateway = f"{self.runtime.config.gateway.name} {self.runtime.version}"
+            if request.describe:
+                body: dict[str, Any] = {
+                    "gateway": gateway,
+                    "drive": drive.to_json(),
+                    "state": state,
+                    "table": paramsbackup.table_to_json(table),
+                    "writable": sorted(hub.policy(drive_id).writable_params),
+                }
+            else:
+                backup = await paramsbackup.take(
+                    drive, table, request.numbers, read, gateway=gateway
+                )
+                body = backup.to_json()
+        except asyncio.CancelledError:
+            self._refuse(pending, "the gateway is shutting down")
+            raise
+        except paramsbackup.BackupError as exc:
+            self._refuse(pending, str(exc))
+        except Exception as exc:
+            log.exception("parameter backup of %s failed", drive_id)
+            self._answer(pending, [Answer.error(error_body(exc))])
+        else:
+            self._answer(pending, [Answer.reply(pending.incoming.key, body)])
 
     def _query_health(self, pending: _Pending) -> None:
         body = self.runtime.health()

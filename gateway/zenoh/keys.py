@@ -86,7 +86,12 @@ KEYS: tuple[KeySpec, ...] = (
         "timeout. Subindex defaults to 0. The key must name one drive and one parameter. "
         "`value` is the raw word; `scaled` is it in `unit` (P0100 = 20 is 2.0 s), with the "
         "parameter's `code` as the manual writes it and its `name` (docs/devices.md lists the "
-        "tables).",
+        "tables). Without a number, `<prefix>/drives/<id>/params` answers the drive's whole "
+        'parameter backup document (docs/operations.md, "Parameter backup and restore"): '
+        "every parameter of the drive's table, or those of the selector parameter "
+        "`numbers` (`params?numbers=1-20,100`); `params?describe` answers the drive's "
+        "identity, its table and its `writable_params` without reading them. A backup "
+        "reads one parameter after the other: give the query a timeout of a minute.",
     ),
     KeySpec(
         KeyKind.EVENTS,

@@ -60,6 +60,7 @@ class Incoming:
     query: Any  # zenoh.Query: replied to and dropped on the I/O thread
     targets: tuple[str, ...] = ()
     client: str = ""  # the querier's session id (client_of)
+    parameters: str = ""  # the selector's parameters ("numbers=1-20;describe")
 
 
 ANONYMOUS = "anonymous"
@@ -162,7 +163,8 @@ class ZenohLink:
                 targets = tuple(d for d, k in self._state_keys.items() if asked.intersects(k))
             body = _payload(payload)
             client = client_of(query.source_info)
-            self._on_query(Incoming(kind, key, body, query, targets, client))
+            parameters = str(query.parameters)
+            self._on_query(Incoming(kind, key, body, query, targets, client, parameters))
         except Exception:
             log.exception("zenoh query on %s could not be handed over", query.key_expr)
             query.drop()

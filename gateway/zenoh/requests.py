@@ -22,6 +22,7 @@ from gateway.model import (
     DriveState,
     DriveStatus,
 )
+from gateway.paramsbackup import parse_numbers
 
 PARAM_NUMBER_MAX = 65535
 PARAM_SUBINDEX_MAX = 65535
@@ -199,6 +200,32 @@ def _write_value(payload: bytes | None) -> ParamValue | None:
     if isinstance(value, float) and not math.isfinite(value):
         raise BadRequest("value must be a finite number")
     return value
+
+
+@dataclass(frozen=True, slots=True)
+class BackupRequest:
+    """A query on ``<prefix>/drives/<id>/params``: ``numbers`` None = the drive's table."""
+
+    numbers: tuple[tuple[int, int], ...] | None = None
+    describe: bool = False
+
+
+BACKUP_PARAMETERS = frozenset({"numbers", "describe"})
+
+
+def parse_backup_request(parameters: str) -> BackupRequest:
+    """The selector's parameters: ``numbers=100-103,134`` and ``describe``."""
+    given: dict[str, str] = {}
+    for part in filter(None, parameters.split(";")):
+        name, _, value = part.partition("=")
+        given[name] = value
+    unknown = sorted(set(given) - BACKUP_PARAMETERS)
+    if unknown:
+        raise BadRequest(
+            f"unknown selector parameter(s): {', '.join(unknown)} (known: describe, numbers)"
+        )
+    numbers = parse_numbers(given["numbers"]) if "numbers" in given else None
+    return BackupRequest(numbers, "describe" in given)
 
 
 def param_result(

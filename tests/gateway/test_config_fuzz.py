@@ -1,4 +1,4 @@
-"""Fuzz: every input to ``check-config`` ends with exit 0 or 2 and a message, never a
+"""Fuzz: every input to ``check-config`` ends with exit 0, 1 or 2 and a message, never a
 traceback (issue 18). The inputs are the shipped configs (config/demo.toml,
 config/site.example.toml) with their values, keys, nesting and types mutated, and
 their bytes flipped, inserted and deleted."""
@@ -149,11 +149,11 @@ def check(text: bytes, capsys: pytest.CaptureFixture[str]) -> None:
         path.write_bytes(text)
         status = main(["check-config", str(path)])
     out, err = capsys.readouterr()
-    assert status in (0, 2)
+    assert status in (0, 1, 2)  # 1: valid, with something left to fill in (a CHANGE-ME)
     if status == 2:
         assert err.startswith("error: ") and "cannot be checked" not in err, err
     else:
-        assert ": ok, " in out
+        assert (": ok, " if status == 0 else ": valid, but not ready, ") in out
 
 
 FUZZ = settings(

@@ -80,17 +80,33 @@ def test_unit_file_has_the_required_settings() -> None:
     assert settings["ProtectSystem"] == "strict"
     assert settings["PrivateTmp"] == "yes"
     assert settings["SupplementaryGroups"] == "dialout"
-    assert settings["CapabilityBoundingSet"] == ""  # CAP_NET_BIND_SERVICE only for port 502
-    assert "#AmbientCapabilities=CAP_NET_BIND_SERVICE" in text
+    # ExecReload= does what SIGHUP does (check the file, reload nothing), then sends it
+    reloads = [
+        line.split("=", 1)[1] for line in text.splitlines() if line.startswith("ExecReload=")
+    ]
+    assert reloads == [
+        "/opt/drive-gateway/venv/bin/drive-gateway check-config --errors-only /etc/drive-gateway/site.toml",
+        "/bin/kill -HUP $MAINPID",
+    ]
+
+
+def test_the_site_template_and_the_unit_agree_on_the_modbus_port() -> None:
+    """Binding a port below 1024 needs CAP_NET_BIND_SERVICE, and only that capability."""
+    import tomllib
+
+    site = tomllib.loads((UNIT.parent / "site.example.toml").read_text())
+    port = int(site["modbus"]["bind"].rsplit(":", 1)[1])
+    settings = dict(unit_lines())
+    wanted = "CAP_NET_BIND_SERVICE" if port < 1024 else ""
+    assert settings["CapabilityBoundingSet"] == wanted, port
+    assert settings["AmbientCapabilities"] == wanted, port
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
 def test_unit_file_verifies(tmp_path: Path) -> None:
     exe = Path(sys.executable).parent / "drive-gateway"
     unit = tmp_path / "drive-gateway.service"
-    unit.write_text(
-        UNIT.read_text().replace("/opt/drive-gateway/.venv/bin/drive-gateway", str(exe))
-    )
+    unit.write_text(UNIT.read_text().replace("/opt/drive-gateway/venv/bin/drive-gateway", str(exe)))
     proc = subprocess.run(
         ["systemd-analyze", "verify", str(unit)], capture_output=True, text=True, check=False
     )
@@ -149,15 +165,14 @@ def _offline_security(unit: Path) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
 def test_unit_exposure_stays_low(tmp_path: Path) -> None:
-    """The score recorded in docs/operations.md ("Security"); systemd >= 250 (--offline)."""
+    """The score recorded in docs/operations.md ("Security"); systemd >= 250 (--offline).
+    1.9: the 1.7 of the sandbox plus CAP_NET_BIND_SERVICE for Modbus on port 502 (issue 24)."""
     exe = Path(sys.executable).parent / "drive-gateway"
     unit = tmp_path / "drive-gateway.service"
-    unit.write_text(
-        UNIT.read_text().replace("/opt/drive-gateway/.venv/bin/drive-gateway", str(exe))
-    )
+    unit.write_text(UNIT.read_text().replace("/opt/drive-gateway/venv/bin/drive-gateway", str(exe)))
     proc = _offline_security(unit)
     if "--offline" in proc.stderr and proc.returncode != 0:
         pytest.skip(f"systemd-analyze has no --offline: {proc.stderr.strip()}")
     found = re.search(r"Overall exposure level for drive-gateway\.service: ([0-9.]+)", proc.stdout)
     assert found, proc.stdout + proc.stderr
-    assert float(found.group(1)) <= 1.7, proc.stdout
+    assert float(found.group(1)) <= 1.9, proc.stdout
