@@ -133,7 +133,7 @@ from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
-LEAVE_BOUND = 1.0  # s: the longest wait for Release answers on shutdown
+LEAVE_BOUND = 1.0  # s: the shortest bound on the wait for Release answers on shutdown
 LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SIM_START_BOUND = 2.0  # s
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
@@ -428,7 +428,9 @@ class DeviceNetAdapter:
         self._outbox.clear()
         self._act_quietly(now, engine.leave(now))
         self._flush(now)
-        bound = now + LEAVE_BOUND
+        # the Releases go out request_spacing apart, each answered within explicit_timeout
+        spread = len(engine.nodes) * engine.config.request_spacing
+        bound = now + max(LEAVE_BOUND, spread + self.options.explicit_timeout)
         while not engine.left and self.clock() < bound:
             deadline = engine.next_deadline()
             wait = LEAVE_WAIT if deadline is None else deadline - self.clock()
