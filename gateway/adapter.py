@@ -27,6 +27,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 from gateway.errors import AdapterError
+from gateway.loader import NotLoadable, load
 from gateway.model import DesiredCommand, Device, DriveState, SpeedScale
 
 if TYPE_CHECKING:
@@ -228,15 +229,12 @@ def _unknown(name: str) -> AdapterError:
 
 
 def _import(name: str, target: str) -> Any:
-    module_name, _, class_name = target.partition(":")
     try:
-        module = importlib.import_module(module_name)
+        return load(target)
+    except NotLoadable as exc:
+        raise AdapterError(f"adapter {name!r}: {exc}") from None
     except Exception as exc:  # an adapter that cannot be imported, for whatever reason
         raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
-    cls = getattr(module, class_name, None)
-    if cls is None:
-        raise AdapterError(f"adapter {name!r}: {module_name} has no {class_name}")
-    return cls
 
 
 def load_adapter(name: str) -> AdapterClass:

@@ -14,22 +14,11 @@ from dataclasses import dataclass, field, fields, replace
 from enum import Enum, IntEnum
 from typing import Any
 
+from gateway import devices
 from gateway.errors import CommandRejected
 
-
-class Device(Enum):
-    """The device models the gateway knows."""
-
-    CFW11 = "CFW-11"
-    CFW700 = "CFW700"
-    CFW320 = "CFW320"
-    CFW08 = "CFW-08"
-    MCD600 = "MCD 600"
-    TEST = "test"
-
-    @property
-    def is_soft_starter(self) -> bool:
-        return self is Device.MCD600
+Device = devices.Device
+"""The device models (the registry, gateway/devices.py), importable from the model."""
 
 
 class CommState(Enum):

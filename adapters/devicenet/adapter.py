@@ -119,6 +119,7 @@ from gateway.adapter import (
     param_table,
 )
 from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
 from gateway.errors import (
     AdapterError,
     DriveOffline,
@@ -211,7 +212,7 @@ def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
 class DeviceNetAdapter:
     """One DeviceNet line scanned by the gateway, with WEG CFW-08 drives."""
 
-    devices: ClassVar[frozenset[Device]] = frozenset({Device.CFW08})
+    devices: ClassVar[frozenset[Device]] = devices_of("devicenet")  # the registry's
     address_range: ClassVar[tuple[int, int]] = (0, 63)
 
     @classmethod

@@ -164,10 +164,12 @@ class Mcd600Sim:
         self.motor_set_used: MotorSet | None = None
 
     @classmethod
-    def for_drive(cls, drive: DriveConfig) -> Self:
+    def for_drive(cls, drive: DriveConfig | None) -> Self:
         """The simulated starter a configured drive describes (``simulate = true``): its
         mode, Ident_Number, FLC, small-model current scale, PROFIBUS address (parameter
-        12-7), ``sim_params`` and ``sim_time_scale``."""
+        12-7), ``sim_params`` and ``sim_time_scale``; a factory default one for ``None``."""
+        if drive is None:
+            return cls()
         o = drive.options if isinstance(drive.options, Mcd600Options) else Mcd600Options()
         params = {PROFIBUS_ADDRESS: drive.address} if 1 <= drive.address <= 125 else {}
         params.update(o.sim_params)

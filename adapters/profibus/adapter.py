@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -37,7 +36,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
 from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.loader import load
 from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
 from gateway.schema import Table
 
@@ -63,6 +64,7 @@ from .master import (
 )
 from .portlock import PortHeld
 from .profile import (
+    BUS,
     DP_STATIONS,
     PROFILES,
     SET_SLAVE_ADD_DEFAULT,
@@ -159,9 +161,7 @@ class _Channel:
 class ProfibusAdapter:
     """A Profibus DP class-1 master line (see the module docstring)."""
 
-    devices: ClassVar[frozenset[Device]] = frozenset(
-        {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
-    )
+    devices: ClassVar[frozenset[Device]] = devices_of(BUS)  # the registry's (gateway.devices)
     # 0-126 in the core's check: a device's own range (its profile's ``addresses``, from its
     # manual) and the DP stations 0-125 are checked in parse_drive_options, naming the drive
     address_range: ClassVar[tuple[int, int]] = (0, SET_SLAVE_ADD_DEFAULT)
@@ -193,8 +193,7 @@ class ProfibusAdapter:
             target = cls.profiles[device]
         except KeyError:
             raise GatewayError(f"no Profibus profile for {device.value}") from None
-        module_name, _, class_name = target.partition(":")
-        return getattr(importlib.import_module(module_name), class_name)
+        return load(target)
 
     # ------------------------------------------------------------------ construction
 

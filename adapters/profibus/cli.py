@@ -10,9 +10,10 @@
   master per line.
 * ``drive-gateway sim profibus --port PORT --slaves SPEC...``: simulated slaves on a serial
   port (or ``--port pty``: a new pty pair, its path printed for the master), until Ctrl-C.
-  SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: cfw11, cfw700, cfw320, mcd600, echo;
-  SIZE: bytes in and out of an echo slave), or ``--config FILE`` to simulate the drives of
-  a gateway config's Profibus buses as they are configured.
+  SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: the ``cli`` names of the registry's
+  Profibus devices, :data:`.sim.devices.KINDS`; SIZE: bytes in and out of an echo slave),
+  or ``--config FILE`` to simulate the drives of a gateway config's Profibus buses as they
+  are configured.
 """
 
 from __future__ import annotations
@@ -380,6 +381,8 @@ def parse_spec(text: str) -> list[SlaveSpec]:
 
 
 def add_sim(sub: Any) -> None:
+    from .sim.devices import KINDS
+
     p = sub.add_parser("profibus", help="simulated DP slaves on a serial port")
     p.add_argument("--port", required=True, help="device path, pyserial URL, or 'pty'")
     p.add_argument(
@@ -396,7 +399,7 @@ def add_sim(sub: Any) -> None:
         type=parse_spec,
         default=[],
         metavar="SPEC",
-        help="ADDRESS[-ADDRESS]:KIND[:SIZE], KIND: cfw11 cfw700 cfw320 mcd600 echo",
+        help=f"ADDRESS[-ADDRESS]:KIND[:SIZE], KIND: {' '.join(KINDS)}",
     )
     _add_rs485(p)
     p.add_argument("--config", help="simulate the drives of this gateway config's Profibus buses")

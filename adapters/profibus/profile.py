@@ -11,33 +11,35 @@ generic DP slave simulator: it checks the configuration it is given, answers
 data exchange, reacts to lost communication (watchdog expiry, Global_Control
 Clear) and answers DP-V1 record reads and writes with its manual's errors.
 
-Profiles are found through :data:`PROFILES` (device -> "module:Class"), so the
-master never imports a profile module eagerly, and the MCD 600 profile lives in
-its own package (adapters/mcd600) while running on this master.
+Profiles are found through :data:`PROFILES` (device -> "module:Class", from the device
+registry :mod:`gateway.devices`), so the master never imports a profile module eagerly,
+and the MCD 600 profile lives in its own package (adapters/mcd600) while running on this
+master.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol
 
 from gateway.adapter import Capabilities, ParamValue
+from gateway.devices import devices_of
 from gateway.errors import GatewayError
+from gateway.loader import load
 from gateway.model import DesiredCommand, Device
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig
     from gateway.schema import Table
 
+BUS: Final = "profibus"
+"""The adapter name the registry's Profibus devices give as their ``bus``."""
+
 PROFILES: dict[Device, str] = {
-    Device.CFW11: "adapters.profibus.weg.cfw11:Cfw11Profile",
-    Device.CFW700: "adapters.profibus.weg.cfw700:Cfw700Profile",
-    Device.CFW320: "adapters.profibus.weg.cfw320:Cfw320Profile",
-    Device.MCD600: "adapters.mcd600.profile:Mcd600Profile",
+    d: d.spec.profile for d in Device if d in devices_of(BUS) and d.spec.profile
 }
-"""Device -> "module:Class" of its :class:`DpProfile`."""
+"""Device -> "module:Class" of its :class:`DpProfile` (from the registry)."""
 
 
 class RecordAccessError(GatewayError):
@@ -187,8 +189,7 @@ def load_profile(device: Device) -> ProfileFactory:
         target = PROFILES[device]
     except KeyError:
         raise GatewayError(f"no Profibus profile for {device.value}") from None
-    module_name, _, class_name = target.partition(":")
-    factory: ProfileFactory = getattr(importlib.import_module(module_name), class_name)
+    factory: ProfileFactory = load(target)
     return factory
 
 
@@ -238,4 +239,14 @@ class SimDevice(Protocol):
 
     def power_cycle(self, now: float) -> None:
         """Lose power and come back: parameters kept, running state and comm lost."""
+        ...
+
+
+class SimFactory(Protocol):
+    """How a device's simulator is built: the class the registry names as its ``simulator``
+    (:mod:`gateway.devices`) has this one class method."""
+
+    def for_drive(self, drive: DriveConfig | None) -> SimDevice:
+        """The simulated device a configured drive describes (``simulate = true``: its
+        profile options, its address), or a default one for ``None``."""
         ...

@@ -68,8 +68,11 @@ class EchoSim:
         self.global_controls: deque[Any] = deque(maxlen=GLOBAL_CONTROLS_KEPT)  # the last ones
 
     @classmethod
-    def for_drive(cls, drive: DriveConfig) -> EchoSim:
-        """The device a drive's config describes (``size`` and ``ident_number`` options)."""
+    def for_drive(cls, drive: DriveConfig | None) -> EchoSim:
+        """The device a drive's config describes (``size`` and ``ident_number`` options);
+        a default one for ``None``."""
+        if drive is None:
+            return cls()
         size = getattr(drive.options, "size", 4)
         ident = getattr(drive.options, "ident_number", ECHO_IDENT)
         return cls(int(size), int(ident))

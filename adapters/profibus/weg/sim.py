@@ -24,7 +24,7 @@ import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import ClassVar, Final
+from typing import TYPE_CHECKING, ClassVar, Final
 
 from adapters.profibus import profidrive as pd
 from adapters.profibus import wegrecord
@@ -40,6 +40,9 @@ from . import spec as specs
 from . import words as w
 from .options import WegOptions
 from .spec import DataProfile, ModelSpec
+
+if TYPE_CHECKING:
+    from gateway.config import DriveConfig
 
 log = logging.getLogger(__name__)
 
@@ -211,6 +214,16 @@ class WegSim:
             self._store(spec.read_map_param(i + 3), param)
         for i, param in enumerate(words_out):
             self._store(spec.write_map_param(i + 3), param)
+
+    @classmethod
+    def for_drive(cls, drive: DriveConfig | None) -> WegSim:
+        """The drive a configured drive describes (``simulate = true``): programmed as its
+        profile options expect, at its address; a factory default one for ``None``."""
+        if drive is None:
+            return cls()
+        if isinstance(drive.options, WegOptions):
+            return cls.matching(drive.options, address=drive.address)
+        return cls(address=drive.address)
 
     @classmethod
     def matching(
