@@ -24,11 +24,11 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, Unpack, runtime_checkable
 
 from gateway.errors import AdapterError
 from gateway.loader import NotLoadable, load
-from gateway.model import DesiredCommand, Device, DriveState, SpeedScale
+from gateway.model import DesiredCommand, Device, DriveState, DriveUpdate, SpeedScale
 
 if TYPE_CHECKING:
     from gateway.config import BusConfig, DriveConfig
@@ -154,7 +154,9 @@ class HubPort(Protocol):
 
     def state(self, drive_id: str) -> DriveState: ...
 
-    def update(self, drive_id: str, **changes: Any) -> DriveState: ...
+    def update(self, drive_id: str, **changes: Unpack[DriveUpdate]) -> DriveState:
+        """Report readings (typed: :class:`gateway.model.DriveUpdate`)."""
+        ...
 
     def desired(self, drive_id: str) -> DesiredCommand: ...
 

@@ -30,10 +30,6 @@ KINDS: Final[Mapping[str, Device]] = {d.spec.cli: d for d in SIM_DEVICES if d.sp
 """Names of the simulated devices on the command line."""
 
 
-FORWARD_PRM: Final = frozenset({Device.MCD600})
-"""Devices whose simulator reads the Set_Prm user data itself (the MCD 600's timeout byte)."""
-
-
 def with_setup(sim: SimDevice, device: Device, override: Any) -> SimDevice:
     """``sim`` behind the GSD file of a drive's config (``SetupOverride``), if it has one."""
     gsd = getattr(override, "gsd", None)
@@ -42,7 +38,7 @@ def with_setup(sim: SimDevice, device: Device, override: Any) -> SimDevice:
     from .gsdsim import GsdSim
 
     modules = tuple(getattr(override, "modules", ()))
-    wrapped: SimDevice = GsdSim(sim, gsd, forward_prm=device in FORWARD_PRM, modules=modules)
+    wrapped: SimDevice = GsdSim(sim, gsd, modules=modules)
     return wrapped
 
 

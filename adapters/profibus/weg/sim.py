@@ -31,7 +31,7 @@ from adapters.profibus import wegrecord
 from adapters.profibus.cfg import CompactId, IoDirection
 from adapters.profibus.dpv1 import WEG_ERROR_CODE_1_TEXTS
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.profile import RecordAccessError, SimDeviceBase
 from gateway.model import Device
 from gateway.sim import FaultInjector, Motor, MotorParams
 
@@ -131,8 +131,10 @@ class Panel:
     reference_rpm: float = 0.0  # signed
 
 
-class WegSim:
+class WegSim(SimDeviceBase):
     """A simulated WEG drive (one model per subclass); implements the SimDevice protocol."""
+
+    handles_clear = True  # Clear is A138/F238 per P0313, not a lost communication
 
     spec: ClassVar[ModelSpec]
 
@@ -170,7 +172,7 @@ class WegSim:
         for number, value in (params or {}).items():
             self._store(number, value)
         self.ident_number = self.spec.default_ident if ident_number is None else ident_number
-        self.faults = FaultInjector()
+        self.faults: FaultInjector = FaultInjector()
         self.busy_reads = busy_reads
         self.motor = Motor(motor or self._motor_params())
         self.pinned: dict[int, int] = {}
