@@ -171,7 +171,7 @@ class _Drive:
     p313: int | None = None
     problem: str | None = None
     in_force: str | None = None  # the assembly pair the I/O connection's paths name
-    io_values: dict[str, int] = field(default_factory=dict)
+    io_values: dict[str, float | int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
     bad_inputs: int = 0
     output_key: object = None  # what the current output was computed from
@@ -186,7 +186,7 @@ class _Drive:
         return self.cfg.address
 
     @property
-    def values(self) -> dict[str, int]:
+    def values(self) -> dict[str, float | int]:
         return {**self.io_values, **self.params}
 
 
@@ -519,7 +519,8 @@ class DeviceNetAdapter:
             d.bad_inputs += 1
             return
         d.io_values = dict(changes.pop("values"))
-        hub.update(d.id, comm=CommState.ONLINE, values=d.values, **changes)
+        changes["values"] = d.values
+        hub.update(d.id, comm=CommState.ONLINE, **changes)
 
     def _on_result(self, now: float, action: ExplicitResult) -> None:
         fut = self._pending.pop(action.token, None)
