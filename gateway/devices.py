@@ -30,8 +30,9 @@ class DeviceSpec:
     ``for_drive(drive)`` builds the simulated device of a configured drive, or a default
     one for ``None`` (the Profibus ``SimFactory``; "" where the bus adapter chooses its
     simulator itself). ``cli``: its name on ``drive-gateway sim <bus>``. ``doc``: its line
-    in docs/architecture.md. ``test``: a device of the tests, in no adapter's production
-    set and in no published list.
+    in docs/architecture.md. ``gsd_names``: what a GSD file's Model_Name says for it
+    (casefolded parts; ``drive-gateway profibus scan --gsd-dir`` matches them). ``test``: a
+    device of the tests, in no adapter's production set and in no published list.
     """
 
     model: str
@@ -42,6 +43,7 @@ class DeviceSpec:
     simulator: str = ""
     cli: str = ""
     doc: str = ""
+    gsd_names: tuple[str, ...] = ()
     soft_starter: bool = False
     test: bool = False
 
@@ -61,6 +63,7 @@ class Device(Enum):
         simulator="adapters.profibus.weg.sim:Cfw11Sim",
         cli="cfw11",
         doc="WEG CFW-11 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
+        gsd_names=("cfw-11", "cfw11"),
     )
     CFW700 = DeviceSpec(
         "CFW700",
@@ -71,6 +74,7 @@ class Device(Enum):
         simulator="adapters.profibus.weg.sim:Cfw700Sim",
         cli="cfw700",
         doc="WEG CFW700 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
+        gsd_names=("cfw700", "cfw-700"),
     )
     CFW320 = DeviceSpec(
         "CFW320",
@@ -81,6 +85,7 @@ class Device(Enum):
         simulator="adapters.profibus.weg.sim:Cfw320Sim",
         cli="cfw320",
         doc="WEG CFW320 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
+        gsd_names=("cfw320", "cfw-320"),
     )
     CFW08 = DeviceSpec(
         "CFW-08",
@@ -99,6 +104,7 @@ class Device(Enum):
         cli="mcd600",
         doc="Danfoss VLT MCD 600 soft starter (docs/devices.md, Danfoss VLT MCD 600)",
         soft_starter=True,
+        gsd_names=("mcd 600", "mcd600", "mcd6"),
     )
     TEST = DeviceSpec(
         "test",

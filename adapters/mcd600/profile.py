@@ -79,6 +79,14 @@ class Mcd600Profile(DpProfileBase):
     the same three bytes, and only this profile knows it is a new trip."""
 
     @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """``mode``: the one whose layout has these sizes (guide 4.1)."""
+        for layout in LAYOUTS.values():
+            if (layout.input_len, layout.output_len) == (input_bytes, output_bytes):
+                return (f'mode = "{layout.mode.value}"',)
+        return ()
+
+    @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Mcd600Options:
         return parse_options(table, drive)
 

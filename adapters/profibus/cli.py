@@ -25,15 +25,17 @@ import signal
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any
 
 from gateway.config import Config, DriveConfig
+from gateway.model import Device
 
 from .driver import LineDriver
 from .fdl import MAX_STATION, StationType
 from .link import OPEN_ERRORS, Rs485, open_link
 from .options import ProfibusDriveOptions
 from .portlock import PortHeld
+from .profile import PROFILES, load_profile
 from .scan import Scanner, SlaveInfo
 from .timing import BAUD_RATES, BusParams
 
@@ -299,24 +301,14 @@ def _json(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) 
     return out
 
 
-_DEVICE_NAMES: Final = (
-    ("CFW-11", ("cfw-11", "cfw11")),
-    ("CFW700", ("cfw700", "cfw-700")),
-    ("CFW320", ("cfw320", "cfw-320")),
-    ("MCD 600", ("mcd 600", "mcd600", "mcd6")),
-)
-
-
-def _device_of(gsd: Any) -> str | None:
-    """The device model a GSD's Model_Name names (None: not one the gateway knows)."""
+def _device_of(gsd: Any) -> Device | None:
+    """The device a GSD's Model_Name names, by the registry's ``gsd_names`` (None: not one
+    the gateway knows)."""
     name = str(gsd.name).casefold()
-    for device, keys in _DEVICE_NAMES:
-        if any(k in name for k in keys):
+    for device in PROFILES:
+        if any(k in name for k in device.spec.gsd_names):
             return device
     return None
-
-
-_MCD_MODES: Final = {(2, 2): "basic", (6, 3): "extended", (10, 7): "parameter"}
 
 
 def stanza(address: int, match: GsdMatch) -> str:
@@ -327,7 +319,7 @@ def stanza(address: int, match: GsdMatch) -> str:
     lines = [
         "[[buses.profibus.drives]]",
         f'id = "station{address}"',
-        f'device = "{device}"' if device else 'device = ""  # not a model the gateway knows',
+        f'device = "{device.value}"' if device else 'device = ""  # not a model the gateway knows',
         f"address = {address}",
         f"gsd = {json.dumps(str(match.gsd.path))}",
     ]
@@ -341,10 +333,8 @@ def stanza(address: int, match: GsdMatch) -> str:
         lines.append(f"modules = {json.dumps(list(match.modules))}")
     ids = decode_identifiers(match.cfg or b"")
     sizes = (total_input_bytes(ids), total_output_bytes(ids))
-    if device == "MCD 600" and sizes in _MCD_MODES:
-        lines.append(f'mode = "{_MCD_MODES[sizes]}"')
-    elif device is not None and device != "MCD 600" and sizes[0] == sizes[1] and sizes[0] != 4:
-        lines.append(f"words = {sizes[0] // 2}")
+    if device is not None:
+        lines.extend(load_profile(device).telegram_keys(*sizes))
     return "\n".join(lines) + "\n"
 
 

@@ -229,10 +229,21 @@ class DpProfileBase:
     async def read_codes(self, channel: RecordChannel) -> Readings:
         return {}
 
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        return ()
+
 
 class ProfileFactory(Protocol):
     device: ClassVar[Device]
     addresses: ClassVar[AddressRange]
+
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """The config lines (``key = value``) that give a drive of this device a telegram of
+        these sizes, for the stanzas ``drive-gateway profibus scan --toml`` prints (empty:
+        none needed, or none gives it)."""
+        ...
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Any: ...

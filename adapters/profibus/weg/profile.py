@@ -135,6 +135,13 @@ class WegProfile(DpProfileBase):
             cls.addresses = AddressRange(low, high, spec.address_source)
 
     @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """``words`` for a telegram of other than 2 words in and out (P0922 / P751)."""
+        if input_bytes == output_bytes and input_bytes != 4:
+            return (f"words = {input_bytes // 2}",)
+        return ()
+
+    @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
         return parse_options(table, cls.spec)
 
