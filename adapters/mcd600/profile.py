@@ -17,7 +17,7 @@ import logging
 import math
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import TYPE_CHECKING, ClassVar, Final
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from adapters.profibus.profile import (
     AddressRange,
@@ -85,6 +85,13 @@ class Mcd600Profile(DpProfileBase):
             if (layout.input_len, layout.output_len) == (input_bytes, output_bytes):
                 return (f'mode = "{layout.mode.value}"',)
         return ()
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The ``mode`` (guide 4.1)."""
+        if not isinstance(options, Mcd600Options):
+            return super().telegram_text(options)
+        return f"MCD 600 mode = {options.mode.value!r}"
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Mcd600Options:

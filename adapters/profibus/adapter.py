@@ -191,7 +191,8 @@ class ProfibusAdapter:
         builtin = None  # the profile's own setup: only to check a GSD module or cfg against
         if table.has("gsd") or table.has("cfg"):
             builtin = profile_class(replace(drive, options=profile_options)).setup()
-        return opts.parse_drive_options(table, drive, profile_options, builtin)
+        telegram = profile_class.telegram_text(profile_options)
+        return opts.parse_drive_options(table, drive, profile_options, builtin, telegram)
 
     @classmethod
     def profile_class(cls, device: Device) -> ProfileFactory:

@@ -103,6 +103,9 @@ class AddressRange:
         return f"{text} ({self.source}); use {low}-{high}"
 
 
+BUILTIN_TELEGRAM: Final = "its built-in telegram"
+"""What fixes the telegram of a profile that has no setting for it (``telegram_text``)."""
+
 DEFAULT_ADDRESSES: Final = AddressRange(*DP_STATIONS, "DP station addresses, fact sheet 1.2")
 """For a profile that declares no ``addresses`` of its own (a test device)."""
 
@@ -233,6 +236,10 @@ class DpProfileBase:
     def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
         return ()
 
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        return BUILTIN_TELEGRAM
+
 
 class ProfileFactory(Protocol):
     device: ClassVar[Device]
@@ -243,6 +250,12 @@ class ProfileFactory(Protocol):
         """The config lines (``key = value``) that give a drive of this device a telegram of
         these sizes, for the stanzas ``drive-gateway profibus scan --toml`` prints (empty:
         none needed, or none gives it)."""
+        ...
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The setting of the profile's ``options`` that fixes its telegram, as an operator
+        knows it (for the error when a GSD module or ``cfg`` gives other sizes)."""
         ...
 
     @classmethod

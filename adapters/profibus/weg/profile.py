@@ -142,6 +142,15 @@ class WegProfile(DpProfileBase):
         return ()
 
     @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The telegram words (P0922 / P751), or frame 20 on a CFW-11."""
+        if not isinstance(options, WegOptions):
+            return super().telegram_text(options)
+        if options.frame == 20:
+            return f"frame 20, {options.words} words (P0922 = 5)"
+        return f"words = {options.words}, P0922 (CFW320: P751) = {options.words - 1}"
+
+    @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
         return parse_options(table, cls.spec)
 
