@@ -12,8 +12,8 @@ device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive
   and ``profile.outputs(hub.desired(id))`` -> the next Data_Exchange;
 * extended diagnosis (changed) -> ``profile.on_ext_diag`` -> hub events (every read, empty
   ones included, for a profile with ``sees_every_diag = True``: it keeps its own memory);
-* a profile with ``wants_codes`` / ``read_codes(channel)`` (the WEG drives: fault and alarm
-  codes not mapped in the telegram) gets them read over DP-V1 when it asks;
+* a profile whose ``wants_codes`` is true (the WEG drives: fault and alarm codes not mapped
+  in the telegram) gets them read over DP-V1 by its ``read_codes(channel)``;
 * leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
 
 The port disappearing never crashes the gateway: drives go offline and the port is

@@ -736,7 +736,7 @@ class WegProfile(DpProfileBase):
     def wants_codes(self) -> bool:
         """True when the status shows a fault or alarm that no telegram word numbers.
 
-        The master may then call :meth:`read_codes` (an addition to the DpProfile contract).
+        The adapter then calls :meth:`read_codes` (DpProfile hooks, DpProfileBase defaults).
         """
         fault_mapped = any(p in (49, 947) for p in self.in_map)
         alarm_mapped = 48 in self.in_map
