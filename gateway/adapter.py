@@ -24,10 +24,11 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, Unpack, runtime_checkable
 
 from gateway.errors import AdapterError
-from gateway.model import DesiredCommand, Device, DriveState, SpeedScale
+from gateway.loader import NotLoadable, load
+from gateway.model import DesiredCommand, Device, DriveState, DriveUpdate, SpeedScale
 
 if TYPE_CHECKING:
     from gateway.config import BusConfig, DriveConfig
@@ -153,7 +154,9 @@ class HubPort(Protocol):
 
     def state(self, drive_id: str) -> DriveState: ...
 
-    def update(self, drive_id: str, **changes: Any) -> DriveState: ...
+    def update(self, drive_id: str, **changes: Unpack[DriveUpdate]) -> DriveState:
+        """Report readings (typed: :class:`gateway.model.DriveUpdate`)."""
+        ...
 
     def desired(self, drive_id: str) -> DesiredCommand: ...
 
@@ -228,15 +231,12 @@ def _unknown(name: str) -> AdapterError:
 
 
 def _import(name: str, target: str) -> Any:
-    module_name, _, class_name = target.partition(":")
     try:
-        module = importlib.import_module(module_name)
+        return load(target)
+    except NotLoadable as exc:
+        raise AdapterError(f"adapter {name!r}: {exc}") from None
     except Exception as exc:  # an adapter that cannot be imported, for whatever reason
         raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
-    cls = getattr(module, class_name, None)
-    if cls is None:
-        raise AdapterError(f"adapter {name!r}: {module_name} has no {class_name}")
-    return cls
 
 
 def load_adapter(name: str) -> AdapterClass:

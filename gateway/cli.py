@@ -8,7 +8,6 @@ without the core importing them at start-up.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import os
 import sys
@@ -19,6 +18,7 @@ from typing import Any, NoReturn
 from gateway import __version__
 from gateway.config import DEFAULT_CONFIG, Config, load
 from gateway.errors import ConfigError, ConfigErrors
+from gateway.loader import load_optional
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -255,14 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"drive-gateway {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for target in COMMANDS.values():
-        module_name, _, func_name = target.partition(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name and module_name.startswith(exc.name):
-                continue
-            raise
-        getattr(module, func_name)(sub)
+        add = load_optional(target)
+        if add is not None:
+            add(sub)
     from gateway.cli_docs import apply_formatter
 
     apply_formatter(parser)  # every argument's help shows its default

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib
 import logging
 import signal
 import time
@@ -35,6 +34,7 @@ from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.hub import DrivePolicy, Hub
+from gateway.loader import load_optional
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
 
@@ -159,15 +159,9 @@ def build_hub(config: Config, hub: Hub | None = None) -> Hub:
 
 
 def load_front_end(name: str) -> Callable[[Runtime], FrontEnd] | None:
-    module_name, _, class_name = FRONT_ENDS[name].partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and module_name.startswith(exc.name):
-            log.warning("%s front end is not part of this build; not serving it", name)
-            return None
-        raise
-    factory: Callable[[Runtime], FrontEnd] = getattr(module, class_name)
+    factory: Callable[[Runtime], FrontEnd] | None = load_optional(FRONT_ENDS[name])
+    if factory is None:
+        log.warning("%s front end is not part of this build; not serving it", name)
     return factory
 
 

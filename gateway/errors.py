@@ -54,6 +54,14 @@ class FrameEncodeError(GatewayError, ValueError):
     """A value that cannot be put on the wire (out of range, too long)."""
 
 
+def require_int(what: str, value: object, low: int, high: int) -> int:
+    """``value`` if it is an int (not a bool) in ``low..high``, else FrameEncodeError: the
+    one range check of every encoder (codecs may import this module of the core)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise FrameEncodeError(f"{what} must be an integer in {low}..{high}, got {value!r}")
+    return value
+
+
 class GatewayTimeout(GatewayError, TimeoutError):
     """A request that got no answer in time."""
 

@@ -34,7 +34,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any, Protocol, cast
+from typing import Any, Protocol, Unpack, cast
 
 from gateway.adapter import Capabilities, Event, EventKind, ParamValue
 from gateway.errors import (
@@ -53,6 +53,7 @@ from gateway.model import (
     DriveCommand,
     DriveState,
     DriveStatus,
+    DriveUpdate,
     Source,
     StopAction,
 )
@@ -256,8 +257,11 @@ class Hub:
     def states(self) -> list[DriveState]:
         return [d.state for d in self._drives.values()]
 
-    def update(self, drive_id: str, **changes: Any) -> DriveState:
+    def update(self, drive_id: str, **changes: Unpack[DriveUpdate]) -> DriveState:
         """An adapter reports readings; returns the (possibly new) state.
+
+        The names and types are checked by mypy (:class:`DriveUpdate`); a name that is no
+        field of the state is still refused at run time (TypeError).
 
         Hot path: one pass keeps the readings that differ (``seq``, ``ts`` and
         ``control_source`` are the hub's own and ignored), the new state is built

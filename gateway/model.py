@@ -12,24 +12,13 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from enum import Enum, IntEnum
-from typing import Any
+from typing import Any, TypedDict
 
+from gateway import devices
 from gateway.errors import CommandRejected
 
-
-class Device(Enum):
-    """The device models the gateway knows."""
-
-    CFW11 = "CFW-11"
-    CFW700 = "CFW700"
-    CFW320 = "CFW320"
-    CFW08 = "CFW-08"
-    MCD600 = "MCD 600"
-    TEST = "test"
-
-    @property
-    def is_soft_starter(self) -> bool:
-        return self is Device.MCD600
+Device = devices.Device
+"""The device models (the registry, gateway/devices.py), importable from the model."""
 
 
 class CommState(Enum):
@@ -220,6 +209,42 @@ class DriveState:
     def same_reading(self, other: DriveState) -> bool:
         """True when nothing but seq and ts differ."""
         return replace(self, seq=0, ts=0.0) == replace(other, seq=0, ts=0.0)
+
+
+class Readings(TypedDict, total=False):
+    """What a device profile reads from its device, on the way to the hub: the reading
+    fields of :class:`DriveState`, each optional (a profile gives what it has). Typed keys:
+    a misspelt field or a wrong type fails in mypy; at run time it is a plain dict (the
+    hub's hot path stays as it was). ``comm`` is not a reading: the adapter adds it
+    (:class:`DriveUpdate`)."""
+
+    status: DriveStatus
+    running: bool
+    direction: Direction
+    at_reference: bool
+    remote: bool
+    alarm: bool
+    speed_rpm: float | None
+    speed_pct: float | None
+    speed_ref_rpm: float | None
+    speed_ref_pct: float | None
+    current_a: float | None
+    current_pct_flc: float | None
+    motor_temp_pct: float | None
+    power_kw: float | None
+    voltage_v: float | None
+    fault_code: int | None
+    fault_text: str | None
+    alarm_code: int | None
+    speed_base: str | None
+    values: Mapping[str, float | int]
+
+
+class DriveUpdate(Readings, total=False):
+    """What an adapter reports to the hub (``HubPort.update``): readings and the drive's
+    communication state."""
+
+    comm: CommState
 
 
 _set_attribute = object.__setattr__

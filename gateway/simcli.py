@@ -6,8 +6,9 @@ found through :data:`SIMULATORS`; a package not in this build is skipped.
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
+
+from gateway.loader import NotLoadable, load_optional
 
 SIMULATORS: dict[str, str] = {
     "profibus": "adapters.profibus.cli:add_sim",
@@ -19,12 +20,9 @@ def add_sim(sub: Any) -> None:
     p = sub.add_parser("sim", help="run simulated devices standalone on a port or CAN bus")
     buses = p.add_subparsers(dest="bus", metavar="BUS", required=True)
     for target in SIMULATORS.values():
-        module_name, _, func = target.partition(":")
         try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name and module_name.startswith(exc.name):
-                continue
-            raise
-        if hasattr(module, func):
-            getattr(module, func)(buses)
+            add = load_optional(target)
+        except NotLoadable:
+            continue
+        if add is not None:
+            add(buses)

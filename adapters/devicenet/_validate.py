@@ -1,17 +1,9 @@
-"""Range checks shared by the DeviceNet encoders: every failure is a FrameEncodeError."""
+"""Checks shared by the DeviceNet encoders: every failure is a FrameEncodeError (the range
+check is :func:`gateway.errors.require_int`, shared by every encoder)."""
 
 from __future__ import annotations
 
 from gateway.errors import FrameEncodeError
-
-
-def check_int(name: str, value: object, low: int, high: int) -> int:
-    """``value`` if it is an int (not a bool) in ``low..high``, else FrameEncodeError."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise FrameEncodeError(f"{name} must be an int, not {value!r}")
-    if not low <= value <= high:
-        raise FrameEncodeError(f"{name} {value} out of {low}..{high}")
-    return value
 
 
 def check_bytes(name: str, value: object, max_length: int | None = None) -> bytes:

@@ -120,6 +120,7 @@ from gateway.adapter import (
     param_table,
 )
 from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
 from gateway.errors import (
     AdapterError,
     DriveOffline,
@@ -170,7 +171,7 @@ class _Drive:
     p313: int | None = None
     problem: str | None = None
     in_force: str | None = None  # the assembly pair the I/O connection's paths name
-    io_values: dict[str, int] = field(default_factory=dict)
+    io_values: dict[str, float | int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
     bad_inputs: int = 0
     output_key: object = None  # what the current output was computed from
@@ -185,7 +186,7 @@ class _Drive:
         return self.cfg.address
 
     @property
-    def values(self) -> dict[str, int]:
+    def values(self) -> dict[str, float | int]:
         return {**self.io_values, **self.params}
 
 
@@ -227,7 +228,7 @@ def seed_param_table() -> ParamTable:
 class DeviceNetAdapter:
     """One DeviceNet line scanned by the gateway, with WEG CFW-08 drives."""
 
-    devices: ClassVar[frozenset[Device]] = frozenset({Device.CFW08})
+    devices: ClassVar[frozenset[Device]] = devices_of("devicenet")  # the registry's
     address_range: ClassVar[tuple[int, int]] = (0, 63)
 
     @classmethod
@@ -536,7 +537,8 @@ class DeviceNetAdapter:
             d.bad_inputs += 1
             return
         d.io_values = dict(changes.pop("values"))
-        hub.update(d.id, comm=CommState.ONLINE, values=d.values, **changes)
+        changes["values"] = d.values
+        hub.update(d.id, comm=CommState.ONLINE, **changes)
 
     def _on_result(self, now: float, action: ExplicitResult) -> None:
         fut = self._pending.pop(action.token, None)

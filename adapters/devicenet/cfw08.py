@@ -23,7 +23,7 @@ from adapters.devicenet.datatypes import CipType, encode_value, read_value
 from adapters.devicenet.errors import AssemblyDecodeError, DataTypeDecodeError
 from gateway.adapter import Capabilities
 from gateway.errors import FrameEncodeError
-from gateway.model import DesiredCommand, Direction, DriveStatus, SpeedScale
+from gateway.model import DesiredCommand, Direction, DriveStatus, Readings, SpeedScale
 
 ASSEMBLY_SIZE = 4  # seed 4.1.8 and table 11: every instance is 2 words
 DEFAULT_WEG_SPEED_SCALE = 8192  # decision (100/150): 8192 counts = max_rpm
@@ -588,7 +588,7 @@ def capabilities(settings: ProfileSettings) -> Capabilities:
     )
 
 
-def _speed_fields(settings: ProfileSettings, rpm: float) -> dict[str, Any]:
+def _speed_fields(settings: ProfileSettings, rpm: float) -> Readings:
     return {
         "speed_rpm": round(rpm, 1),
         "speed_pct": round(100.0 * rpm / settings.max_rpm, 2),
@@ -609,9 +609,7 @@ def _near(settings: ProfileSettings, actual: float, ref: float) -> bool:
     return abs(abs(actual) - abs(ref)) <= settings.at_reference_rpm
 
 
-def _state70(
-    s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float
-) -> dict[str, Any]:
+def _state70(s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float) -> Readings:
     if not isinstance(a, In70):
         raise TypeError(a)
     rpm = float(a.speed_rpm)
@@ -642,9 +640,7 @@ _STATE71_STATUS: Mapping[int, DriveStatus] = {
 }
 
 
-def _state71(
-    s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float
-) -> dict[str, Any]:
+def _state71(s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float) -> Readings:
     if not isinstance(a, In71):
         raise TypeError(a)
     status = _STATE71_STATUS.get(a.drive_state, DriveStatus.NOT_READY)
@@ -670,7 +666,7 @@ def _state71(
 
 def _state150(
     s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float
-) -> dict[str, Any]:
+) -> Readings:
     if not isinstance(a, In150):
         raise TypeError(a)
     magnitude = counts_to_rpm(a.speed_counts, s.max_rpm, s.weg_speed_scale)
@@ -700,9 +696,7 @@ _STATE_MAPPERS = {
 }
 
 
-def state_changes(
-    settings: ProfileSettings, data: bytes, desired: DesiredCommand
-) -> dict[str, Any]:
+def state_changes(settings: ProfileSettings, data: bytes, desired: DesiredCommand) -> Readings:
     """The DriveState fields an input assembly gives (raises AssemblyDecodeError)."""
     assembly = decode_input(settings.pair.input_instance, data)
     ref = min(reference_rpm(settings, desired), settings.max_rpm)

@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from adapters.devicenet._validate import check_int
 from adapters.devicenet.datatypes import CipType, encode_value, read_value
 from adapters.devicenet.errors import DupMacDecodeError, UnexpectedCanId
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import MAX_MAC, PredefinedMessage, match_predefined, predefined_can_id
+from gateway.errors import require_int
 
 DUPMAC_LENGTH = 7  # fact sheet 2.3
 _RESPONSE_BIT = 0x80  # byte 0 b7 (fact sheet 2.3)
@@ -40,11 +40,11 @@ class DupMacCheck:
     serial_number: int
 
     def __post_init__(self) -> None:
-        check_int("MAC ID", self.mac, 0, MAX_MAC)
-        check_int("check message kind", self.kind, 0, 1)
-        check_int("physical port", self.port, 0, _PORT_MASK)
-        check_int("vendor ID", self.vendor_id, 0, CipType.UINT.maximum)
-        check_int("serial number", self.serial_number, 0, CipType.UDINT.maximum)
+        require_int("MAC ID", self.mac, 0, MAX_MAC)
+        require_int("check message kind", self.kind, 0, 1)
+        require_int("physical port", self.port, 0, _PORT_MASK)
+        require_int("vendor ID", self.vendor_id, 0, CipType.UINT.maximum)
+        require_int("serial number", self.serial_number, 0, CipType.UDINT.maximum)
         object.__setattr__(self, "kind", DupMacKind(self.kind))
 
     def encode_data(self) -> bytes:

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import ClassVar
 
-from adapters.devicenet._validate import check_bytes, check_int
+from adapters.devicenet._validate import check_bytes
 from adapters.devicenet.cip import NO_ADDITIONAL_CODE, GeneralStatus, Service, general_status_text
 from adapters.devicenet.errors import ExplicitDecodeError
 from adapters.devicenet.ids import MAX_MAC
 from adapters.devicenet.objects import AllocationChoice
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 FRAG_BIT = 0x80  # byte 0 b7 (fact sheet 2.4)
 XID_BIT = 0x40  # byte 0 b6
@@ -54,8 +54,8 @@ _ID_WIDTHS: dict[BodyFormat, tuple[int, int]] = {
 
 
 def _check_path(class_id: int, instance_id: int) -> None:
-    check_int("class id", class_id, 0, 0xFFFF)
-    check_int("instance id", instance_id, 0, 0xFFFF)
+    require_int("class id", class_id, 0, 0xFFFF)
+    require_int("instance id", instance_id, 0, 0xFFFF)
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,7 +69,7 @@ class GetAttributeSingle:
 
     def __post_init__(self) -> None:
         _check_path(self.class_id, self.instance_id)
-        check_int("attribute id", self.attribute_id, 0, 0xFF)
+        require_int("attribute id", self.attribute_id, 0, 0xFF)
 
     def encode_data(self) -> bytes:
         return bytes((self.attribute_id,))
@@ -87,7 +87,7 @@ class SetAttributeSingle:
 
     def __post_init__(self) -> None:
         _check_path(self.class_id, self.instance_id)
-        check_int("attribute id", self.attribute_id, 0, 0xFF)
+        require_int("attribute id", self.attribute_id, 0, 0xFF)
         value = check_bytes("attribute value", self.value)
         if not value:
             raise FrameEncodeError("Set_Attribute_Single needs a value of at least one byte")
@@ -141,7 +141,7 @@ class Reset:
     def __post_init__(self) -> None:
         _check_path(self.class_id, self.instance_id)
         if self.reset_type is not None:
-            check_int("reset type", self.reset_type, 0, 0xFF)
+            require_int("reset type", self.reset_type, 0, 0xFF)
 
     def encode_data(self) -> bytes:
         return b"" if self.reset_type is None else bytes((self.reset_type,))
@@ -162,8 +162,8 @@ class AllocateConnectionSet:
 
     def __post_init__(self) -> None:
         _check_path(self.class_id, self.instance_id)
-        check_int("allocation choice", self.choice, 0, 0xFF)
-        check_int("allocator MAC", self.allocator_mac, 0, MAX_MAC)
+        require_int("allocation choice", self.choice, 0, 0xFF)
+        require_int("allocator MAC", self.allocator_mac, 0, MAX_MAC)
         object.__setattr__(self, "choice", AllocationChoice(self.choice))
 
     def encode_data(self) -> bytes:
@@ -181,7 +181,7 @@ class ReleaseConnectionSet:
 
     def __post_init__(self) -> None:
         _check_path(self.class_id, self.instance_id)
-        check_int("release choice", self.choice, 0, 0xFF)
+        require_int("release choice", self.choice, 0, 0xFF)
         object.__setattr__(self, "choice", AllocationChoice(self.choice))
 
     def encode_data(self) -> bytes:
@@ -198,7 +198,7 @@ class GenericRequest:
     data: bytes = b""
 
     def __post_init__(self) -> None:
-        check_int("service", self.service, 0, SERVICE_MASK)
+        require_int("service", self.service, 0, SERVICE_MASK)
         if self.service in _REQUEST_DECODERS:
             raise FrameEncodeError(f"service 0x{self.service:02X} has its own request type; use it")
         _check_path(self.class_id, self.instance_id)
@@ -231,7 +231,7 @@ class SuccessResponse:
     data: bytes = b""
 
     def __post_init__(self) -> None:
-        check_int("service", self.service, 0, SERVICE_MASK)
+        require_int("service", self.service, 0, SERVICE_MASK)
         if self.service in _RESPONSE_DECODERS:
             raise FrameEncodeError(
                 f"service 0x{self.service:02X} has its own response type; use it"
@@ -254,7 +254,7 @@ class AllocateResponse:
     message_body_format: int = BodyFormat.CLASS8_INSTANCE8
 
     def __post_init__(self) -> None:
-        check_int("message body format", self.message_body_format, 0, 0xFF)
+        require_int("message body format", self.message_body_format, 0, 0xFF)
 
     @property
     def body_format(self) -> BodyFormat | None:
@@ -274,8 +274,8 @@ class ErrorResponse:
     additional_code: int = NO_ADDITIONAL_CODE
 
     def __post_init__(self) -> None:
-        check_int("general status", self.general_status, 0, 0xFF)
-        check_int("additional code", self.additional_code, 0, 0xFF)
+        require_int("general status", self.general_status, 0, 0xFF)
+        require_int("additional code", self.additional_code, 0, 0xFF)
 
     @property
     def text(self) -> str:
@@ -306,7 +306,7 @@ class ExplicitMessage:
     body: Body
 
     def __post_init__(self) -> None:
-        check_int("MAC ID", self.mac, 0, MAX_MAC)
+        require_int("MAC ID", self.mac, 0, MAX_MAC)
         if not isinstance(self.xid, bool):
             raise FrameEncodeError(f"XID must be a bool, not {self.xid!r}")
         if not isinstance(self.body, _BODY_TYPES):

@@ -23,7 +23,7 @@ import logging
 from dataclasses import dataclass
 from enum import IntEnum
 
-from adapters.devicenet._validate import check_bytes, check_int
+from adapters.devicenet._validate import check_bytes
 from adapters.devicenet.errors import (
     FragmentAckError,
     FragmentAckTimeout,
@@ -32,7 +32,7 @@ from adapters.devicenet.errors import (
     ReassembledTooLong,
     ReassemblyTimeout,
 )
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 log = logging.getLogger(__name__)
 
@@ -79,9 +79,9 @@ class ExplicitFragment:
     payload: bytes = b""
 
     def __post_init__(self) -> None:
-        check_int("header", self.header, 0, HEADER_MASK)
-        check_int("fragment type", self.kind, FragmentType.FIRST, FragmentType.LAST)
-        check_int("fragment count", self.count, 0, COUNT_MASK)
+        require_int("header", self.header, 0, HEADER_MASK)
+        require_int("fragment type", self.kind, FragmentType.FIRST, FragmentType.LAST)
+        require_int("fragment count", self.count, 0, COUNT_MASK)
         payload = check_bytes("fragment payload", self.payload, EXPLICIT_FRAGMENT_PAYLOAD)
         object.__setattr__(self, "kind", FragmentType(self.kind))
         object.__setattr__(self, "payload", payload)
@@ -103,9 +103,9 @@ class FragmentAck:
     status: int = ACK_SUCCESS
 
     def __post_init__(self) -> None:
-        check_int("header", self.header, 0, HEADER_MASK)
-        check_int("fragment count", self.count, 0, COUNT_MASK)
-        check_int("ack status", self.status, 0, 0xFF)
+        require_int("header", self.header, 0, HEADER_MASK)
+        require_int("fragment count", self.count, 0, COUNT_MASK)
+        require_int("ack status", self.status, 0, 0xFF)
 
     def encode(self) -> bytes:
         return bytes(
@@ -155,8 +155,8 @@ class IoFragment:
     payload: bytes = b""
 
     def __post_init__(self) -> None:
-        check_int("fragment type", self.kind, FragmentType.FIRST, FragmentType.LAST)
-        check_int("fragment count", self.count, 0, COUNT_MASK)
+        require_int("fragment type", self.kind, FragmentType.FIRST, FragmentType.LAST)
+        require_int("fragment count", self.count, 0, COUNT_MASK)
         payload = check_bytes("fragment payload", self.payload, IO_FRAGMENT_PAYLOAD)
         object.__setattr__(self, "kind", FragmentType(self.kind))
         object.__setattr__(self, "payload", payload)

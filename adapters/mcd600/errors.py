@@ -7,18 +7,11 @@ encoders raise :class:`gateway.errors.FrameEncodeError`.
 
 from __future__ import annotations
 
-from gateway.errors import FrameDecodeError, FrameEncodeError
+from gateway.errors import FrameDecodeError
 
 
 class Mcd600DecodeError(FrameDecodeError):
     """Bytes that do not decode as an MCD 600 PROFIBUS card structure."""
-
-
-def require_int(what: str, value: int, low: int, high: int) -> int:
-    """``value`` if it is an int in ``low..high``, else FrameEncodeError."""
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise FrameEncodeError(f"{what} must be an integer in {low}..{high}, got {value!r}")
-    return value
 
 
 def require_size(what: str, data: bytes, size: int) -> bytes:

@@ -24,7 +24,9 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Final, Self
 
-from .errors import Mcd600DecodeError, require_int, require_size
+from gateway.errors import require_int
+
+from .errors import Mcd600DecodeError, require_size
 from .monitoring import MonitorReply
 from .programming import IDLE, ParamReply, ParamRequest
 from .words import ControlWord, StatusWord

@@ -12,6 +12,8 @@ import logging
 from collections.abc import Mapping
 from typing import Final
 
+from gateway.model import Readings as DriveReadings
+
 from .errors import Mcd600DecodeError
 from .monitoring import REQUESTS, DataRequest, MonitorReply, Readings, decode_value
 
@@ -72,9 +74,14 @@ class DataPoller:
         self._readings.update(new)
         return new
 
-    def model_fields(self) -> dict[str, float | None]:
+    def model_fields(self) -> DriveReadings:
         """The DriveState fields the readings give (None where not read yet)."""
-        return {name: _float(self._readings.get(name)) for name in MODEL_FIELDS}
+        got = self._readings.get
+        return {
+            "motor_temp_pct": _float(got("motor_temp_pct")),
+            "power_kw": _float(got("power_kw")),
+            "voltage_v": _float(got("voltage_v")),
+        }
 
     def values(self) -> dict[str, float | int]:
         """The readings that are not DriveState fields, for ``DriveState.values``."""

@@ -22,13 +22,15 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 from adapters.profibus.profile import (
     AddressRange,
     DiagEvent,
+    DiagKind,
+    DpProfileBase,
     EventSink,
     RecordChannel,
     SlaveSetup,
 )
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import DriveOffline, GatewayError, ParameterError
-from gateway.model import DesiredCommand, Device, DriveStatus
+from gateway.model import DesiredCommand, Device, DriveStatus, Readings
 
 from .diag import ExtDiag
 from .layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
@@ -64,7 +66,7 @@ NEEDS_PARAMETER_MODE = (
 )
 
 
-class Mcd600Profile:
+class Mcd600Profile(DpProfileBase):
     """:class:`adapters.profibus.profile.DpProfile` for the MCD 600 PROFIBUS card."""
 
     device: ClassVar[Device] = Device.MCD600
@@ -75,6 +77,21 @@ class Mcd600Profile:
     """Every diagnosis read comes here, even bytes equal to the last ones: after a reset the
     card clears its telegram (5.1.1) without raising the alert, so the same trip again is
     the same three bytes, and only this profile knows it is a new trip."""
+
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """``mode``: the one whose layout has these sizes (guide 4.1)."""
+        for layout in LAYOUTS.values():
+            if (layout.input_len, layout.output_len) == (input_bytes, output_bytes):
+                return (f'mode = "{layout.mode.value}"',)
+        return ()
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The ``mode`` (guide 4.1)."""
+        if not isinstance(options, Mcd600Options):
+            return super().telegram_text(options)
+        return f"MCD 600 mode = {options.mode.value!r}"
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Mcd600Options:
@@ -122,7 +139,7 @@ class Mcd600Profile:
     def capabilities(self) -> Capabilities:
         return Capabilities(speed_scale=None, unsupported=dict(UNSUPPORTED))
 
-    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Mapping[str, Any]:
+    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Readings:
         """Nothing to read at start-up (no DP-V1, no speed scale): start from a clean slate,
         keeping a trip code the start-up diagnosis may already have given."""
         self._reset_command_state()
@@ -181,7 +198,7 @@ class Mcd600Profile:
 
     # ------------------------------------------------------------------ inputs
 
-    def inputs(self, data: bytes, now: float) -> Mapping[str, Any]:
+    def inputs(self, data: bytes, now: float) -> Readings:
         telegram = InputTelegram.decode(self.layout, data)
         if telegram.monitor is not None:
             new = self._poller.take(telegram.monitor)
@@ -199,7 +216,7 @@ class Mcd600Profile:
                 changes["current_a"] = float(measured)
         return changes
 
-    def _status_changes(self, st: StatusWord) -> dict[str, Any]:
+    def _status_changes(self, st: StatusWord) -> Readings:
         status = self._map_status(st)
         self._status = status
         pct = round(st.current_pct_flc, 2)
@@ -232,7 +249,7 @@ class Mcd600Profile:
             return self._start_sent
         return self._status not in (DriveStatus.RUNNING, DriveStatus.STOPPING)
 
-    def _fault_fields(self, tripped: bool) -> dict[str, Any]:
+    def _fault_fields(self, tripped: bool) -> Readings:
         if not tripped:
             if self._tripped_seen:  # the trip was reset: its code is history
                 self._tripped_seen = False
@@ -257,15 +274,17 @@ class Mcd600Profile:
                 self._trip_code = diag.trip_code
                 text = trip_text(diag.trip_code)
                 events.append(
-                    DiagEvent(f"trip {diag.trip_code}: {text}", "trip", {"code": diag.trip_code})
+                    DiagEvent(
+                        f"trip {diag.trip_code}: {text}", DiagKind.TRIP, {"code": diag.trip_code}
+                    )
                 )
             else:
-                events.append(DiagEvent("trip code cleared", "info", {"code": 0}))
+                events.append(DiagEvent("trip code cleared", DiagKind.INFO, {"code": 0}))
         if diag.changed_param and diag.changed_param != old.changed_param:  # 5.1.2
             events.append(
                 DiagEvent(
                     f"parameter {diag.changed_param} changed on the starter",
-                    "parameter",
+                    DiagKind.PARAMETER,
                     {"number": diag.changed_param},
                 )
             )

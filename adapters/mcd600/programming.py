@@ -10,7 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
-from .errors import require_int, require_size
+from gateway.errors import require_int
+
+from .errors import require_size
 
 REQUEST_SIZE: Final = 4
 REPLY_SIZE: Final = 4

@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import TYPE_CHECKING, ClassVar, Final, Protocol, Self
+from typing import TYPE_CHECKING, Final, Protocol, Self
 
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.profile import RecordAccessError, SimDeviceBase
 from gateway.sim import FaultInjector, MotorParams
 
 from .diag import ExtDiag
@@ -96,10 +96,11 @@ class GlobalControlLike(Protocol):
     def sync(self) -> bool: ...
 
 
-class Mcd600Sim:
+class Mcd600Sim(SimDeviceBase):
     """One simulated MCD 600 with a PROFIBUS card (a ``SimDevice``)."""
 
-    dpv1: ClassVar[bool] = False  # Set_Prm has no DP-V1 status bytes: user data from byte 7
+    dpv1 = False  # Set_Prm has no DP-V1 status bytes: user data from byte 7
+    reads_user_prm = True  # its comm timeout byte (3.3), behind a GSD file too
 
     def __init__(
         self,
@@ -134,7 +135,7 @@ class Mcd600Sim:
         self.starter = SoftStarter(
             motor, line_voltage=line_voltage, required_start_pct=required_start_pct
         )
-        self.faults = FaultInjector(seed=seed)
+        self.faults: FaultInjector = FaultInjector(seed=seed)
         # digital inputs (request 16); the reset input must be closed to run (3.3)
         self.reset_input_closed = True
         self.start_input = False
@@ -164,10 +165,12 @@ class Mcd600Sim:
         self.motor_set_used: MotorSet | None = None
 
     @classmethod
-    def for_drive(cls, drive: DriveConfig) -> Self:
+    def for_drive(cls, drive: DriveConfig | None) -> Self:
         """The simulated starter a configured drive describes (``simulate = true``): its
         mode, Ident_Number, FLC, small-model current scale, PROFIBUS address (parameter
-        12-7), ``sim_params`` and ``sim_time_scale``."""
+        12-7), ``sim_params`` and ``sim_time_scale``; a factory default one for ``None``."""
+        if drive is None:
+            return cls()
         o = drive.options if isinstance(drive.options, Mcd600Options) else Mcd600Options()
         params = {PROFIBUS_ADDRESS: drive.address} if 1 <= drive.address <= 125 else {}
         params.update(o.sim_params)
@@ -232,6 +235,9 @@ class Mcd600Sim:
     def diag_alert(self) -> bool:
         """A trip raises the diagnosis alarm (5.1.1); a changed parameter does not (5.1.2)."""
         return self.trip_code != 0
+
+    def alerts(self, ext: bytes) -> bool:
+        return self.diag_alert
 
     def tick(self, now: float) -> None:
         """Advance to ``now``; the timers due on the way (communication timeout, auto-reset)

@@ -10,7 +10,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Self
 
-from .errors import require_int, require_size
+from gateway.errors import require_int
+
+from .errors import require_size
 
 WORD_SIZE: Final = 2
 

@@ -12,8 +12,8 @@ device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive
   and ``profile.outputs(hub.desired(id))`` -> the next Data_Exchange;
 * extended diagnosis (changed) -> ``profile.on_ext_diag`` -> hub events (every read, empty
   ones included, for a profile with ``sees_every_diag = True``: it keeps its own memory);
-* a profile with ``wants_codes`` / ``read_codes(channel)`` (the WEG drives: fault and alarm
-  codes not mapped in the telegram) gets them read over DP-V1 when it asks;
+* a profile whose ``wants_codes`` is true (the WEG drives: fault and alarm codes not mapped
+  in the telegram) gets them read over DP-V1 by its ``read_codes(channel)``;
 * leaving data exchange -> ``profile.on_comm_lost()`` and comm "offline".
 
 The port disappearing never crashes the gateway: drives go offline and the port is
@@ -29,15 +29,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from enum import Enum
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
 from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.loader import load
 from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
 from gateway.schema import Table
 
@@ -63,11 +65,13 @@ from .master import (
 )
 from .portlock import PortHeld
 from .profile import (
-    DP_STATIONS,
+    BUS,
     PROFILES,
     SET_SLAVE_ADD_DEFAULT,
-    AddressRange,
+    DiagKind,
     DpProfile,
+    EventSink,
+    ProfileFactory,
     RecordAccessError,
     SlaveSetup,
 )
@@ -77,9 +81,6 @@ if TYPE_CHECKING:
     from .sim.port import SimPort
 
 log = logging.getLogger(__name__)
-
-DEFAULT_ADDRESSES: Final = AddressRange(*DP_STATIONS, "DP station addresses, fact sheet 1.2")
-"""For a profile that declares no ``addresses`` of its own (a test device)."""
 
 REOPEN_BACKOFF: Final = (0.5, 10.0)  # s, first and longest pause before reopening the port
 CONNECT_BACKOFF: Final = (2.0, 60.0)  # s, between on_connect attempts of a drive
@@ -101,15 +102,23 @@ FAULT_EVENTS: Final[Mapping[FaultKind, EventKind]] = {
     FaultKind.DPV1_UNANSWERED: EventKind.BUS,  # the line's trouble; data exchange goes on
 }
 
-DIAG_KINDS: Final[Mapping[str, EventKind]] = {
-    "fault": EventKind.FAULT,
-    "trip": EventKind.TRIP,
-    "alarm": EventKind.ALARM,
-    "parameter": EventKind.PARAMETER,
-    "info": EventKind.BUS,
-    "config": EventKind.CONFIG,
-    "safety": EventKind.SAFETY,
+DIAG_KINDS: Final[Mapping[DiagKind, EventKind]] = {
+    DiagKind.FAULT: EventKind.FAULT,
+    DiagKind.TRIP: EventKind.TRIP,
+    DiagKind.ALARM: EventKind.ALARM,
+    DiagKind.PARAMETER: EventKind.PARAMETER,
+    DiagKind.INFO: EventKind.BUS,
+    DiagKind.CONFIG: EventKind.CONFIG,
+    DiagKind.SAFETY: EventKind.SAFETY,
 }
+
+
+class PortState(Enum):
+    """The serial port, as the diagnostics show it (``port_state``)."""
+
+    CLOSED = "closed"
+    OPEN = "open"
+    REOPENING = "reopening"
 
 
 @dataclass
@@ -159,9 +168,7 @@ class _Channel:
 class ProfibusAdapter:
     """A Profibus DP class-1 master line (see the module docstring)."""
 
-    devices: ClassVar[frozenset[Device]] = frozenset(
-        {Device.CFW11, Device.CFW700, Device.CFW320, Device.MCD600}
-    )
+    devices: ClassVar[frozenset[Device]] = devices_of(BUS)  # the registry's (gateway.devices)
     # 0-126 in the core's check: a device's own range (its profile's ``addresses``, from its
     # manual) and the DP stations 0-125 are checked in parse_drive_options, naming the drive
     address_range: ClassVar[tuple[int, int]] = (0, SET_SLAVE_ADD_DEFAULT)
@@ -177,24 +184,24 @@ class ProfibusAdapter:
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
         profile_class = cls.profile_class(drive.device)
-        addresses = getattr(profile_class, "addresses", DEFAULT_ADDRESSES)
-        refusal = addresses.refusal(drive.device.value, drive.address)
+        refusal = profile_class.addresses.refusal(drive.device.value, drive.address)
         if refusal is not None:
             raise table.error("address", refusal)
         profile_options = profile_class.parse_options(table, drive)
         builtin = None  # the profile's own setup: only to check a GSD module or cfg against
         if table.has("gsd") or table.has("cfg"):
             builtin = profile_class(replace(drive, options=profile_options)).setup()
-        return opts.parse_drive_options(table, drive, profile_options, builtin)
+        telegram = profile_class.telegram_text(profile_options)
+        return opts.parse_drive_options(table, drive, profile_options, builtin, telegram)
 
     @classmethod
-    def profile_class(cls, device: Device) -> Any:
+    def profile_class(cls, device: Device) -> ProfileFactory:
         try:
             target = cls.profiles[device]
         except KeyError:
             raise GatewayError(f"no Profibus profile for {device.value}") from None
-        module_name, _, class_name = target.partition(":")
-        return getattr(importlib.import_module(module_name), class_name)
+        factory: ProfileFactory = load(target)
+        return factory
 
     # ------------------------------------------------------------------ construction
 
@@ -227,7 +234,7 @@ class ProfibusAdapter:
         self._driver: LineDriver | None = None
         self._futures: dict[int, asyncio.Future[RecordDone]] = {}
         self._port = self.options.port
-        self._port_state = "closed"
+        self._port_state = PortState.CLOSED
         self._port_error: str | None = None
         self._reopens = 0
         self._link_opens = 0  # PortHeld before the first: refuse to start (one master per line)
@@ -300,9 +307,9 @@ class ProfibusAdapter:
             await asyncio.sleep(pause)
 
     def _attach(self, link: SerialLink) -> None:
-        if self._port_state == "reopening":
+        if self._port_state is PortState.REOPENING:
             self._reopens += 1
-        self._port_state = "open"
+        self._port_state = PortState.OPEN
         self._port_error = None
         self._link = link
         self._driver = LineDriver(self.master, link, self._on_action, self._on_flushed_noise)
@@ -328,7 +335,7 @@ class ProfibusAdapter:
             for drive in self._drives.values():
                 self._event(drive, EventKind.BUS, text)
         self._port_error = text
-        self._port_state = "reopening"
+        self._port_state = PortState.REOPENING
 
     async def _leave(self) -> None:
         """Leave the line: Global_Control Clear to all, then close the port (rule 4)."""
@@ -361,7 +368,7 @@ class ProfibusAdapter:
                 await self.sim.settle()
             log.info("%s: Global_Control Clear sent; closing %s", self.name, self._port)
         await self._detach()
-        self._port_state = "closed"
+        self._port_state = PortState.CLOSED
         if self.sim is not None:
             self.sim.close()
             self.sim = None
@@ -490,7 +497,7 @@ class ProfibusAdapter:
             changes = drive.profile.inputs(action.data, now)
             self._hub.update(drive.id, comm=CommState.ONLINE, **changes)
             desired = self._hub.desired(drive.id)
-            if getattr(drive.profile, "wants_codes", False):
+            if drive.profile.wants_codes:
                 self._read_codes(drive, now)
         else:
             desired = self._safe(drive)
@@ -507,13 +514,12 @@ class ProfibusAdapter:
         )
 
     async def _codes(self, drive: _Drive) -> None:
-        read = getattr(drive.profile, "read_codes", None)
         try:
-            if callable(read) and self._hub is not None:
+            if self._hub is not None:
                 async with drive.lock:
-                    changes = await read(_Channel(self, drive))
+                    changes = await drive.profile.read_codes(_Channel(self, drive))
                 if changes and drive.up:
-                    self._hub.update(drive.id, **dict(changes))
+                    self._hub.update(drive.id, **changes)
         except GatewayError as exc:
             log.info("%s: fault codes not read: %s", drive.id, exc)
             if self._loop is not None:
@@ -526,7 +532,7 @@ class ProfibusAdapter:
         if drive is None:
             return
         # A profile with ``sees_every_diag`` (MCD 600) keeps its own memory of the diagnosis.
-        every = getattr(drive.profile, "sees_every_diag", False)
+        every = drive.profile.sees_every_diag
         if action.ext == drive.last_ext and not every:
             return
         drive.last_ext = action.ext
@@ -538,7 +544,7 @@ class ProfibusAdapter:
             self._event(drive, EventKind.BUS, f"extended diagnosis not understood: {exc}")
             return
         for ev in events:
-            self._event(drive, DIAG_KINDS.get(ev.kind, EventKind.BUS), ev.text, **dict(ev.data))
+            self._event(drive, DIAG_KINDS[ev.kind], ev.text, **dict(ev.data))
 
     def _on_record(self, action: RecordDone) -> None:
         future = self._futures.pop(action.job, None)
@@ -588,13 +594,13 @@ class ProfibusAdapter:
             hub.set_capabilities(drive.id, drive.profile.capabilities())
             drive.configured = True
             if changes:
-                hub.update(drive.id, **dict(changes))
+                hub.update(drive.id, **changes)
             self._event(drive, EventKind.COMM, "configured: data exchange with the drive's profile")
             return
 
-    def _sink(self, drive: _Drive) -> Callable[..., None]:
-        def sink(text: str, kind: str = "info", **data: Any) -> None:
-            self._event(drive, DIAG_KINDS.get(kind, EventKind.BUS), text, **data)
+    def _sink(self, drive: _Drive) -> EventSink:
+        def sink(text: str, kind: DiagKind = DiagKind.INFO, **data: Any) -> None:
+            self._event(drive, DIAG_KINDS[kind], text, **data)
 
         return sink
 
@@ -698,7 +704,7 @@ class ProfibusAdapter:
         return {
             "port": self._port,
             "simulated": self.options.simulate,
-            "port_state": self._port_state,
+            "port_state": self._port_state.value,
             "port_error": self._port_error,
             "reopens": self._reopens,
             **self.master.line_diagnostics(),
@@ -744,7 +750,7 @@ def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlavePara
 def _record_result(drive: _Drive, done: RecordDone) -> bytes:
     """The data of a finished DP-V1 job, or the error the RecordChannel contract names."""
     if done.error is not None:
-        table = getattr(drive.profile, "record_error_texts", None)
+        table = drive.profile.record_error_texts
         text = done.error.text_in(table) if table else done.error.text
         raise RecordAccessError(
             text, done.error.error_code_1, done.error.error_code_2, done.error.error_decode

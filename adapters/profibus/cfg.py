@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Self
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 from ._pdu import bit, bits, fail
-from .errors import DecodeFailure, require_length, require_range
+from .errors import DecodeFailure, require_length
 from .fdl import MAX_DU
 
 
@@ -53,7 +53,7 @@ class CompactId:
 
     def encode(self) -> bytes:
         direction = IoDirection(self.direction)
-        length = require_range("compact identifier length", self.length, 1, 16)
+        length = require_int("compact identifier length", self.length, 1, 16)
         return bytes((bits((self.consistent, 7), (self.words, 6)) | direction << 4 | (length - 1),))
 
 
@@ -70,7 +70,7 @@ class IoLength:
         return self.length * (2 if self.words else 1)
 
     def encode(self) -> int:
-        length = require_range("special identifier length", self.length, 1, 64)
+        length = require_int("special identifier length", self.length, 1, 64)
         return bits((self.consistent, 7), (self.words, 6)) | (length - 1)
 
     @classmethod

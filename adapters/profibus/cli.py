@@ -10,9 +10,10 @@
   master per line.
 * ``drive-gateway sim profibus --port PORT --slaves SPEC...``: simulated slaves on a serial
   port (or ``--port pty``: a new pty pair, its path printed for the master), until Ctrl-C.
-  SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: cfw11, cfw700, cfw320, mcd600, echo;
-  SIZE: bytes in and out of an echo slave), or ``--config FILE`` to simulate the drives of
-  a gateway config's Profibus buses as they are configured.
+  SPEC is ``ADDRESS[-ADDRESS]:KIND[:SIZE]`` (KIND: the ``cli`` names of the registry's
+  Profibus devices, :data:`.sim.devices.KINDS`; SIZE: bytes in and out of an echo slave),
+  or ``--config FILE`` to simulate the drives of a gateway config's Profibus buses as they
+  are configured.
 """
 
 from __future__ import annotations
@@ -24,15 +25,17 @@ import signal
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any
 
 from gateway.config import Config, DriveConfig
+from gateway.model import Device
 
 from .driver import LineDriver
 from .fdl import MAX_STATION, StationType
 from .link import OPEN_ERRORS, Rs485, open_link
 from .options import ProfibusDriveOptions
 from .portlock import PortHeld
+from .profile import PROFILES, load_profile
 from .scan import Scanner, SlaveInfo
 from .timing import BAUD_RATES, BusParams
 
@@ -298,24 +301,14 @@ def _json(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) 
     return out
 
 
-_DEVICE_NAMES: Final = (
-    ("CFW-11", ("cfw-11", "cfw11")),
-    ("CFW700", ("cfw700", "cfw-700")),
-    ("CFW320", ("cfw320", "cfw-320")),
-    ("MCD 600", ("mcd 600", "mcd600", "mcd6")),
-)
-
-
-def _device_of(gsd: Any) -> str | None:
-    """The device model a GSD's Model_Name names (None: not one the gateway knows)."""
+def _device_of(gsd: Any) -> Device | None:
+    """The device a GSD's Model_Name names, by the registry's ``gsd_names`` (None: not one
+    the gateway knows)."""
     name = str(gsd.name).casefold()
-    for device, keys in _DEVICE_NAMES:
-        if any(k in name for k in keys):
+    for device in PROFILES:
+        if any(k in name for k in device.spec.gsd_names):
             return device
     return None
-
-
-_MCD_MODES: Final = {(2, 2): "basic", (6, 3): "extended", (10, 7): "parameter"}
 
 
 def stanza(address: int, match: GsdMatch) -> str:
@@ -326,7 +319,7 @@ def stanza(address: int, match: GsdMatch) -> str:
     lines = [
         "[[buses.profibus.drives]]",
         f'id = "station{address}"',
-        f'device = "{device}"' if device else 'device = ""  # not a model the gateway knows',
+        f'device = "{device.value}"' if device else 'device = ""  # not a model the gateway knows',
         f"address = {address}",
         f"gsd = {json.dumps(str(match.gsd.path))}",
     ]
@@ -340,10 +333,8 @@ def stanza(address: int, match: GsdMatch) -> str:
         lines.append(f"modules = {json.dumps(list(match.modules))}")
     ids = decode_identifiers(match.cfg or b"")
     sizes = (total_input_bytes(ids), total_output_bytes(ids))
-    if device == "MCD 600" and sizes in _MCD_MODES:
-        lines.append(f'mode = "{_MCD_MODES[sizes]}"')
-    elif device is not None and device != "MCD 600" and sizes[0] == sizes[1] and sizes[0] != 4:
-        lines.append(f"words = {sizes[0] // 2}")
+    if device is not None:
+        lines.extend(load_profile(device).telegram_keys(*sizes))
     return "\n".join(lines) + "\n"
 
 
@@ -380,6 +371,8 @@ def parse_spec(text: str) -> list[SlaveSpec]:
 
 
 def add_sim(sub: Any) -> None:
+    from .sim.devices import KINDS
+
     p = sub.add_parser("profibus", help="simulated DP slaves on a serial port")
     p.add_argument("--port", required=True, help="device path, pyserial URL, or 'pty'")
     p.add_argument(
@@ -396,7 +389,7 @@ def add_sim(sub: Any) -> None:
         type=parse_spec,
         default=[],
         metavar="SPEC",
-        help="ADDRESS[-ADDRESS]:KIND[:SIZE], KIND: cfw11 cfw700 cfw320 mcd600 echo",
+        help=f"ADDRESS[-ADDRESS]:KIND[:SIZE], KIND: {' '.join(KINDS)}",
     )
     _add_rs485(p)
     p.add_argument("--config", help="simulate the drives of this gateway config's Profibus buses")

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Final, Self
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 from ._pdu import bit, bits, fail, need
-from .errors import DecodeFailure, require_length, require_range, whole_raw
+from .errors import DecodeFailure, require_length, whole_raw
 from .fdl import MAX_DU
 
 NO_MASTER: Final = 0xFF  # 1.8: Master_Add 0xFF = no master
@@ -154,10 +154,9 @@ class ChannelDiag:
     def encode(self) -> bytes:
         return bytes(
             (
-                _BLOCK_CHANNEL << 6 | require_range("module", self.module, 0, 63),
-                ChannelDirection(self.direction) << 6
-                | require_range("channel", self.channel, 0, 63),
-                ChannelType(self.channel_type) << 5 | require_range("error", self.error, 0, 31),
+                _BLOCK_CHANNEL << 6 | require_int("module", self.module, 0, 63),
+                ChannelDirection(self.direction) << 6 | require_int("channel", self.channel, 0, 63),
+                ChannelType(self.channel_type) << 5 | require_int("error", self.error, 0, 31),
             )
         )
 
@@ -179,8 +178,8 @@ class AlarmDiag:
             bytes(
                 (
                     len(data) + 4,
-                    require_range("alarm_type", self.alarm_type, 0, 127),
-                    require_range("slot", self.slot, 0, 255),
+                    require_int("alarm_type", self.alarm_type, 0, 127),
+                    require_int("slot", self.slot, 0, 255),
                     _specifier_byte(self.specifier, self.add_ack, self.sequence),
                 )
             )
@@ -203,8 +202,8 @@ class StatusDiag:
             bytes(
                 (
                     len(data) + 4,
-                    0x80 | require_range("status_type", self.status_type, 0, 127),
-                    require_range("slot", self.slot, 0, 255),
+                    0x80 | require_int("status_type", self.status_type, 0, 127),
+                    require_int("slot", self.slot, 0, 255),
                     AlarmSpecifier(self.specifier),
                 )
             )
@@ -215,7 +214,7 @@ class StatusDiag:
 def _specifier_byte(specifier: AlarmSpecifier, add_ack: bool, sequence: int) -> int:
     """1.8: b1-0 specifier, b2 Add_Ack, b7-3 sequence number."""
     return (
-        require_range("sequence", sequence, 0, 31) << 3
+        require_int("sequence", sequence, 0, 31) << 3
         | (0x04 if add_ack else 0)
         | AlarmSpecifier(specifier)
     )
@@ -369,7 +368,7 @@ class SlaveDiag:
         return not (self.station_not_ready or self.cfg_fault or self.prm_fault or self.prm_req)
 
     def encode(self) -> bytes:
-        require_range("ident_number", self.ident_number, 0, 0xFFFF)
+        require_int("ident_number", self.ident_number, 0, 0xFFFF)
         head = bytes(
             (
                 bits(
@@ -392,7 +391,7 @@ class SlaveDiag:
                     (self.deactivated, 7),
                 ),
                 bits((self.ext_diag_overflow, 7)),
-                require_range("master_address", self.master_address, 0, 255),
+                require_int("master_address", self.master_address, 0, 255),
                 self.ident_number >> 8,
                 self.ident_number & 0xFF,
             )

@@ -21,12 +21,12 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import ClassVar, Final, Self
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 from ._pdu import bit, bits, exact, fail, need
 from .cfg import Configuration
 from .diag import SlaveDiag
-from .errors import DecodeFailure, require_length, require_range
+from .errors import DecodeFailure, require_length
 from .fdl import (
     BROADCAST,
     MAX_DU,
@@ -136,7 +136,7 @@ class Dpv1Status:
         return ALARM_MODE_MAX_ALARMS[self.alarm_mode & 0x07]
 
     def encode(self) -> bytes:
-        require_range("alarm_mode", self.alarm_mode, 0, 7)
+        require_int("alarm_mode", self.alarm_mode, 0, 7)
         return bytes(
             (
                 bits(
@@ -215,7 +215,7 @@ class SetPrm:
         return watchdog_time(self.wd_fact_1, self.wd_fact_2, base_1ms=base_1ms)
 
     def encode(self) -> bytes:
-        require_range("ident_number", self.ident_number, 0, 0xFFFF)
+        require_int("ident_number", self.ident_number, 0, 0xFFFF)
         head = bytes(
             (
                 bits(
@@ -225,12 +225,12 @@ class SetPrm:
                     (self.unlock_req, 6),
                     (self.lock_req, 7),
                 ),
-                require_range("wd_fact_1", self.wd_fact_1, 1, WD_FACTOR_MAX),
-                require_range("wd_fact_2", self.wd_fact_2, 1, WD_FACTOR_MAX),
-                require_range("min_tsdr", self.min_tsdr, 0, 255),
+                require_int("wd_fact_1", self.wd_fact_1, 1, WD_FACTOR_MAX),
+                require_int("wd_fact_2", self.wd_fact_2, 1, WD_FACTOR_MAX),
+                require_int("min_tsdr", self.min_tsdr, 0, 255),
                 self.ident_number >> 8,
                 self.ident_number & 0xFF,
-                require_range("group_ident", self.group_ident, 0, 255),
+                require_int("group_ident", self.group_ident, 0, 255),
             )
         )
         dpv1 = self.dpv1.encode() if self.dpv1 is not None else b""
@@ -290,7 +290,7 @@ class GlobalControl:
     @staticmethod
     def groups_mask(groups: Iterable[int]) -> int:
         """Group_Select for groups numbered 1..8."""
-        return sum(1 << (require_range("group", g, 1, 8) - 1) for g in set(groups))
+        return sum(1 << (require_int("group", g, 1, 8) - 1) for g in set(groups))
 
     def encode(self) -> bytes:
         return bytes(
@@ -302,7 +302,7 @@ class GlobalControl:
                     (self.unsync, 4),
                     (self.sync, 5),
                 ),
-                require_range("group_select", self.group_select, 0, 255),
+                require_int("group_select", self.group_select, 0, 255),
             )
         )
 
@@ -328,10 +328,10 @@ class SetSlaveAdd:
     user_data: bytes = b""
 
     def encode(self) -> bytes:
-        require_range("ident_number", self.ident_number, 0, 0xFFFF)
+        require_int("ident_number", self.ident_number, 0, 0xFFFF)
         return bytes(
             (
-                require_range("new_address", self.new_address, 0, BROADCAST),
+                require_int("new_address", self.new_address, 0, BROADCAST),
                 self.ident_number >> 8,
                 self.ident_number & 0xFF,
                 1 if self.no_add_chg else 0,

@@ -15,11 +15,11 @@ from enum import IntEnum
 from types import MappingProxyType
 from typing import Final, Self, TypeVar
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 from .diag import AlarmDiag, AlarmSpecifier, decode_specifier
 from .dp import MasterSap, SlaveSap
-from .errors import DecodeFailure, Dpv1DecodeError, require_length, require_range
+from .errors import DecodeFailure, Dpv1DecodeError, require_length
 from .fdl import DataTelegram, RequestFc, ResponseStatus, StationType
 
 
@@ -137,9 +137,9 @@ def _header(function: Dpv1Function, slot: int, index: int, length: int) -> bytes
     return bytes(
         (
             function,
-            require_range("slot", slot, 0, 255),
-            require_range("index", index, 0, 255),
-            require_range("length", length, 0, MAX_DATA),
+            require_int("slot", slot, 0, 255),
+            require_int("index", index, 0, 255),
+            require_int("length", length, 0, MAX_DATA),
         )
     )
 
@@ -242,9 +242,9 @@ class AlarmAck:
         return bytes(
             (
                 Dpv1Function.ALARM_ACK,
-                require_range("slot", self.slot, 0, 255),
-                require_range("alarm_type", self.alarm_type, 0, 127),
-                require_range("sequence", self.sequence, 0, 31) << 3
+                require_int("slot", self.slot, 0, 255),
+                require_int("alarm_type", self.alarm_type, 0, 127),
+                require_int("sequence", self.sequence, 0, 31) << 3
                 | (0x04 if self.add_ack else 0)
                 | AlarmSpecifier(self.specifier),
             )
@@ -296,9 +296,9 @@ class Dpv1ErrorResponse:
         return bytes(
             (
                 function | ERROR_FLAG,
-                require_range("error_decode", self.error_decode, 0, 255),
-                require_range("error_code_1", self.error_code_1, 0, 255),
-                require_range("error_code_2", self.error_code_2, 0, 255),
+                require_int("error_decode", self.error_decode, 0, 255),
+                require_int("error_code_1", self.error_code_1, 0, 255),
+                require_int("error_code_2", self.error_code_2, 0, 255),
             )
         )
 

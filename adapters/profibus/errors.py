@@ -59,13 +59,6 @@ class WegRecordDecodeError(ProfibusDecodeError):
     """A WEG parameter record (index 48) that does not decode (WEG manuals 4.2.6/5.2.5)."""
 
 
-def require_range(what: str, value: int, low: int, high: int) -> int:
-    """Return ``value`` if ``low <= value <= high`` (and it is an int), else FrameEncodeError."""
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise FrameEncodeError(f"{what} must be an integer in {low}..{high}, got {value!r}")
-    return value
-
-
 def require_length(what: str, data: bytes, low: int, high: int) -> bytes:
     """Return ``bytes(data)`` if its length is in ``low..high``, else FrameEncodeError."""
     if not low <= len(data) <= high:

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 from typing import Final
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
-from .errors import DecodeFailure, FdlDecodeError, require_length, require_range
+from .errors import DecodeFailure, FdlDecodeError, require_length
 
 # 1.2 start delimiters and end delimiter.
 SD1: Final = 0x10
@@ -210,8 +210,8 @@ class DataTelegram:
         )
 
     def encode(self) -> bytes:
-        require_range("DA", self.da, 0, BROADCAST)
-        require_range("SA", self.sa, 0, BROADCAST)
+        require_int("DA", self.da, 0, BROADCAST)
+        require_int("SA", self.sa, 0, BROADCAST)
         body = bytearray(
             (
                 self.da | (_ADDRESS_EXT if self.dsap is not None else 0),
@@ -221,7 +221,7 @@ class DataTelegram:
         )
         for name, sap in (("DSAP", self.dsap), ("SSAP", self.ssap)):
             if sap is not None:
-                body.append(require_range(name, sap, 0, MAX_SAP))
+                body.append(require_int(name, sap, 0, MAX_SAP))
         body += require_length("DU", self.data, 0, MAX_DATA_AFTER_FC - (len(body) - 3))
         fcs = sum(body) & 0xFF
         delimiter = self.delimiter
@@ -250,8 +250,8 @@ class TokenTelegram:
     sa: int
 
     def encode(self) -> bytes:
-        require_range("DA", self.da, 0, BROADCAST)
-        require_range("SA", self.sa, 0, BROADCAST)
+        require_int("DA", self.da, 0, BROADCAST)
+        require_int("SA", self.sa, 0, BROADCAST)
         return bytes((SD4, self.da, self.sa))
 
 

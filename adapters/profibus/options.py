@@ -56,6 +56,7 @@ from .errors import ProfibusDecodeError
 from .gsd import Gsd, GsdError, GsdSetupError, build_setup
 from .gsd import load as load_gsd
 from .link import URL_SCHEMES, Rs485, is_url
+from .profile import BUILTIN_TELEGRAM
 from .timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 
 WATCHDOG_MIN: Final = 0.01  # 1.6: 10 ms base x 1 x 1
@@ -236,16 +237,22 @@ def _check_addresses(t: Table, master_address: int) -> None:
 
 
 def parse_drive_options(
-    t: Table, drive: DriveConfig, profile_options: Any, builtin: Any = None
+    t: Table,
+    drive: DriveConfig,
+    profile_options: Any,
+    builtin: Any = None,
+    telegram: str = BUILTIN_TELEGRAM,
 ) -> ProfibusDriveOptions:
     """The master's per-drive keys; ``profile_options`` come from the profile's parser.
 
     ``builtin`` is the profile's own :class:`~adapters.profibus.profile.SlaveSetup` (its
-    ``input_len`` and ``output_len`` are checked against a GSD module or ``cfg``).
+    ``input_len`` and ``output_len`` are checked against a GSD module or ``cfg``);
+    ``telegram`` says which of the profile's settings fixes that telegram (its
+    ``telegram_text``), for the error when they differ.
     """
     setup = _gsd_setup(t) if t.has("gsd") else _explicit_setup(t)
     if setup is not None and builtin is not None and setup.cfg is not None:
-        _check_sizes(t, setup, builtin, profile_options)
+        _check_sizes(t, setup, builtin, telegram)
     return ProfibusDriveOptions(
         profile=profile_options, watchdog=_watchdog(t, "watchdog", None), setup=setup
     )
@@ -327,7 +334,7 @@ def _explicit_setup(t: Table) -> SetupOverride | None:
     )
 
 
-def _check_sizes(t: Table, setup: SetupOverride, builtin: Any, profile_options: Any) -> None:
+def _check_sizes(t: Table, setup: SetupOverride, builtin: Any, telegram: str) -> None:
     """The module's (or cfg's) I/O bytes must be the profile telegram's, both ways."""
     ids = decode_identifiers(setup.cfg or b"")
     have = (total_input_bytes(ids), total_output_bytes(ids))
@@ -339,23 +346,9 @@ def _check_sizes(t: Table, setup: SetupOverride, builtin: Any, profile_options: 
     raise t.error(
         key,
         f"{what} gives {have[0]} bytes in and {have[1]} out; the drive's profile "
-        f"({telegram_text(profile_options)}) has {want[0]} in and {want[1]} out",
+        f"({telegram}) has {want[0]} in and {want[1]} out",
     )
 
 
 def _hex(data: bytes) -> str:
     return ", ".join(f"0x{b:02X}" for b in data)
-
-
-def telegram_text(profile_options: Any) -> str:
-    """The profile setting that fixes the telegram, as an operator knows it."""
-    mode = getattr(profile_options, "mode", None)
-    if mode is not None:
-        return f"MCD 600 mode = {getattr(mode, 'value', mode)!r}"
-    frame = getattr(profile_options, "frame", None)
-    words = getattr(profile_options, "words", None)
-    if frame == 20:
-        return f"frame 20, {words} words (P0922 = 5)"
-    if words is not None:
-        return f"words = {words}, P0922 (CFW320: P751) = {words - 1}"
-    return "its built-in telegram"

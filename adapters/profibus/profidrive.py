@@ -19,10 +19,10 @@ from enum import IntEnum
 from types import MappingProxyType
 from typing import Final, Self
 
-from gateway.errors import FrameEncodeError
+from gateway.errors import FrameEncodeError, require_int
 
 from .dpv1 import MAX_DATA, ReadRequest, WriteRequest
-from .errors import DecodeFailure, ProfidriveDecodeError, require_range, whole_raw
+from .errors import DecodeFailure, ProfidriveDecodeError, whole_raw
 
 PARAMETER_INDEX: Final = 47  # 1.11 / WEG 4.2.4: index 47
 DEFAULT_SLOT: Final = 0  # WEG 4.2.3: slot 0 (Toshiba 0, ABB 1: check the device, 1.11)
@@ -166,9 +166,9 @@ class ParameterAddress:
         return struct.pack(
             ">BBHH",
             attribute,
-            require_range("elements", self.elements, 0, 255),
-            require_range("parameter number", self.number, 0, 0xFFFF),
-            require_range("subindex", self.subindex, 0, 0xFFFF),
+            require_int("elements", self.elements, 0, 255),
+            require_int("parameter number", self.number, 0, 0xFFFF),
+            require_int("subindex", self.subindex, 0, 0xFFFF),
         )
 
     @classmethod
@@ -222,7 +222,7 @@ class ValueBlock:
         except ValueError:
             raise FrameEncodeError(f"unknown data format {self.format!r}") from None
         code = _STRUCT[fmt]
-        count = require_range("number of values", len(self.values), 0, 0 if not code else 255)
+        count = require_int("number of values", len(self.values), 0, 0 if not code else 255)
         try:
             body = struct.pack(f">{count}{code}", *self.values) if code else b""
         except struct.error as exc:
@@ -311,7 +311,7 @@ class ParameterRequest:
             request_id = RequestId(self.request_id)
         except ValueError:
             raise FrameEncodeError(f"unknown request id {self.request_id!r}") from None
-        n = require_range("number of parameters", len(self.parameters), 1, 255)
+        n = require_int("number of parameters", len(self.parameters), 1, 255)
         expected_values = n if request_id == RequestId.CHANGE else 0
         if len(self.values) != expected_values:
             raise FrameEncodeError(
@@ -321,9 +321,9 @@ class ParameterRequest:
         out = (
             bytes(
                 (
-                    require_range("request reference", self.reference, 0, 255),
+                    require_int("request reference", self.reference, 0, 255),
                     request_id,
-                    require_range("axis", self.axis, 0, 255),
+                    require_int("axis", self.axis, 0, 255),
                     n,
                 )
             )
@@ -416,15 +416,15 @@ class ParameterResponse:
             response_id = ResponseId(self.response_id)
         except ValueError:
             raise FrameEncodeError(f"unknown response id {self.response_id!r}") from None
-        n = require_range("number of parameters", self.parameter_count, 1, 255)
+        n = require_int("number of parameters", self.parameter_count, 1, 255)
         problem = _block_count_problem(response_id, n, len(self.values))
         if problem:
             raise FrameEncodeError(problem)
         out = bytes(
             (
-                require_range("request reference", self.reference, 0, 255),
+                require_int("request reference", self.reference, 0, 255),
                 response_id,
-                require_range("axis", self.axis, 0, 255),
+                require_int("axis", self.axis, 0, 255),
                 n,
             )
         ) + b"".join(v.encode() for v in self.values)

@@ -11,33 +11,38 @@ generic DP slave simulator: it checks the configuration it is given, answers
 data exchange, reacts to lost communication (watchdog expiry, Global_Control
 Clear) and answers DP-V1 record reads and writes with its manual's errors.
 
-Profiles are found through :data:`PROFILES` (device -> "module:Class"), so the
-master never imports a profile module eagerly, and the MCD 600 profile lives in
-its own package (adapters/mcd600) while running on this master.
+Profiles are found through :data:`PROFILES` (device -> "module:Class", from the device
+registry :mod:`gateway.devices`), so the master never imports a profile module eagerly,
+and the MCD 600 profile lives in its own package (adapters/mcd600) while running on this
+master.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol
 
 from gateway.adapter import Capabilities, ParamValue
+from gateway.devices import devices_of
 from gateway.errors import GatewayError
-from gateway.model import DesiredCommand, Device
+from gateway.loader import load
+from gateway.model import DesiredCommand, Device, Readings
 
 if TYPE_CHECKING:
+    from adapters.profibus.dp import GlobalControl
     from gateway.config import DriveConfig
     from gateway.schema import Table
+    from gateway.sim import FaultInjector
+
+BUS: Final = "profibus"
+"""The adapter name the registry's Profibus devices give as their ``bus``."""
 
 PROFILES: dict[Device, str] = {
-    Device.CFW11: "adapters.profibus.weg.cfw11:Cfw11Profile",
-    Device.CFW700: "adapters.profibus.weg.cfw700:Cfw700Profile",
-    Device.CFW320: "adapters.profibus.weg.cfw320:Cfw320Profile",
-    Device.MCD600: "adapters.mcd600.profile:Mcd600Profile",
+    d: d.spec.profile for d in Device if d in devices_of(BUS) and d.spec.profile
 }
-"""Device -> "module:Class" of its :class:`DpProfile`."""
+"""Device -> "module:Class" of its :class:`DpProfile` (from the registry)."""
 
 
 class RecordAccessError(GatewayError):
@@ -98,12 +103,31 @@ class AddressRange:
         return f"{text} ({self.source}); use {low}-{high}"
 
 
+BUILTIN_TELEGRAM: Final = "its built-in telegram"
+"""What fixes the telegram of a profile that has no setting for it (``telegram_text``)."""
+
+DEFAULT_ADDRESSES: Final = AddressRange(*DP_STATIONS, "DP station addresses, fact sheet 1.2")
+"""For a profile that declares no ``addresses`` of its own (a test device)."""
+
+
+class DiagKind(StrEnum):
+    """What a profile's event is about (the adapter maps it to the hub's event kind)."""
+
+    FAULT = "fault"
+    TRIP = "trip"
+    ALARM = "alarm"
+    PARAMETER = "parameter"
+    INFO = "info"
+    CONFIG = "config"
+    SAFETY = "safety"
+
+
 @dataclass(frozen=True, slots=True)
 class DiagEvent:
     """Something a profile read from the slave's extended diagnosis, worth an event."""
 
     text: str
-    kind: str = "fault"  # "fault", "trip", "alarm", "parameter", "info", "config", "safety"
+    kind: DiagKind = DiagKind.FAULT
     data: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -120,13 +144,34 @@ class RecordChannel(Protocol):
 
 
 class EventSink(Protocol):
-    def __call__(self, text: str, kind: str = "info", **data: Any) -> None: ...
+    def __call__(self, text: str, kind: DiagKind = DiagKind.INFO, **data: Any) -> None: ...
 
 
 class DpProfile(Protocol):
-    """One configured slave's device profile (stateful: one instance per drive)."""
+    """One configured slave's device profile (stateful: one instance per drive).
+
+    The hooks below ``addresses`` are optional for a device: :class:`DpProfileBase` has
+    their defaults, and a profile subclasses it.
+    """
 
     device: ClassVar[Device]
+    addresses: ClassVar[AddressRange]
+    """The slave addresses the device accepts (its manual); checked at config time."""
+    sees_every_diag: ClassVar[bool]
+    """True: ``on_ext_diag`` gets every diagnosis read, empty and unchanged ones included
+    (the profile keeps its own memory: the MCD 600); False: only a changed, non-empty one."""
+    record_error_texts: ClassVar[Mapping[int, str] | None]
+    """The device's own texts of DP-V1 Error_Code_1 values, or None (the standard's)."""
+
+    @property
+    def wants_codes(self) -> bool:
+        """True when the status shows a fault or alarm whose code the telegram does not
+        carry: the adapter then calls :meth:`read_codes` (the WEG drives)."""
+        ...
+
+    async def read_codes(self, channel: RecordChannel) -> Readings:
+        """Fault and alarm codes read over DP-V1 (when :attr:`wants_codes`)."""
+        ...
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Any:
@@ -139,10 +184,10 @@ class DpProfile(Protocol):
         """Speed scale (None for a soft starter) and the commands it refuses, with reasons."""
         ...
 
-    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Mapping[str, Any]:
+    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Readings:
         """After the slave reached data exchange: read scales, write ``startup_params``.
 
-        Returns drive-state changes (for example ``speed_base``). Raise
+        Returns readings (for example ``speed_base``). Raise
         :class:`gateway.errors.GatewayError` to leave the drive "not configured".
         """
         ...
@@ -151,8 +196,8 @@ class DpProfile(Protocol):
         """The output telegram for this cycle (fault reset as one edge, state machines)."""
         ...
 
-    def inputs(self, data: bytes, now: float) -> Mapping[str, Any]:
-        """Drive-state changes (DriveState field names) from an input telegram."""
+    def inputs(self, data: bytes, now: float) -> Readings:
+        """The readings of an input telegram."""
         ...
 
     def on_ext_diag(self, data: bytes) -> list[DiagEvent]:
@@ -172,8 +217,46 @@ class DpProfile(Protocol):
     ) -> None: ...
 
 
+class DpProfileBase:
+    """The defaults of :class:`DpProfile`'s optional hooks; a profile subclasses it and
+    overrides what its device needs."""
+
+    addresses: ClassVar[AddressRange] = DEFAULT_ADDRESSES
+    sees_every_diag: ClassVar[bool] = False
+    record_error_texts: ClassVar[Mapping[int, str] | None] = None
+
+    @property
+    def wants_codes(self) -> bool:
+        return False
+
+    async def read_codes(self, channel: RecordChannel) -> Readings:
+        return {}
+
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        return ()
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        return BUILTIN_TELEGRAM
+
+
 class ProfileFactory(Protocol):
     device: ClassVar[Device]
+    addresses: ClassVar[AddressRange]
+
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """The config lines (``key = value``) that give a drive of this device a telegram of
+        these sizes, for the stanzas ``drive-gateway profibus scan --toml`` prints (empty:
+        none needed, or none gives it)."""
+        ...
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The setting of the profile's ``options`` that fixes its telegram, as an operator
+        knows it (for the error when a GSD module or ``cfg`` gives other sizes)."""
+        ...
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Any: ...
@@ -187,24 +270,56 @@ def load_profile(device: Device) -> ProfileFactory:
         target = PROFILES[device]
     except KeyError:
         raise GatewayError(f"no Profibus profile for {device.value}") from None
-    module_name, _, class_name = target.partition(":")
-    factory: ProfileFactory = getattr(importlib.import_module(module_name), class_name)
+    factory: ProfileFactory = load(target)
     return factory
 
 
 class SimDevice(Protocol):
     """A simulated device behind the generic DP slave simulator (sans-IO, clock injected).
 
-    Optional hooks the slave simulator calls when a device has them (``getattr``):
-    ``check_cfg(cfg: bytes) -> bool`` on Chk_Cfg (a WEG drive shows P0740 = 3 on a bad one);
-    ``clear_mode(now, active: bool)`` on Global_Control Clear/Operate, and
-    ``global_control(gc: dp.GlobalControl, now)`` for Clear/Sync/Freeze (the MCD 600
-    quick-stops on Clear). When a device has either, Clear goes there and ``comm_lost``
-    is called only on watchdog expiry. ``address`` is re-read after ``set_prm`` and
-    ``power_cycle``; ``diag_alert`` (bool) sets Ext_Diag with high priority.
+    The hooks from ``dpv1`` to ``global_control`` are optional for a device:
+    :class:`SimDeviceBase` has their defaults, and a simulator subclasses it.
     """
 
     ident_number: int
+
+    @property
+    def dpv1(self) -> bool:
+        """Set_Prm carries the DP-V1 status bytes (the user data after them)."""
+        ...
+
+    @property
+    def reads_user_prm(self) -> bool:
+        """Behind a GSD file the device still gets the Set_Prm user data (the MCD 600's
+        timeout byte); False: the GSD's checks take it and the device gets none."""
+        ...
+
+    @property
+    def faults(self) -> FaultInjector | None:
+        """The device's own fault injector, shared with the slave (lost replies, noise)."""
+        ...
+
+    @property
+    def handles_clear(self) -> bool:
+        """Global_Control Clear goes to :meth:`clear_mode` (a WEG drive's A138/F238);
+        False: a Clear is a lost communication (``comm_lost``)."""
+        ...
+
+    def alerts(self, ext: bytes) -> bool:
+        """Whether the extended diagnosis ``ext`` is worth a high-priority answer (DH)."""
+        ...
+
+    def check_cfg(self, cfg: bytes) -> bool:
+        """Chk_Cfg: whether ``cfg`` is accepted (a WEG drive shows P0740 = 3 on a bad one)."""
+        ...
+
+    def clear_mode(self, now: float, active: bool) -> None:
+        """Global_Control Clear (``active``) or Operate again (when :attr:`handles_clear`)."""
+        ...
+
+    def global_control(self, control: GlobalControl, now: float) -> None:
+        """Every Global_Control for the slave (Clear, Sync, Freeze: the MCD 600)."""
+        ...
 
     def expected_cfg(self) -> bytes:
         """The Chk_Cfg bytes it accepts (Get_Cfg answers them); others are a Cfg_Fault."""
@@ -239,3 +354,38 @@ class SimDevice(Protocol):
     def power_cycle(self, now: float) -> None:
         """Lose power and come back: parameters kept, running state and comm lost."""
         ...
+
+
+class SimFactory(Protocol):
+    """How a device's simulator is built: the class the registry names as its ``simulator``
+    (:mod:`gateway.devices`) has this one class method."""
+
+    def for_drive(self, drive: DriveConfig | None) -> SimDevice:
+        """The simulated device a configured drive describes (``simulate = true``: its
+        profile options, its address), or a default one for ``None``."""
+        ...
+
+
+class SimDeviceBase:
+    """The defaults of :class:`SimDevice`'s optional hooks; a simulator subclasses it and
+    overrides what its device does."""
+
+    dpv1: bool = True
+    reads_user_prm: bool = False
+    faults: FaultInjector | None = None
+    handles_clear: bool = False
+
+    def expected_cfg(self) -> bytes:
+        raise NotImplementedError
+
+    def alerts(self, ext: bytes) -> bool:
+        return bool(ext)
+
+    def check_cfg(self, cfg: bytes) -> bool:
+        return cfg == self.expected_cfg()
+
+    def clear_mode(self, now: float, active: bool) -> None:
+        return None
+
+    def global_control(self, control: GlobalControl, now: float) -> None:
+        return None

@@ -20,8 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
+from gateway.errors import require_int
+
 from .dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS, ReadRequest, WriteRequest
-from .errors import DecodeFailure, WegRecordDecodeError, require_range
+from .errors import DecodeFailure, WegRecordDecodeError
 
 WEG_RECORD_INDEX: Final = 48
 WEG_SLOT: Final = 0
@@ -41,7 +43,7 @@ class WegSelect:
     number: int
 
     def encode(self) -> bytes:
-        return require_range("parameter number", self.number, 0, 0xFFFF).to_bytes(2, "big")
+        return require_int("parameter number", self.number, 0, 0xFFFF).to_bytes(2, "big")
 
 
 @dataclass(frozen=True)
@@ -52,8 +54,8 @@ class WegWrite:
     value: int
 
     def encode(self) -> bytes:
-        number = require_range("parameter number", self.number, 0, 0xFFFF)
-        value = require_range("parameter value", self.value, 0, 0xFFFF)
+        number = require_int("parameter number", self.number, 0, 0xFFFF)
+        value = require_int("parameter value", self.value, 0, 0xFFFF)
         return number.to_bytes(2, "big") + value.to_bytes(2, "big")
 
 
@@ -77,7 +79,7 @@ class WegValue:
     value: int
 
     def encode(self) -> bytes:
-        return require_range("parameter value", self.value, 0, 0xFFFF).to_bytes(2, "big")
+        return require_int("parameter value", self.value, 0, 0xFFFF).to_bytes(2, "big")
 
     @classmethod
     def decode(cls, data: bytes) -> Self:

@@ -65,14 +65,8 @@ CONTROL_CODES: dict[ControlMode, int] = {
     ControlMode.MODBUS: 2,
     ControlMode.WEB: 3,
 }
-DEVICE_CODES: dict[Device, int] = {
-    Device.CFW11: 1,
-    Device.CFW700: 2,
-    Device.CFW320: 3,
-    Device.CFW08: 4,
-    Device.MCD600: 5,
-    Device.TEST: 255,
-}
+DEVICE_CODES: dict[Device, int] = {device: device.spec.code for device in Device}
+"""From the device registry (gateway/devices.py)."""
 UNKNOWN_DEVICE_CODE = 0
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from gateway.adapter import EventKind
+from gateway.devices import published
 from gateway.model import COMMAND_FIELDS, EXTRA_JSON_FIELDS, JSON_FIELDS
 
 
@@ -156,7 +157,7 @@ COMMAND_FIELD_DOC: dict[str, str] = {
 
 STATE_FIELD_DOC: dict[str, str] = {
     "id": "drive id (the `<id>` of the keys)",
-    "device": 'device model: "CFW-11", "CFW700", "CFW320", "CFW-08", "MCD 600"',
+    "device": "device model: " + ", ".join(f'"{d.value}"' for d in published()),
     "bus": "bus name from the config",
     "address": "station address (Profibus) or MAC id (DeviceNet)",
     "comm": '"offline", "connecting", "online", "clear"',

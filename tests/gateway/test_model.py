@@ -130,3 +130,13 @@ def test_command_json_round_trip(doc: dict[str, object]) -> None:
 def test_command_parser_only_raises_command_rejected(doc: dict[str, object]) -> None:
     with contextlib.suppress(CommandRejected):
         DriveCommand.from_json(doc)
+
+
+def test_readings_are_the_state_fields_an_adapter_reports() -> None:
+    from gateway.model import STATE_FIELDS, DriveUpdate, Readings
+
+    identity = {"id", "device", "bus", "address"}
+    hubs_own = {"seq", "ts", "control_source", "control_client"}
+    assert set(DriveUpdate.__annotations__) == STATE_FIELDS - identity - hubs_own
+    assert set(DriveUpdate.__annotations__) - set(Readings.__annotations__) == {"comm"}
+    assert not Readings.__required_keys__ and not DriveUpdate.__required_keys__

@@ -19,6 +19,8 @@ from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.profile import (
     PROFILES,
     DiagEvent,
+    DiagKind,
+    DpProfileBase,
     EventSink,
     RecordAccessError,
     RecordChannel,
@@ -45,7 +47,7 @@ class EchoOptions:
     connect_fails: bool = False
 
 
-class EchoProfile:
+class EchoProfile(DpProfileBase):
     device: ClassVar[Device] = Device.TEST
 
     @classmethod
@@ -81,7 +83,7 @@ class EchoProfile:
         if self.options.connect_fails:
             raise GatewayError("the test profile refuses to connect")
         ident = await channel.read_record(0, 0, 4)
-        event(f"echo device {ident.hex()}", "info")
+        event(f"echo device {ident.hex()}", DiagKind.INFO)
         return {"values": {"ident": int.from_bytes(ident[:2], "big")}}
 
     def outputs(self, desired: DesiredCommand, now: float) -> bytes:
@@ -117,7 +119,7 @@ class EchoProfile:
         }
 
     def on_ext_diag(self, data: bytes) -> list[DiagEvent]:
-        return [DiagEvent(f"device diagnosis {data.hex(' ')}", "alarm", {"raw": data.hex()})]
+        return [DiagEvent(f"device diagnosis {data.hex(' ')}", DiagKind.ALARM, {"raw": data.hex()})]
 
     def on_comm_lost(self) -> None:
         self.comm_lost += 1

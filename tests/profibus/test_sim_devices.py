@@ -7,38 +7,31 @@ from typing import Any
 
 import pytest
 
-from adapters.profibus.sim.devices import SIM_DEVICES, make_device, sim_class
+from adapters.mcd600.options import Mcd600Options
+from adapters.mcd600.sim import Mcd600Sim
+from adapters.profibus.sim.devices import KINDS, SIM_DEVICES, make_device, sim_class
 from adapters.profibus.sim.echo import EchoSim
+from adapters.profibus.weg.options import WegOptions
+from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim
 from gateway.config import DriveConfig
+from gateway.loader import NotLoadable
 from gateway.model import Device
 
 
-@dataclass(frozen=True)
-class Options:
-    mode: str = "extended"
-    flc_a: float | None = 52.0
-    words: int = 4
-    colour: str = "red"
+class Recording:
+    """A simulator class: its one factory is ``for_drive``."""
 
-
-class Plain:
-    def __init__(self, mode: str = "basic", *, flc_a: int = 100, address: int = 1) -> None:
-        self.mode, self.flc_a, self.address = mode, flc_a, address
-
-
-class Matching:
-    def __init__(self, **kw: Any) -> None:
-        self.kw = kw
+    def __init__(self, drive: DriveConfig | None) -> None:
+        self.drive = drive
 
     @classmethod
-    def matching(cls, options: Any, *, address: int = 1) -> Matching:
-        return cls(options=options, address=address)
+    def for_drive(cls, drive: DriveConfig | None) -> Any:
+        return cls(drive)
 
 
 TABLE = {
     Device.TEST: "adapters.profibus.sim.echo:EchoSim",
-    Device.CFW08: "tests.profibus.test_sim_devices:Plain",
-    Device.CFW320: "tests.profibus.test_sim_devices:Matching",
+    Device.CFW08: "tests.profibus.test_sim_devices:Recording",
     Device.CFW700: "tests.profibus.test_sim_devices:Nothing",
 }
 
@@ -47,7 +40,7 @@ def drive(device: Device, options: Any = None, address: int = 9) -> DriveConfig:
     return DriveConfig(id="x", bus="pb", device=device, address=address, options=options)
 
 
-def test_for_drive_wins() -> None:
+def test_for_drive_builds_the_device_of_a_drive() -> None:
     @dataclass(frozen=True)
     class EchoOptions:
         size: int = 8
@@ -56,24 +49,35 @@ def test_for_drive_wins() -> None:
     assert isinstance(sim, EchoSim) and sim.size == 8
 
 
-def test_matching_programs_the_device_as_the_options_say() -> None:
-    sim = make_device(Device.CFW320, drive(Device.CFW320, Options()), TABLE)
-    assert isinstance(sim, Matching) and sim.kw == {"options": Options(), "address": 9}
-
-
-def test_constructor_keywords_shared_with_the_options() -> None:
-    sim = make_device(Device.CFW08, drive(Device.CFW08, Options()), TABLE)
-    assert isinstance(sim, Plain)
-    assert (sim.mode, sim.flc_a, sim.address) == ("extended", 52, 9)
-    assert isinstance(sim.flc_a, int)
+def test_the_factory_gets_the_drive_or_none() -> None:
+    configured = drive(Device.CFW08)
+    sim = make_device(Device.CFW08, configured, TABLE)
+    assert isinstance(sim, Recording) and sim.drive is configured
     bare = make_device(Device.CFW08, None, TABLE)
-    assert isinstance(bare, Plain) and bare.mode == "basic"
+    assert isinstance(bare, Recording) and bare.drive is None
+
+
+def test_a_weg_drive_is_programmed_as_its_options_say() -> None:
+    options = WegOptions(words=4)
+    sim = make_device(Device.CFW320, drive(Device.CFW320, options, address=9))
+    assert isinstance(sim, Cfw320Sim)
+    assert sim.values == Cfw320Sim.matching(options, address=9).values
+    plain = make_device(Device.CFW11, drive(Device.CFW11, None, address=9))
+    assert isinstance(plain, Cfw11Sim)
+    assert plain.values == Cfw11Sim(address=9).values
+    assert make_device(Device.CFW11).values == Cfw11Sim().values  # type: ignore[attr-defined]
+
+
+def test_an_mcd600_is_built_from_its_options() -> None:
+    sim = make_device(Device.MCD600, drive(Device.MCD600, Mcd600Options(flc_a=52.0)))
+    assert isinstance(sim, Mcd600Sim)
+    assert isinstance(make_device(Device.MCD600), Mcd600Sim)
 
 
 def test_missing_simulators() -> None:
     with pytest.raises(LookupError, match="no simulated CFW-11"):
         sim_class(Device.CFW11, TABLE)
-    with pytest.raises(LookupError, match="has no Nothing"):
+    with pytest.raises(NotLoadable, match="has no Nothing"):
         sim_class(Device.CFW700, TABLE)
 
 
@@ -81,3 +85,7 @@ def test_every_device_of_the_adapter_has_a_simulator_entry() -> None:
     from adapters.profibus.adapter import ProfibusAdapter
 
     assert ProfibusAdapter.devices <= set(SIM_DEVICES)
+
+
+def test_the_command_line_names_come_from_the_registry() -> None:
+    assert list(KINDS) == ["cfw11", "cfw700", "cfw320", "mcd600", "echo"]

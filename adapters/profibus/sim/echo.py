@@ -10,11 +10,11 @@ B6h access denied).
 from __future__ import annotations
 
 from collections import deque
-from typing import TYPE_CHECKING, Any, ClassVar, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from adapters.profibus.cfg import CompactId, IoDirection, encode_identifiers
 from adapters.profibus.dpv1 import error_code_1_text
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.profile import RecordAccessError, SimDeviceBase
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig
@@ -48,10 +48,10 @@ def _refuse(code: int) -> RecordAccessError:
     return RecordAccessError(error_code_1_text(code), code)
 
 
-class EchoSim:
+class EchoSim(SimDeviceBase):
     """A :class:`adapters.profibus.profile.SimDevice` echoing its outputs."""
 
-    dpv1: ClassVar[bool] = True
+    dpv1 = True
 
     def __init__(self, size: int = 4, ident_number: int = ECHO_IDENT) -> None:
         self.size = size
@@ -68,8 +68,11 @@ class EchoSim:
         self.global_controls: deque[Any] = deque(maxlen=GLOBAL_CONTROLS_KEPT)  # the last ones
 
     @classmethod
-    def for_drive(cls, drive: DriveConfig) -> EchoSim:
-        """The device a drive's config describes (``size`` and ``ident_number`` options)."""
+    def for_drive(cls, drive: DriveConfig | None) -> EchoSim:
+        """The device a drive's config describes (``size`` and ``ident_number`` options);
+        a default one for ``None``."""
+        if drive is None:
+            return cls()
         size = getattr(drive.options, "size", 4)
         ident = getattr(drive.options, "ident_number", ECHO_IDENT)
         return cls(int(size), int(ident))
@@ -94,6 +97,9 @@ class EchoSim:
 
     def global_control(self, control: Any, now: float) -> None:
         self.global_controls.append(control)
+
+    def alerts(self, ext: bytes) -> bool:
+        return bool(ext) if self.diag_alert is None else self.diag_alert
 
     def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
         self._check(slot, index)

@@ -15,7 +15,7 @@ Everything else (data exchange, records, diagnosis) is the wrapped device's.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
 from adapters.profibus.gsd import (
@@ -27,24 +27,21 @@ from adapters.profibus.gsd import (
     station_prm_len,
 )
 
+if TYPE_CHECKING:
+    from adapters.profibus.dp import GlobalControl
+    from adapters.profibus.profile import SimDevice
+    from gateway.sim import FaultInjector
+
 SEARCH_DEPTH = 8  # modules tried in a row for Get_Cfg before the first Chk_Cfg
 
 
 class GsdSim:
     """A device simulator behind a GSD file's start-up checks (see the module docstring)."""
 
-    def __init__(
-        self,
-        device: Any,
-        gsd: Gsd,
-        *,
-        forward_prm: bool = False,
-        modules: tuple[str, ...] = (),
-    ) -> None:
+    def __init__(self, device: SimDevice, gsd: Gsd, *, modules: tuple[str, ...] = ()) -> None:
         self.device = device
         self.gsd = gsd
         self.ident_number = gsd.ident_number
-        self.forward_prm = forward_prm  # the device reads the user data itself (MCD 600)
         ids = decode_identifiers(device.expected_cfg())
         self.sizes = (total_input_bytes(ids), total_output_bytes(ids))
         own = tuple(m for m in (gsd.module(name) for name in modules) if m is not None)
@@ -54,7 +51,58 @@ class GsdSim:
         self.refusal = ""  # why the last Set_Prm or Chk_Cfg was refused
 
     def __getattr__(self, name: str) -> Any:
+        """The wrapped device's own attributes (its state, for tests and tools)."""
         return getattr(self.device, name)
+
+    # ------------------------------------------------------------------ the device's hooks
+
+    @property
+    def dpv1(self) -> bool:
+        return self.device.dpv1
+
+    @property
+    def reads_user_prm(self) -> bool:
+        return self.device.reads_user_prm
+
+    @property
+    def faults(self) -> FaultInjector | None:
+        return self.device.faults
+
+    def alerts(self, ext: bytes) -> bool:
+        return self.device.alerts(ext)
+
+    @property
+    def handles_clear(self) -> bool:
+        return self.device.handles_clear
+
+    def clear_mode(self, now: float, active: bool) -> None:
+        self.device.clear_mode(now, active)
+
+    def global_control(self, control: GlobalControl, now: float) -> None:
+        self.device.global_control(control, now)
+
+    def exchange(self, outputs: bytes, now: float) -> bytes:
+        return self.device.exchange(outputs, now)
+
+    def comm_lost(self, now: float) -> None:
+        self.device.comm_lost(now)
+
+    def read_record(self, slot: int, index: int, length: int, now: float) -> bytes:
+        return self.device.read_record(slot, index, length, now)
+
+    def write_record(self, slot: int, index: int, data: bytes, now: float) -> None:
+        self.device.write_record(slot, index, data, now)
+
+    def ext_diag(self) -> bytes:
+        return self.device.ext_diag()
+
+    def tick(self, now: float) -> None:
+        self.device.tick(now)
+
+    def power_cycle(self, now: float) -> None:
+        self.device.power_cycle(now)
+
+    # ------------------------------------------------------------------ the GSD's checks
 
     def _fits(self, modules: tuple[GsdModule, ...]) -> bool:
         ins = sum(m.input_bytes for m in modules)
@@ -105,8 +153,7 @@ class GsdSim:
         if reason is not None:
             return self._refuse(reason)
         self.modules = modules
-        check = getattr(self.device, "check_cfg", None)
-        return bool(check(self.device.expected_cfg())) if callable(check) else True
+        return self.device.check_cfg(self.device.expected_cfg())
 
     def _check_prm(self, modules: tuple[GsdModule, ...]) -> str | None:
         data = self.user_prm
@@ -127,4 +174,4 @@ class GsdSim:
         reason = check_user_prm(self.gsd, (), data[: station_prm_len(self.gsd)])
         if reason is not None:
             return self._refuse(reason)
-        return bool(self.device.set_prm(self.user_prm if self.forward_prm else b""))
+        return bool(self.device.set_prm(self.user_prm if self.reads_user_prm else b""))

@@ -6,14 +6,14 @@ Wait_Cfg -> Data_Exch, 1.6 Set_Prm (lock, watchdog, group), 1.7 Chk_Cfg/Get_Cfg,
 Slave_Diag with the flags a real slave sets, 1.9 Global_Control, 1.10 DP-V1 on SAP 51 (the
 request is acknowledged with E5, polls get E5 until the answer is ready, then DL with it).
 
-The device behind it is any :class:`adapters.profibus.profile.SimDevice`. Optional device
-attributes the slave honours: ``dpv1`` (False: Set_Prm without the DP-V1 status bytes, SAP
-51 inactive), ``check_cfg(cfg) -> bool`` (the device judges Chk_Cfg itself),
-``clear_mode(now, active)`` (Global_Control Clear and the Operate after it; without it a
-Clear is ``comm_lost``), ``global_control(control, now)`` (every Global_Control: Sync,
-Freeze, the MCD 600's quick stop on Clear), ``diag_alert`` (whether the current extended
-diagnosis is worth a DH reply), ``faults`` (a :class:`gateway.sim.FaultInjector` whose
-drop/delay/noise apply to this slave's replies).
+The device behind it is any :class:`adapters.profibus.profile.SimDevice`; the hooks it may
+leave to :class:`adapters.profibus.profile.SimDeviceBase`: ``dpv1`` (False: Set_Prm without
+the DP-V1 status bytes, SAP 51 inactive), ``check_cfg(cfg) -> bool`` (Chk_Cfg),
+``handles_clear`` and ``clear_mode(now, active)`` (Global_Control Clear and the Operate after
+it; by default a Clear is ``comm_lost``), ``global_control(control, now)`` (every Global_Control:
+Sync, Freeze, the MCD 600's quick stop on Clear), ``alerts(ext)`` (whether the current
+extended diagnosis is worth a DH reply), ``faults`` (a :class:`gateway.sim.FaultInjector`
+whose drop/delay/noise apply to this slave's replies).
 """
 
 from __future__ import annotations
@@ -100,11 +100,8 @@ class DpSlave:
     def __init__(self, address: int, device: SimDevice) -> None:
         self.address = address
         self.device = device
-        self.dpv1: bool = bool(getattr(device, "dpv1", True))
-        device_faults = getattr(device, "faults", None)
-        self.injector = (
-            device_faults if isinstance(device_faults, FaultInjector) else FaultInjector()
-        )
+        self.dpv1: bool = device.dpv1
+        self.injector = device.faults if device.faults is not None else FaultInjector()
         self.faults = SlaveFaults()
         self.counters = SlaveCounters()
         self.off_until = -math.inf
@@ -211,7 +208,7 @@ class DpSlave:
             ident_number=self.device.ident_number,
             station_not_ready=self.mode is not SlaveMode.DATA_EXCH or self.faults.not_ready,
             cfg_fault=self.cfg_fault,
-            ext_diag=self._alert(ext),
+            ext_diag=self.device.alerts(ext),
             prm_fault=self.prm_fault,
             prm_req=self.mode is SlaveMode.WAIT_PRM,
             wd_on=self.watchdog is not None,
@@ -222,17 +219,13 @@ class DpSlave:
         )
         return request.reply(diag.encode() + ext)
 
-    def _alert(self, ext: bytes) -> bool:
-        alert = getattr(self.device, "diag_alert", None)
-        return bool(ext) if alert is None else bool(alert)
-
     def _diag_waiting(self) -> bool:
         """DH in a data exchange reply: new extended diagnosis worth the master's read."""
         ext = self.device.ext_diag()
         if not ext:
             self._diag_delivered = b""
             return False
-        return ext != self._diag_delivered and self._alert(ext)
+        return ext != self._diag_delivered and self.device.alerts(ext)
 
     # 1.6 -----------------------------------------------------------------
 
@@ -285,10 +278,7 @@ class DpSlave:
     def _cfg_ok(self, cfg: bytes) -> bool:
         if self.faults.wrong_cfg is not None:
             return cfg == self.faults.wrong_cfg
-        check = getattr(self.device, "check_cfg", None)
-        if callable(check):
-            return bool(check(cfg))
-        return cfg == self.device.expected_cfg()
+        return self.device.check_cfg(cfg)
 
     def _get_cfg(self, request: DataTelegram, now: float) -> Reply:
         return request.reply(self.expected_cfg)
@@ -328,24 +318,21 @@ class DpSlave:
             return
         self.last_contact = now
         self.counters.global_controls.append(control)
-        clear_mode = getattr(self.device, "clear_mode", None)
         if control.clear_data:
             self.counters.clears += 1
             if not self.clear:
                 self.clear = True
-                if callable(clear_mode):
-                    clear_mode(now, True)
+                if self.device.handles_clear:
+                    self.device.clear_mode(now, True)
                 else:
                     self._comm_lost(now)
         elif self.clear:
             self.clear = False
-            if callable(clear_mode):
-                clear_mode(now, False)
+            if self.device.handles_clear:
+                self.device.clear_mode(now, False)
         self.sync = (self.sync or control.sync) and not control.unsync
         self.freeze = (self.freeze or control.freeze) and not control.unfreeze
-        hook = getattr(self.device, "global_control", None)
-        if callable(hook):
-            hook(control, now)
+        self.device.global_control(control, now)
 
     # 1.10 ----------------------------------------------------------------
 

@@ -25,13 +25,15 @@ from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
 from adapters.profibus.profile import (
     AddressRange,
     DiagEvent,
+    DiagKind,
+    DpProfileBase,
     EventSink,
     RecordChannel,
     SlaveSetup,
 )
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
-from gateway.model import DesiredCommand, Device, Direction, DriveStatus, SpeedScale
+from gateway.model import DesiredCommand, Device, Direction, DriveStatus, Readings, SpeedScale
 
 from . import words as w
 from .options import WegOptions, parse_options
@@ -118,7 +120,7 @@ class _Sent:
     remote: bool = True
 
 
-class WegProfile:
+class WegProfile(DpProfileBase):
     """DpProfile of a WEG drive on Profibus DP (see the module docstring)."""
 
     device: ClassVar[Device]
@@ -131,6 +133,22 @@ class WegProfile:
         if spec is not None:
             low, high = spec.address_range
             cls.addresses = AddressRange(low, high, spec.address_source)
+
+    @classmethod
+    def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
+        """``words`` for a telegram of other than 2 words in and out (P0922 / P751)."""
+        if input_bytes == output_bytes and input_bytes != 4:
+            return (f"words = {input_bytes // 2}",)
+        return ()
+
+    @classmethod
+    def telegram_text(cls, options: Any) -> str:
+        """The telegram words (P0922 / P751), or frame 20 on a CFW-11."""
+        if not isinstance(options, WegOptions):
+            return super().telegram_text(options)
+        if options.frame == 20:
+            return f"frame 20, {options.words} words (P0922 = 5)"
+        return f"words = {options.words}, P0922 (CFW320: P751) = {options.words - 1}"
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
@@ -213,7 +231,7 @@ class WegProfile:
 
     # ------------------------------------------------------------------ connect
 
-    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Mapping[str, Any]:
+    async def on_connect(self, channel: RecordChannel, event: EventSink) -> Readings:
         """Write ``startup_params``, check the drive's programming, read the scales."""
         for number, value in self.options.startup_params:
             await self._startup_param(channel, event, number, value)
@@ -225,7 +243,7 @@ class WegProfile:
         self._event = event
         if self.spec.reads_control_type:
             self._set_control_type(await self.params.read(channel, 202))
-        changes: dict[str, Any] = {"speed_base": None if self.base is None else self.base.label}
+        changes: Readings = {"speed_base": None if self.base is None else self.base.label}
         if self.control_type is not None:
             changes["values"] = self._own_values()
         return changes
@@ -255,7 +273,7 @@ class WegProfile:
         log.warning("%s: %s", self.drive.id, text)
         if self._event is not None:
             self._event(
-                text, "safety", control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp
+                text, DiagKind.SAFETY, control_type=raw, quick_stop_as_ramp=self.quick_stop_as_ramp
             )
 
     def _own_values(self) -> dict[str, float | int]:
@@ -275,7 +293,12 @@ class WegProfile:
         try:
             if await self.params.read(channel, number) != raw:
                 await self.params.write(channel, number, raw)
-                event(f"startup {name} = {value} written", "parameter", number=number, value=value)
+                event(
+                    f"startup {name} = {value} written",
+                    DiagKind.PARAMETER,
+                    number=number,
+                    value=value,
+                )
             back = await self.params.read(channel, number)
         except ParameterError as exc:
             raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
@@ -505,14 +528,14 @@ class WegProfile:
 
     # ------------------------------------------------------------------ inputs
 
-    def inputs(self, data: bytes, now: float) -> Mapping[str, Any]:
+    def inputs(self, data: bytes, now: float) -> Readings:
         n = self.options.words
         if len(data) != 2 * n:
             raise ProfibusDecodeError(
                 DecodeFailure.BAD_LENGTH, f"input telegram of {len(data)} bytes, not {2 * n}", data
             )
         raw = struct.unpack(f">{n}H", data)
-        changes: dict[str, Any] = {}
+        changes: Readings = {}
         speed = w.signed(raw[1])
         if self.profidrive:
             self._profidrive_in(raw[0], speed, changes)
@@ -529,7 +552,7 @@ class WegProfile:
             changes["values"] = dict(mapped.values)
         return changes
 
-    def _speed_fields(self, speed: int, changes: dict[str, Any]) -> None:
+    def _speed_fields(self, speed: int, changes: Readings) -> None:
         if self.base is None:
             return
         changes["speed_rpm"] = round(self.base.rpm_of(speed), 3)
@@ -548,7 +571,7 @@ class WegProfile:
         band = self.options.at_reference_band
         return abs(self.base.pct_of(speed) - self.base.pct_of(effective)) <= band
 
-    def _manufacturer_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
+    def _manufacturer_in(self, word: int, speed: int, changes: Readings) -> None:
         """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403)."""
         st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
         self._status_values = {
@@ -574,18 +597,20 @@ class WegProfile:
             status = DriveStatus.STARTING
         self._faulted, self._alarm = st.fault, st.alarm
         changes.update(
-            status=status,
-            running=st.running,
-            direction=Direction.FORWARD if st.forward else Direction.REVERSE,
-            at_reference=at_ref,
-            remote=st.remote,
-            alarm=st.alarm,
+            {
+                "status": status,
+                "running": st.running,
+                "direction": Direction.FORWARD if st.forward else Direction.REVERSE,
+                "at_reference": at_ref,
+                "remote": st.remote,
+                "alarm": st.alarm,
+            }
         )
 
     def _has_status_bit(self, bit: str) -> bool:
         return any(name == bit for name, _ in self.spec.status_bits)
 
-    def _profidrive_in(self, word: int, speed: int, changes: dict[str, Any]) -> None:
+    def _profidrive_in(self, word: int, speed: int, changes: Readings) -> None:
         """P0968 ZSW1 (Table 3.9 / 4.8) and NIST (4000h = P0134)."""
         zsw = w.ProfidriveStatus.decode(word, self.spec.zsw1_bits)
         self._zsw = zsw
@@ -613,51 +638,53 @@ class WegProfile:
             direction = Direction.FORWARD if self._sent.reference >= 0 else Direction.REVERSE
         self._faulted, self._alarm = zsw.fault, zsw.warning
         changes.update(
-            status=status,
-            running=running,
-            direction=direction,
-            at_reference=at_ref,
-            remote=zsw.control_requested,
-            alarm=zsw.warning,
+            {
+                "status": status,
+                "running": running,
+                "direction": direction,
+                "at_reference": at_ref,
+                "remote": zsw.control_requested,
+                "alarm": zsw.warning,
+            }
         )
 
     # ------------------------------------------------------------------ mapped words
 
-    def _mapped_word(self, param: int, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _mapped_word(self, param: int, word: int, changes: Readings, m: _Mapped) -> None:
         handler = _KNOWN.get(param)
         if handler is None:
             m.values[self.spec.pname(param)] = scaled(param, word)
         else:
             handler(self, word, changes, m)
 
-    def _current(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _current(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0003 motor current, one decimal (P0742 description: 4.7 A is sent as 47)."""
         amps = word / 10.0
         changes["current_a"] = amps
         if self.ratings.rated_current_a:
             changes["current_pct_flc"] = round(100.0 * amps / self.ratings.rated_current_a, 2)
 
-    def _alarm_word(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _alarm_word(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0048 present alarm (Table 3.2 bit 7 note)."""
         m.alarm = word
 
-    def _fault_word(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _fault_word(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0049 present fault (Table 3.2 bit 15 note) / P0947 fault number."""
         if word:
             m.fault = word
 
-    def _power(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _power(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0010 output power, kW with one decimal (P0761 description)."""
         changes["power_kw"] = word / 10.0
 
-    def _pd_current(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _pd_current(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0760: 4000h = 100 % of the motor rated current P0401."""
         pct = 100.0 * word / w.PROFIDRIVE_PERCENT_BASE
         changes["current_pct_flc"] = round(pct, 2)
         if self.ratings.rated_current_a:
             changes["current_a"] = round(pct * self.ratings.rated_current_a / 100.0, 2)
 
-    def _pd_power(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _pd_power(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0761 = (P0010 / P0404) x 4000h."""
         if self.ratings.rated_power_kw:
             frac = word / w.PROFIDRIVE_PERCENT_BASE
@@ -665,16 +692,16 @@ class WegProfile:
         else:
             m.values["power_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
 
-    def _pd_torque(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _pd_torque(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0762: 4000h = 100 % of the output torque."""
         m.values["torque_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
 
-    def _namur(self, word: int, changes: dict[str, Any], m: _Mapped) -> None:
+    def _namur(self, word: int, changes: Readings, m: _Mapped) -> None:
         """P0763 VIK-NAMUR status (Table 3.7): fault categories."""
         m.namur = word
         m.values[self.spec.pname(763)] = word
 
-    def _resolve_codes(self, changes: dict[str, Any], m: _Mapped) -> None:
+    def _resolve_codes(self, changes: Readings, m: _Mapped) -> None:
         """Fault and alarm codes with their texts from the drive's own tables."""
         if self._faulted:
             code = m.fault if m.fault is not None else self._polled_fault
@@ -686,10 +713,10 @@ class WegProfile:
                 text = self.spec.fault_text(code)
             elif categories:
                 text = "; ".join(c for c, _ in categories)
-            changes.update(fault_code=code, fault_text=text)
+            changes.update({"fault_code": code, "fault_text": text})
         else:
             self._polled_fault = None
-            changes.update(fault_code=None, fault_text=None)
+            changes.update({"fault_code": None, "fault_text": None})
         if m.alarm is not None:
             alarm: int | None = m.alarm  # P0048 in a telegram word
         elif self._alarm:
@@ -709,7 +736,7 @@ class WegProfile:
     def wants_codes(self) -> bool:
         """True when the status shows a fault or alarm that no telegram word numbers.
 
-        The master may then call :meth:`read_codes` (an addition to the DpProfile contract).
+        The adapter then calls :meth:`read_codes` (DpProfile hooks, DpProfileBase defaults).
         """
         fault_mapped = any(p in (49, 947) for p in self.in_map)
         alarm_mapped = 48 in self.in_map
@@ -717,16 +744,16 @@ class WegProfile:
             self._alarm and not alarm_mapped and self._polled_alarm is None
         )
 
-    async def read_codes(self, channel: RecordChannel) -> Mapping[str, Any]:
+    async def read_codes(self, channel: RecordChannel) -> Readings:
         """Read P0049 (present fault) and P0048 (present alarm) through DP-V1."""
         fault, alarm = await self.params.read_many(channel, [(49, 0), (48, 0)])
-        changes: dict[str, Any] = {}
+        changes: Readings = {}
         if self._faulted and fault:
             self._polled_fault = fault
-            changes.update(fault_code=fault, fault_text=self.spec.fault_text(fault))
+            changes.update({"fault_code": fault, "fault_text": self.spec.fault_text(fault)})
         if self._alarm and alarm:
             self._polled_alarm = alarm
-            changes.update(alarm_code=alarm)
+            changes.update({"alarm_code": alarm})
         return changes
 
     def alarm_text(self, code: int) -> str:
@@ -742,7 +769,7 @@ class WegProfile:
         return [
             DiagEvent(
                 f"unexpected device diagnosis {data.hex(' ')}",
-                kind="info",
+                kind=DiagKind.INFO,
                 data={"raw": data.hex()},
             )
         ]
@@ -821,7 +848,7 @@ class _Mapped:
     values: dict[str, float | int] = field(default_factory=dict)
 
 
-_Handler = Callable[[WegProfile, int, dict[str, Any], _Mapped], None]
+_Handler = Callable[[WegProfile, int, Readings, _Mapped], None]
 
 _KNOWN: Final[Mapping[int, _Handler]] = {
     3: WegProfile._current,

@@ -24,14 +24,14 @@ import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import ClassVar, Final
+from typing import TYPE_CHECKING, ClassVar, Final
 
 from adapters.profibus import profidrive as pd
 from adapters.profibus import wegrecord
 from adapters.profibus.cfg import CompactId, IoDirection
 from adapters.profibus.dpv1 import WEG_ERROR_CODE_1_TEXTS
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.profile import RecordAccessError, SimDeviceBase
 from gateway.model import Device
 from gateway.sim import FaultInjector, Motor, MotorParams
 
@@ -40,6 +40,9 @@ from . import spec as specs
 from . import words as w
 from .options import WegOptions
 from .spec import DataProfile, ModelSpec
+
+if TYPE_CHECKING:
+    from gateway.config import DriveConfig
 
 log = logging.getLogger(__name__)
 
@@ -128,8 +131,10 @@ class Panel:
     reference_rpm: float = 0.0  # signed
 
 
-class WegSim:
+class WegSim(SimDeviceBase):
     """A simulated WEG drive (one model per subclass); implements the SimDevice protocol."""
+
+    handles_clear = True  # Clear is A138/F238 per P0313, not a lost communication
 
     spec: ClassVar[ModelSpec]
 
@@ -167,7 +172,7 @@ class WegSim:
         for number, value in (params or {}).items():
             self._store(number, value)
         self.ident_number = self.spec.default_ident if ident_number is None else ident_number
-        self.faults = FaultInjector()
+        self.faults: FaultInjector = FaultInjector()
         self.busy_reads = busy_reads
         self.motor = Motor(motor or self._motor_params())
         self.pinned: dict[int, int] = {}
@@ -211,6 +216,16 @@ class WegSim:
             self._store(spec.read_map_param(i + 3), param)
         for i, param in enumerate(words_out):
             self._store(spec.write_map_param(i + 3), param)
+
+    @classmethod
+    def for_drive(cls, drive: DriveConfig | None) -> WegSim:
+        """The drive a configured drive describes (``simulate = true``): programmed as its
+        profile options expect, at its address; a factory default one for ``None``."""
+        if drive is None:
+            return cls()
+        if isinstance(drive.options, WegOptions):
+            return cls.matching(drive.options, address=drive.address)
+        return cls(address=drive.address)
 
     @classmethod
     def matching(

@@ -10,6 +10,7 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from adapters.mcd600.sim import Mcd600Sim
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.cli import build_line
 from adapters.profibus.sim.gsdsim import GsdSim
@@ -102,7 +103,8 @@ async def test_every_device_from_its_gsd_reaches_data_exchange_with_the_files_by
         assert params[5].user_prm == bytes([0x00, 0xFD, 0xFD])  # one byte per extra word
         assert params[6].cfg == bytes.fromhex("F0A093")
         assert params[6].user_prm == bytes([30]) and not params[6].dpv1
-        assert sims[6].device.comm_timeout == 30  # the MCD 600 took the timeout from it
+        starter = sims[6].device
+        assert isinstance(starter, Mcd600Sim) and starter.comm_timeout == 30  # from Set_Prm
 
 
 async def test_a_wrong_module_is_a_cfg_fault_whose_event_names_the_bytes_and_the_module() -> None:
