@@ -12,19 +12,15 @@ import pytest
 from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
-    LINK_DOWN_ERRNOS,
-    RX_BATCH,
     CanLink,
     LinkConfig,
     RxBad,
     RxError,
     RxFailed,
     RxFrame,
-    _Notifier,
     convert,
-    error_number,
-    open_problem,
 )
+from adapters.link.can import LINK_DOWN_ERRNOS, RX_BATCH, _Notifier, error_number, open_problem
 from gateway.errors import AdapterError
 from tests.support.timing import scaled
 
