@@ -190,22 +190,28 @@ def test_the_shared_link_layer_imports_no_bus_adapter() -> None:
     assert violations(rule) == []
 
 
-def test_the_bus_adapters_use_the_shared_link_layer() -> None:
-    """Both bus packages open their lines and run their engines through adapters.link."""
-    for pkg in ("adapters.profibus", "adapters.devicenet"):
-        users = [
-            m for m in MODULES if under(m, pkg) and any(under(i, SHARED_LINK) for i in MODULES[m])
-        ]
-        assert users, f"{pkg} does not use {SHARED_LINK}"
-        assert not [
-            m
-            for m in MODULES
-            if under(m, pkg)
-            and m.endswith(".driver")
-            and not any(
-                under(i, f"{SHARED_LINK}.stream", f"{SHARED_LINK}.candriver") for i in MODULES[m]
-            )
-        ]
+def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
+    """One link per medium: pyserial and python-can are imported by adapters.link, and by a
+    bus's own link module only for its settings (8E1, the CAN frame it carries)."""
+    own_links = [f"{pkg}.link" for pkg in CODEC_NAMES]
+
+    def rule(mod: str, imp: str) -> str | None:
+        if under(imp, *FIELDBUS_LIBS) and not under(mod, SHARED_LINK, *own_links):
+            return "a fieldbus library only in adapters.link (and a bus's link settings)"
+        return None
+
+    assert violations(rule) == []
+
+
+@pytest.mark.parametrize(
+    ("adapter", "loop"),
+    [
+        ("adapters.profibus.adapter", f"{SHARED_LINK}.stream"),
+        ("adapters.devicenet.adapter", f"{SHARED_LINK}.candriver"),
+    ],
+)
+def test_each_bus_adapter_runs_on_its_mediums_driver_loop(adapter: str, loop: str) -> None:
+    assert loop in reachable([adapter])
 
 
 def is_simulator(mod: str) -> bool:
