@@ -344,9 +344,11 @@ class DeviceNetAdapter:
                 await links.start()
                 await driver.run()
             finally:
-                await self._leave(link, engine, driver)
-                await self._stop_tasks()
-                await links.stop()
+                try:
+                    await self._leave(link, engine, driver)
+                    await self._stop_tasks()
+                finally:
+                    await links.stop()  # a simulated line's devices, after the Release
                 for d in self.drives.values():
                     hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
                 self.link = self.engine = self._driver = None

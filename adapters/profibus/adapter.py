@@ -203,7 +203,7 @@ class ProfibusAdapter:
         if not isinstance(bus.options, opts.ProfibusOptions):
             raise missing_options(bus.name)
         self.options: opts.ProfibusOptions = bus.options
-        self.links: SerialLinks | None = links or self._real_port()
+        self.links: SerialLinks | None = links if links is not None else self._real_port()
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
@@ -228,7 +228,7 @@ class ProfibusAdapter:
         self._link: SerialLink | None = None
         self._driver: LineDriver | None = None
         self._futures: dict[int, asyncio.Future[RecordDone]] = {}
-        self._port: str | None = None
+        self._port = self.options.port  # a simulated line's: once it started
         self._port_state = "closed"
         self._port_error: str | None = None
         self._reopens = 0
