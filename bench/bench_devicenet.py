@@ -21,6 +21,7 @@ from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim import SimRunner
+from adapters.devicenet.sim.simulated import sim_configs
 from bench.common import Figure
 from gateway.config import parse
 from gateway.daemon import build_hub
@@ -56,7 +57,7 @@ async def scanner_rate(nodes: int) -> tuple[float, float]:
     )
     hub = build_hub(config)
     adapter = DeviceNetAdapter(config.buses[0])
-    runner = SimRunner(LinkConfig("virtual", channel), adapter.sim_configs())
+    runner = SimRunner(LinkConfig("virtual", channel), sim_configs(config.buses[0]))
     sim = asyncio.create_task(runner.run())
     await runner.started.wait()
     task = asyncio.create_task(adapter.run(hub))

@@ -200,7 +200,10 @@ class AdapterClass(Protocol):
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> Any: ...
 
-    def __call__(self, bus: BusConfig) -> DriveAdapter: ...
+    def __call__(self, bus: BusConfig, *, links: Any = None) -> DriveAdapter:
+        """``links``: the line the composition root chose for the adapter (a simulated line
+        for ``simulate = true``, given only then); None: the adapter's configured line."""
+        ...
 
 
 def _installed() -> dict[str, importlib.metadata.EntryPoint]:

@@ -132,6 +132,8 @@ class BusConfig:
     adapter: str
     options: Any = None
     drives: tuple[DriveConfig, ...] = ()
+    simulate: bool = False
+    """``simulate = true``: the daemon gives the adapter a simulated line."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -360,7 +362,11 @@ def _bus(name: str, t: Table) -> BusConfig:
     _read(t, lambda t: None)  # the bus table's unknown keys
     owners = [(d.address, d.id) for d in drives]
     _check_unique(t, "drives", "address", owners)
-    return BusConfig(name=name, adapter=adapter_name, options=options, drives=tuple(drives))
+    # the adapter's options checked ``simulate`` (a key it does not know is refused above)
+    simulate = t.data.get("simulate") is True
+    return BusConfig(
+        name=name, adapter=adapter_name, options=options, drives=tuple(drives), simulate=simulate
+    )
 
 
 def _drive_tables(t: Table) -> list[Table]:

@@ -47,6 +47,14 @@ FRONT_ENDS: dict[str, str] = {
 }
 """Front-end name (its config section) -> "module:Class"."""
 
+SIMULATORS: dict[str, str] = {
+    "profibus": "adapters.profibus.sim.simulated:SimulatedLine",
+    "devicenet": "adapters.devicenet.sim.simulated:SimulatedBus",
+}
+"""Adapter name -> "module:Class" of its simulated line, made from the bus's config for a
+bus with ``simulate = true`` and given to the adapter as its link factory; the adapters
+themselves never import a simulator."""
+
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
@@ -165,6 +173,22 @@ def load_front_end(name: str) -> Callable[[Runtime], FrontEnd] | None:
     return factory
 
 
+def simulated_line(bus: BusConfig) -> object:
+    """The simulated line of a bus with ``simulate = true`` (its adapter's link factory)."""
+    target = SIMULATORS.get(bus.adapter)
+    if target is None:
+        raise ConfigError(
+            "configuration",
+            f"buses.{bus.name}.simulate",
+            f"adapter {bus.adapter!r} has no simulator",
+        )
+    module_name, _, class_name = target.partition(":")
+    factory: Callable[[BusConfig], object] = getattr(
+        importlib.import_module(module_name), class_name
+    )
+    return factory(bus)
+
+
 class Daemon:
     def __init__(self, config: Config, notifier: Notifier | None = None) -> None:
         self.config = config
@@ -220,7 +244,8 @@ class Daemon:
     # ------------------------------------------------------------ adapters
 
     def _make_adapter(self, bus: BusConfig) -> DriveAdapter:
-        adapter = load_adapter(bus.adapter)(bus)
+        cls = load_adapter(bus.adapter)
+        adapter = cls(bus, links=simulated_line(bus)) if bus.simulate else cls(bus)
         self.runtime.adapters[bus.name] = adapter
         self.hub.attach_params([d.id for d in bus.drives], adapter)
         return adapter

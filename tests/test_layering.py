@@ -55,6 +55,9 @@ DEVICE_PARTS = tuple(
 # Parts of an adapter package that are not codecs: a codec may not import them.
 NON_CODEC_NAMES = ("master", "link", "scanner", "adapter", "sim", "cli", "engine", *DEVICE_PARTS)
 ENGINE_NAMES = ("adapters.profibus.master", "adapters.devicenet.scanner")
+# The link layer every bus adapter shares (one link per medium, one driver loop per medium).
+SHARED_LINK = "adapters.link"
+SHARED_LINK_MAY_IMPORT = (*FIELDBUS_LIBS, "gateway.errors")
 ADAPTER_MAY_IMPORT = (
     "gateway.model",
     "gateway.errors",
@@ -182,11 +185,91 @@ def test_adapters_import_only_their_package_and_the_adapter_contract() -> None:
         own = mod.split(".")[1] if mod.count(".") >= 1 else ""
         if under(imp, "adapters") and imp != "adapters":
             other = imp.split(".")[1]
-            if other != own and (own, other) not in RUNS_ON:
+            # the shared link layer is every bus adapter's; a device runs on its bus's codecs
+            shared = under(imp, SHARED_LINK) or (own, other) in RUNS_ON
+            if other != own and not shared:
                 return "adapters do not import each other"
         return None
 
     assert violations(rule) == []
+
+
+def test_the_shared_link_layer_imports_no_bus_adapter() -> None:
+    """adapters.link knows media (pyserial, python-can), never a protocol: the bus adapters
+    give it their codecs and engines, and it imports none of them nor the core."""
+
+    def rule(mod: str, imp: str) -> str | None:
+        if not under(mod, SHARED_LINK):
+            return None
+        if under(imp, "adapters") and imp != "adapters" and not under(imp, SHARED_LINK):
+            return "the shared link layer imports no bus adapter"
+        if under(imp, "gateway") and not under(imp, *SHARED_LINK_MAY_IMPORT):
+            return "the shared link layer imports only gateway.errors of the core"
+        return None
+
+    assert violations(rule) == []
+
+
+def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
+    """One link per medium: pyserial and python-can are imported by adapters.link, and by a
+    bus's own link module only for its settings (8E1, the CAN frame it carries)."""
+    own_links = [f"{pkg}.link" for pkg in CODEC_NAMES]
+
+    def rule(mod: str, imp: str) -> str | None:
+        if under(imp, *FIELDBUS_LIBS) and not under(mod, SHARED_LINK, *own_links):
+            return "a fieldbus library only in adapters.link (and a bus's link settings)"
+        return None
+
+    assert violations(rule) == []
+
+
+@pytest.mark.parametrize(
+    ("adapter", "loop"),
+    [
+        ("adapters.profibus.adapter", f"{SHARED_LINK}.stream"),
+        ("adapters.devicenet.adapter", f"{SHARED_LINK}.candriver"),
+    ],
+)
+def test_each_bus_adapter_runs_on_its_mediums_driver_loop(adapter: str, loop: str) -> None:
+    assert loop in reachable([adapter])
+
+
+def is_simulator(mod: str) -> bool:
+    """A simulator module: in a ``sim`` package or named ``sim`` (adapters.mcd600.sim)."""
+    return "sim" in mod.split(".")[1:]
+
+
+def simulator_rule(mod: str, imp: str) -> str | None:
+    """Simulators are chosen by the composition root (gateway.daemon gives a simulated line
+    for ``simulate = true``); an adapter's own modules never import one. Its command-line
+    tools (``drive-gateway sim ...``) run simulators on purpose."""
+    if not under(mod, "adapters") or is_simulator(mod) or mod.rpartition(".")[2] == "cli":
+        return None
+    if under(imp, "adapters") and is_simulator(imp):
+        return "a production adapter module imports no simulator (the daemon chooses it)"
+    return None
+
+
+def test_production_adapters_import_no_simulator() -> None:
+    assert violations(simulator_rule) == []
+
+
+def test_the_simulator_rule_sees_a_lazy_import(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """The import adapters/profibus/adapter.py had, inside a method, is one (every import
+    counts, not only the module's top level); a simulator or a CLI may import one."""
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    probe = tmp_path / "adapters" / "profibus" / "adapter.py"
+    probe.parent.mkdir(parents=True)
+    probe.write_text("def start():\n    from .sim.devices import SIM_DEVICES\n")
+    found = imports_of(probe)
+    assert "adapters.profibus.sim.devices" in found
+    assert simulator_rule("adapters.profibus.adapter", "adapters.profibus.sim.devices")
+    assert simulator_rule("adapters.devicenet.adapter", "adapters.mcd600.sim")
+    assert simulator_rule("adapters.profibus.sim.simulated", "adapters.profibus.sim.line") is None
+    assert simulator_rule("adapters.profibus.cli", "adapters.profibus.sim.port") is None
+    assert simulator_rule("gateway.daemon", "adapters.profibus.sim.simulated") is None
 
 
 IO_MODULES: tuple[str, ...] = (*FIELDBUS_LIBS, "asyncio", "socket", "select", "selectors")

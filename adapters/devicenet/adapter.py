@@ -66,7 +66,8 @@ from adapters.devicenet.explicit import (
 )
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
-    CanLink,
+    DeviceNetBus,
+    Link,
     LinkConfig,
     LinkEvent,
     RxBad,
@@ -108,8 +109,9 @@ from adapters.devicenet.scanner.probe import (
     ProbeConfig,
     Progress,
 )
-from adapters.devicenet.sim import SimNodeConfig, SimRunner
-from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
+from adapters.link.can import CanLinks, SendResult
+from adapters.link.candriver import CanDriver, CanProtocol
+from adapters.link.config import missing_options, unsimulated
 from gateway.adapter import (
     Capabilities,
     EventKind,
@@ -136,9 +138,7 @@ log = logging.getLogger(__name__)
 
 LEAVE_BOUND = 1.0  # s: the shortest bound on the wait for Release answers on shutdown
 LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
-SIM_START_BOUND = 2.0  # s
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
-SIM_DEFAULT_MAX_RPM = 1800.0
 ADR_INTERVAL = 1.0  # s between two looks at MAC 63 while an adr drive is missing
 IDLE = "idle"
 
@@ -239,10 +239,25 @@ class DeviceNetAdapter:
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
         return parse_drive(table, drive)
 
-    def __init__(self, bus: BusConfig, *, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        bus: BusConfig,
+        *,
+        links: CanLinks[CanFrame] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        """``links``: the line, as the composition root chose it (a simulated line for
+        ``simulate = true``); None: the configured interface and channel."""
         self.bus = bus
         self.name = bus.name
+        if not isinstance(bus.options, BusOptions):
+            raise missing_options(bus.name)
         self.options: BusOptions = bus.options
+        o = self.options
+        self.links: CanLinks[CanFrame] | None = links
+        """None for ``simulate = true`` without a simulated line: refused when it runs."""
+        if links is None and not o.simulate:
+            self.links = DeviceNetBus(LinkConfig(o.interface, o.channel, o.bitrate))
         self.clock = clock
         self.drives: dict[int, _Drive] = {}
         self._by_id: dict[str, _Drive] = {}
@@ -259,10 +274,10 @@ class DeviceNetAdapter:
             self.drives[d.address] = drive
             self._by_id[d.id] = drive
         self.engine: Scanner | None = None
-        self.link: CanLink | None = None
-        self.sim: SimRunner | None = None
+        self.link: Link | None = None
+        self._driver: CanDriver[CanFrame, Event, Action] | None = None
+        self._next_refresh = 0.0
         self._hub: HubPort | None = None
-        self._outbox: list[CanFrame] = []
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
         self._adr: LineProbe | None = None
         self._adr_next = 0.0
@@ -325,67 +340,38 @@ class DeviceNetAdapter:
             )
         return out
 
-    def sim_configs(self) -> list[SimNodeConfig]:
-        out = []
-        for d in self.drives.values():
-            o, s = d.opts, d.opts.sim
-            out.append(
-                SimNodeConfig(
-                    mac=d.mac,
-                    p710=s.p710 if s.p710 is not None else o.assembly.p710,
-                    p710_stored=s.p710_stored,
-                    p313=s.p313,
-                    max_rpm=s.max_rpm or o.max_rpm or SIM_DEFAULT_MAX_RPM,
-                    ramp_time=s.ramp_time,
-                    weg_speed_scale=o.weg_speed_scale,
-                    product_code=o.product_code if o.product_code is not None else 8,
-                    dupmac_timeout=self.options.dupmac_timeout,
-                    identity=None if o.eds is None else sim_identity(o.eds),
-                    io_sizes=o.io_sizes,
-                )
-            )
-        return out
-
     # ------------------------------------------------------------ run
 
     async def run(self, hub: HubPort) -> None:
+        links = self.links
+        if links is None:
+            raise unsimulated(self.name)
         self._hub = hub
         for d in self.drives.values():
             hub.update(d.id, comm=CommState.OFFLINE)
             if d.settings is not None:
                 hub.set_capabilities(d.id, self._capabilities(d, d.settings))
-        o = self.options
-        link = CanLink(LinkConfig(o.interface, o.channel, o.bitrate))
+        link = links.link()
         engine = Scanner(self.scanner_config(), self.node_configs())
-        sim_task: asyncio.Task[None] | None = None
+        self._next_refresh = 0.0
         async with link:
             self.link, self.engine = link, engine
+            driver = self._driver = CanDriver(engine, link, _Line(self), self.clock)
             try:
-                if o.simulate:
-                    sim_task = await self._start_sim()
-                await self._loop(link, engine)
+                await links.start()
+                await driver.run()
             finally:
-                await self._leave(link, engine)
-                await self._stop_tasks(sim_task)
+                try:
+                    await self._leave(link, engine, driver)
+                    await self._stop_tasks()
+                finally:
+                    await links.stop()  # a simulated line's devices, after the Release
                 for d in self.drives.values():
                     hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
-                self.link = self.engine = None
+                self.link = self.engine = self._driver = None
 
-    async def _start_sim(self) -> asyncio.Task[None]:
-        runner = SimRunner(LinkConfig("virtual", self.options.channel), self.sim_configs())
-        self.sim = runner
-        task = asyncio.create_task(runner.run(), name=f"devicenet-sim-{self.name}")
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(SIM_START_BOUND):
-                await runner.started.wait()
-        if task.done():
-            task.result()  # raises what broke the simulator
-        return task
-
-    async def _stop_tasks(self, sim_task: asyncio.Task[None] | None) -> None:
+    async def _stop_tasks(self) -> None:
         tasks = [t for d in self.drives.values() for t in (d.setup, d.status) if t is not None]
-        if sim_task is not None:
-            tasks.append(sim_task)
         for task in tasks:
             task.cancel()
         for task in tasks:
@@ -395,40 +381,30 @@ class DeviceNetAdapter:
             fut.cancel()
         self._pending.clear()
 
-    async def _loop(self, link: CanLink, engine: Scanner) -> None:
-        poll = self.options.poll_interval
-        next_refresh = 0.0
-        while True:
-            now = self.clock()
-            if now >= next_refresh:  # desired commands reach the outputs once per poll
-                self._refresh_outputs(now)
-                next_refresh = now + poll
-            deadline = engine.next_deadline()
-            if deadline is None or now >= deadline:
-                self._act(now, engine.step(now))
-            self._tick_adr(now, engine)
-            self._flush(now)
-            deadline = engine.next_deadline()
-            wake = next_refresh if deadline is None else min(deadline, next_refresh)
-            adr = self._adr.next_deadline() if self._adr is not None else None
-            if adr is not None:
-                wake = min(wake, adr)
-            events = await link.receive(max(wake - self.clock(), 0.0))
-            now = self.clock()
-            for event in events:
-                self._act(now, engine.step(now, _event(event)))
-                if self._adr is not None and isinstance(event, RxFrame):
-                    self._adr_actions(now, self._adr.step(now, event.frame))
-            self._flush(now)
+    def _before_step(self, now: float) -> None:
+        """Desired commands reach the outputs once per poll."""
+        if now >= self._next_refresh:
+            self._refresh_outputs(now)
+            self._next_refresh = now + self.options.poll_interval
 
-    async def _leave(self, link: CanLink, engine: Scanner) -> None:
+    def _wake_at(self) -> float:
+        adr = self._adr.next_deadline() if self._adr is not None else None
+        return self._next_refresh if adr is None else min(self._next_refresh, adr)
+
+    def _received(self, now: float, event: LinkEvent) -> None:
+        if self._adr is not None and isinstance(event, RxFrame):
+            self._adr_actions(now, self._adr.step(now, event.frame))
+
+    async def _leave(
+        self, link: Link, engine: Scanner, driver: CanDriver[CanFrame, Event, Action]
+    ) -> None:
         """Release every node (fact sheet 2.10 step 8), bounded."""
         if not link.is_open or not engine.online:
             return
         now = self.clock()
-        self._outbox.clear()
-        self._act_quietly(now, engine.leave(now))
-        self._flush(now)
+        driver.discard()
+        self._act_quietly(driver, now, engine.leave(now))
+        driver.flush(now)
         # the Releases go out request_spacing apart, each answered within explicit_timeout
         spread = len(engine.nodes) * engine.config.request_spacing
         bound = now + max(LEAVE_BOUND, spread + self.options.explicit_timeout)
@@ -438,34 +414,21 @@ class DeviceNetAdapter:
             events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
             now = self.clock()
             for event in events:
-                self._act_quietly(now, engine.step(now, _event(event)))
-            self._act_quietly(now, engine.step(now))
-            self._flush(now)
+                self._act_quietly(driver, now, engine.step(now, _event(event)))
+            self._act_quietly(driver, now, engine.step(now))
+            driver.flush(now)
 
-    def _act_quietly(self, now: float, actions: list[Action]) -> None:
+    @staticmethod
+    def _act_quietly(
+        driver: CanDriver[CanFrame, Event, Action], now: float, actions: list[Action]
+    ) -> None:
         with contextlib.suppress(AdapterError):
-            self._act(now, actions)
+            driver.act(now, actions)
 
     # ------------------------------------------------------------ actions
 
-    def _act(self, now: float, actions: list[Action]) -> None:
-        for action in actions:
-            if isinstance(action, Send):
-                self._outbox.append(action.frame)
-            else:
-                self._handlers[type(action)](now, action)
-
-    def _flush(self, now: float) -> None:
-        """Send what the engine asked for; a failure goes back to it (it backs off)."""
-        frames, self._outbox = self._outbox, []
-        if not frames or self.link is None or self.engine is None:
-            return
-        result = self.link.send(frames)
-        if result.error is None:
-            return
-        if result.link_down:
-            self._act(now, self.engine.step(now, LinkDown(result.error)))
-        self._act(now, self.engine.step(now, TxFailed(result.error, result.dropped)))
+    def _handle(self, now: float, action: Action) -> None:
+        self._handlers[type(action)](now, action)
 
     def _hub_port(self) -> HubPort:
         if self._hub is None:
@@ -605,7 +568,8 @@ class DeviceNetAdapter:
     def _adr_actions(self, now: float, actions: list[ProbeAction]) -> None:
         for action in actions:
             if isinstance(action, CanFrame):
-                self._outbox.append(action)
+                if self._driver is not None:
+                    self._driver.queue(action)
             elif isinstance(action, Finished):
                 self._adr = None
                 self._adr_next = now + ADR_INTERVAL
@@ -1035,6 +999,41 @@ def _assembly_problem(
         )
     shown = stored.label if stored is not None else "none"
     return f"{text}; P710 = {p710} selects assembly {shown}"
+
+
+class _Line(CanProtocol[CanFrame, Event, Action]):
+    """The scanner's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`)."""
+
+    def __init__(self, adapter: DeviceNetAdapter) -> None:
+        self.adapter = adapter
+
+    def event(self, received: LinkEvent) -> Event:
+        return _event(received)
+
+    def frame(self, action: Action) -> CanFrame | None:
+        return action.frame if isinstance(action, Send) else None
+
+    def handle(self, now: float, action: Action) -> None:
+        self.adapter._handle(now, action)
+
+    def send_failed(self, result: SendResult) -> list[Event]:
+        error = result.error or ""
+        failed: list[Event] = [LinkDown(error)] if result.link_down else []
+        return [*failed, TxFailed(error, result.dropped)]
+
+    def before_step(self, now: float) -> None:
+        self.adapter._before_step(now)
+
+    def after_step(self, now: float) -> None:
+        engine = self.adapter.engine
+        if engine is not None:
+            self.adapter._tick_adr(now, engine)
+
+    def wake_at(self) -> float | None:
+        return self.adapter._wake_at()
+
+    def received(self, now: float, event: LinkEvent) -> None:
+        self.adapter._received(now, event)
 
 
 def _event(event: LinkEvent) -> Event:

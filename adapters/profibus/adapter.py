@@ -21,8 +21,10 @@ reopened with back-off. One master per line: a port another process holds when t
 adapter first opens it ends the run with :class:`PortHeld` (the daemon does not start);
 held when it comes back after a loss, it is retried like a missing one, the holder named.
 On cancellation the master sends Global_Control Clear to every slave and closes the port.
-With ``simulate = true`` the adapter makes a pty pair and runs its drives' simulated
-devices on the other end, in-process.
+The port is opened through the link factory the composition root gives the adapter
+(:class:`adapters.link.serial.SerialLinks`): the configured port, or for ``simulate =
+true`` a simulated line (:mod:`adapters.profibus.sim.simulated`: the drives' simulated
+devices on the other end of a pty pair, in-process). This module imports no simulator.
 """
 
 from __future__ import annotations
@@ -33,8 +35,9 @@ import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from typing import TYPE_CHECKING, Any, ClassVar, Final
+from typing import Any, ClassVar, Final
 
+from adapters.link.config import missing_options, unsimulated
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
 from gateway.devices import devices_of
@@ -46,7 +49,7 @@ from gateway.schema import Table
 from . import options as opts
 from .dp import GlobalControl
 from .driver import LineDriver
-from .link import OPEN_ERRORS, SerialLink, open_link
+from .link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
 from .master import (
     DiagnosisRead,
     FaultKind,
@@ -63,7 +66,6 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
-from .portlock import PortHeld
 from .profile import (
     BUS,
     PROFILES,
@@ -75,10 +77,6 @@ from .profile import (
     RecordAccessError,
     SlaveSetup,
 )
-
-if TYPE_CHECKING:
-    from .sim.line import SimLine
-    from .sim.port import SimPort
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +171,6 @@ class ProfibusAdapter:
     # manual) and the DP stations 0-125 are checked in parse_drive_options, naming the drive
     address_range: ClassVar[tuple[int, int]] = (0, SET_SLAVE_ADD_DEFAULT)
     profiles: ClassVar[Mapping[Device, str]] = PROFILES
-    sim_devices: ClassVar[Mapping[Device, str] | None] = None  # None: sim.devices.SIM_DEVICES
 
     # ------------------------------------------------------------------ config
 
@@ -205,21 +202,26 @@ class ProfibusAdapter:
 
     # ------------------------------------------------------------------ construction
 
-    def __init__(self, bus: BusConfig) -> None:
+    def __init__(self, bus: BusConfig, *, links: SerialLinks | None = None) -> None:
+        """``links``: the line, as the composition root chose it (a simulated line for
+        ``simulate = true``); None: the configured port."""
         self.bus = bus
         self.name = bus.name
-        self.options: opts.ProfibusOptions = bus.options or opts.ProfibusOptions(simulate=True)
+        if not isinstance(bus.options, opts.ProfibusOptions):
+            raise missing_options(bus.name)
+        self.options: opts.ProfibusOptions = bus.options
+        self.links: SerialLinks | None = links if links is not None else self._real_port()
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
         self._overrides: dict[str, opts.SetupOverride] = {}
         for d in bus.drives:
             drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
-            if drive_opts is not None and drive_opts.setup is not None:
-                self._overrides[d.id] = drive_opts.setup
-            inner = replace(d, options=drive_opts.profile if drive_opts else d.options)
+            inner, override = opts.profile_config(d)
+            if override is not None:
+                self._overrides[d.id] = override
             profile: DpProfile = self.profile_class(d.device)(inner)
-            setup = _overridden(profile.setup(), drive_opts.setup if drive_opts else None)
+            setup = _overridden(profile.setup(), override)
             drive = _Drive(config=inner, profile=profile, setup=setup)
             self._drives[d.id] = drive
             self._by_address[d.address] = drive
@@ -233,7 +235,7 @@ class ProfibusAdapter:
         self._link: SerialLink | None = None
         self._driver: LineDriver | None = None
         self._futures: dict[int, asyncio.Future[RecordDone]] = {}
-        self._port = self.options.port
+        self._port = self.options.port  # a simulated line's: once it started
         self._port_state = PortState.CLOSED
         self._port_error: str | None = None
         self._reopens = 0
@@ -241,20 +243,29 @@ class ProfibusAdapter:
         self.claimed = asyncio.Event()
         """Set once the port's first open was not refused as held (the daemon's READY)."""
         self._control_timer: asyncio.TimerHandle | None = None
-        self.sim: SimPort | None = None
-        self.sim_line: SimLine | None = None  # the simulated slaves (simulate = true)
+
+    def _real_port(self) -> SerialLinks | None:
+        """The configured port; None for ``simulate = true`` (no simulated line given:
+        refused when the adapter runs, not when it is built to be looked at)."""
+        o = self.options
+        return None if o.port is None else profibus_port(o.port, o.baudrate, o.rs485)
+
+    def _line(self) -> SerialLinks:
+        if self.links is None:
+            raise unsimulated(self.name) if self.options.simulate else missing_options(self.name)
+        return self.links
 
     # ------------------------------------------------------------------ running
 
     async def run(self, hub: HubPort) -> None:
+        links = self._line()
         self._hub = hub
         self._loop = asyncio.get_running_loop()
         for drive in self._drives.values():
             hub.set_capabilities(drive.id, drive.profile.capabilities())
             hub.update(drive.id, comm=CommState.OFFLINE)
         try:
-            if self.options.simulate:
-                self._port = self._start_simulation()
+            self._port = links.start()
             if self.options.clear_on_lost_control:
                 self._control_timer = self._loop.call_later(CONTROL_CHECK, self._check_control)
             await self._serve()
@@ -276,14 +287,7 @@ class ProfibusAdapter:
                     failed.set_result(exc)
 
             try:
-                link = await open_link(
-                    self._port,
-                    self.options.baudrate,
-                    loop,
-                    _ignore,
-                    on_error,
-                    rs485=self.options.rs485,
-                )
+                link = await self._line().open(loop, _ignore, on_error)
             except PortHeld as exc:
                 if self._link_opens == 0:
                     raise  # at start: refuse to be a second master (the daemon stops)
@@ -364,42 +368,14 @@ class ProfibusAdapter:
                 link.write(t.data)
             tail = self.master.bus.tx_time(sum(len(t.data) for t in transmits))
             await asyncio.sleep(tail + LEAVE_MARGIN)
-            if self.sim is not None:
-                await self.sim.settle()
+            await self._line().settle()
             log.info("%s: Global_Control Clear sent; closing %s", self.name, self._port)
         await self._detach()
         self._port_state = PortState.CLOSED
-        if self.sim is not None:
-            self.sim.close()
-            self.sim = None
+        self._line().close()
         for future in self._futures.values():
             if not future.done():
                 future.cancel()
-
-    def _start_simulation(self) -> str:
-        from .sim.devices import SIM_DEVICES, make_device, with_setup
-        from .sim.line import SimLine
-        from .sim.port import SimPort
-        from .sim.slave import DpSlave
-
-        table = self.sim_devices if self.sim_devices is not None else SIM_DEVICES
-        line = SimLine(
-            DpSlave(
-                d.address,
-                with_setup(
-                    make_device(d.config.device, d.config, table),
-                    d.config.device,
-                    self._overrides.get(d.id),
-                ),
-            )
-            for d in self._drives.values()
-        )
-        sim, path = SimPort.on_pty(line)
-        sim.start()
-        self.sim = sim
-        self.sim_line = line
-        log.info("%s: simulated line on %s (%d slaves)", self.name, path, len(line.slaves))
-        return path
 
     # ------------------------------------------------------------------ engine actions
 

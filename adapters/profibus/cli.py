@@ -32,9 +32,8 @@ from gateway.model import Device
 
 from .driver import LineDriver
 from .fdl import MAX_STATION, StationType
-from .link import OPEN_ERRORS, Rs485, open_link
+from .link import OPEN_ERRORS, PortHeld, Rs485, open_link
 from .options import ProfibusDriveOptions
-from .portlock import PortHeld
 from .profile import PROFILES, load_profile
 from .scan import Scanner, SlaveInfo
 from .timing import BAUD_RATES, BusParams

@@ -1,230 +1,55 @@
-"""The serial port under the master (and under the standalone simulator): pyserial, non-blocking.
-
-:func:`open_port` opens a device path (``/dev/ttyUSB0``, ``/dev/ttyS1``, a pty) or a pyserial
-URL (``rfc2217://host:port``, ``socket://host:port``) with 8E1 and the baud rate (fact sheet
-1.1: 11-bit characters with even parity). On a pty the kernel accepts and ignores what it
-cannot do: parity is dropped silently, some baud rates are refused (EINVAL), RTS ioctls
-fail; :func:`open_port` carries on there instead of failing.
-
-:class:`SerialLink` reads with ``loop.add_reader`` (never a blocking read), hands the bytes
-and their arrival time to ``on_data``, writes without blocking (a short write waits for
-``add_writer``) and reports a dead port (the USB converter unplugged, EOF, EIO) once to
-``on_error``. A port without a file descriptor (rfc2217, whose pyserial class reads in a
-thread of its own) is polled every :data:`POLL_INTERVAL` instead.
-
-One master per line: a local port is held exclusively (:class:`ExclusiveSerial`: an
-advisory flock taken before any setting changes, then ``TIOCEXCL``; :mod:`.portlock`
-says why both). A port another process holds is refused with :class:`PortHeld`, naming the
-holder where ``/proc`` shows it, before anything is sent or set.
-
-RS-485 direction control: a converter with automatic direction control (most USB ones)
-needs nothing; a UART wired to a transceiver needs the kernel's RS-485 mode, RTS driving the
-transmitter (``TIOCSRS485``). :class:`Rs485` says what to do: ``auto`` (the default) asks
-for it on a local port and carries on where the driver has no RS-485 mode, ``on`` insists
-(opening fails where the driver refuses, a pty excepted: it accepts nothing of the kind and
-means nothing by it), ``off`` leaves RTS alone. URL ports have no local UART to set.
-
-pyserial's URL ports block when they open (a TCP connect, up to 5 s) and close (socket://
-sleeps 0.3 s): :func:`open_link` and :meth:`SerialLink.aclose` run those calls in a
-short-lived thread of their own, never on the event loop. A ``socket://`` connection gets
-TCP_NODELAY: a master sends one short request and waits for the answer, which Nagle's
-algorithm and delayed acknowledgements would hold back by tens of milliseconds.
-"""
+"""The Profibus line's serial port: the shared serial link (:mod:`adapters.link.serial`) with
+the Profibus character format, 8E1 (fact sheet 1.1: 11-bit characters, even parity)."""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import errno
-import logging
-import os
-import select
-import socket
-import stat
-import termios
-import threading
-import time
 from collections.abc import Callable
-from enum import Enum
-from typing import Any, Final, TypeVar
+from typing import Any, Final
 
 import serial
-import serial.rs485
 
-from .portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
+from adapters.link.portlock import PortHeld
+from adapters.link.serial import (
+    OPEN_ERRORS,
+    URL_SCHEMES,
+    CharFormat,
+    Rs485,
+    SerialLink,
+    SerialLinks,
+    SerialPort,
+    in_thread,
+    is_pty,
+    is_url,
+    set_rs485,
+)
+from adapters.link.serial import open_link as open_serial_link
+from adapters.link.serial import open_port as open_serial_port
 
-log = logging.getLogger(__name__)
+__all__ = [
+    "OPEN_ERRORS",
+    "PROFIBUS_CHARS",
+    "URL_SCHEMES",
+    "PortHeld",
+    "Rs485",
+    "SerialLink",
+    "SerialLinks",
+    "in_thread",
+    "is_pty",
+    "is_url",
+    "open_link",
+    "open_port",
+    "profibus_port",
+    "set_rs485",
+]
 
-POLL_INTERVAL: Final = 0.001  # s, ports without a file descriptor
-READ_CHUNK: Final = 4096
-PTY_MAJORS: Final = range(136, 144)  # Linux Unix98 pty slaves (/dev/pts/N)
-URL_SCHEMES: Final = ("rfc2217", "socket", "loop", "spy", "alt", "hwgrep")
-
-OPEN_ERRORS: Final = (OSError, ValueError, termios.error, serial.SerialException)
-"""What opening a port may raise (a missing device, a refused setting)."""
-
-
-class Rs485(Enum):
-    """The kernel's RS-485 mode on a local port (see the module docstring)."""
-
-    AUTO = "auto"  # ask for it; a driver without it (auto-direction converter) is fine
-    ON = "on"  # required: opening fails where the driver refuses (not on a pty)
-    OFF = "off"  # leave RTS alone
-
-
-def rs485_settings() -> serial.rs485.RS485Settings:
-    """RTS high while sending, low while receiving, no extra delays (1.1: no gaps)."""
-    return serial.rs485.RS485Settings(rts_level_for_tx=True, rts_level_for_rx=False)
-
-
-def is_url(port: str) -> bool:
-    return "://" in port
-
-
-def is_pty(port: str) -> bool:
-    """A pty slave device: its settings (baud rate, parity) mean nothing to the kernel."""
-    if is_url(port):
-        return False
-    try:
-        st = os.stat(port)
-    except OSError:
-        return False
-    return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in PTY_MAJORS
-
-
-class ExclusiveSerial(serial.Serial):  # type: ignore[misc]  # pyserial has no types
-    """A local port held exclusively while open (module docstring, :mod:`.portlock`)."""
-
-    def __init__(self) -> None:
-        super().__init__(exclusive=True)  # pyserial flocks before it sets anything
-
-    def open(self) -> None:
-        try:
-            super().open()
-        except serial.SerialException as exc:
-            if not held(exc):
-                raise
-            raise PortHeld(str(self.port), find_holder(str(self.port))) from None
-        set_exclusive(self.fd)
-
-    def close(self) -> None:
-        if self.is_open and self.fd is not None:
-            clear_exclusive(self.fd)
-        super().close()
-
-
-def _configure(ser: Any, baudrate: int) -> None:
-    ser.baudrate = baudrate
-    ser.bytesize = serial.EIGHTBITS
-    ser.parity = serial.PARITY_EVEN  # 1.1: even parity
-    ser.stopbits = serial.STOPBITS_ONE
-    ser.timeout = 0
-    ser.write_timeout = 0
-    ser.xonxoff = False
-    ser.rtscts = False
-    ser.dsrdtr = False
+PROFIBUS_CHARS: Final = CharFormat(serial.EIGHTBITS, serial.PARITY_EVEN, serial.STOPBITS_ONE)
+"""Fact sheet 1.1: 8 data bits, even parity, 1 stop bit."""
 
 
 def open_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> Any:
-    """An open pyserial port set to 8E1 at ``baudrate``, RS-485 as ``rs485`` says (a pty
-    keeps what it can), held exclusively (a local port); :class:`PortHeld` if another
-    process holds it.
-
-    Blocks for a URL port (see the module docstring): call :func:`open_link` from a loop.
-    """
-    if is_url(port):
-        ser = serial.serial_for_url(port, do_not_open=True)
-    else:
-        ser = ExclusiveSerial()
-        ser.port = port
-    _configure(ser, baudrate)
-    try:
-        ser.open()
-    except termios.error:
-        if not is_pty(port):
-            raise
-        _open_pty_anyway(ser, port, baudrate)
-    if port.startswith("socket://"):
-        _no_delay(ser)
-    try:
-        set_rs485(ser, port, rs485)
-    except BaseException:
-        ser.close()
-        raise
-    return ser
-
-
-def _open_pty_anyway(ser: Any, port: str, baudrate: int) -> None:
-    """Open a pty that refused the 8E1 settings (EINVAL); it ignores rate and parity anyway.
-
-    A pty drops even parity (PARENB): asked for settings where only the parity differs from
-    what it has (a second open at the same rate), tcsetattr fails with EINVAL. So without
-    parity first, then also at 9600 (a rate every pty has). Retrying at 9600 with parity on
-    failed at 9600 itself: the intermittent ``(22, 'Invalid argument')`` (issue 20).
-    """
-    log.info("%s is a pty: 8E1 at %d baud not settable there, ignored", port, baudrate)
-    ser.parity = serial.PARITY_NONE
-    try:
-        ser.open()
-    except termios.error:
-        ser.baudrate = 9600
-        ser.open()
-
-
-def set_rs485(ser: Any, port: str, mode: Rs485) -> bool:
-    """Put an open local port in the kernel's RS-485 mode as ``mode`` says; True if set.
-
-    A refusal is logged and tolerated (``auto``, or any pty), else SerialException.
-    """
-    if mode is Rs485.OFF or is_url(port):
-        return False
-    try:
-        ser.rs485_mode = rs485_settings()
-    except (*OPEN_ERRORS, NotImplementedError) as exc:  # a pty: EINVAL or ENOTTY
-        with contextlib.suppress(*OPEN_ERRORS, NotImplementedError):
-            ser.rs485_mode = None  # the port stays as it was: RS-485 mode off
-        if mode is Rs485.ON and not is_pty(port):
-            raise serial.SerialException(f"{port}: the driver refuses RS-485 mode: {exc}") from None
-        log.info("%s: no kernel RS-485 mode (%s); the converter controls direction", port, exc)
-        return False
-    log.info("%s: kernel RS-485 mode on (RTS drives the transmitter)", port)
-    return True
-
-
-def _no_delay(ser: Any) -> None:
-    fd = _fileno(ser)
-    if fd is None:
-        return
-    with contextlib.suppress(OSError), socket.fromfd(fd, socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # on a dup of the fd
-
-
-_T = TypeVar("_T")
-
-
-async def in_thread(func: Callable[[], _T]) -> _T:
-    """Run a blocking call in a thread of its own (it ends with the call)."""
-    loop = asyncio.get_running_loop()
-    future: asyncio.Future[_T] = loop.create_future()
-
-    def deliver(result: _T | None, error: BaseException | None) -> None:
-        if future.cancelled():
-            return
-        if error is not None:
-            future.set_exception(error)
-        else:
-            future.set_result(result)  # type: ignore[arg-type]
-
-    def work() -> None:
-        try:
-            result, error = func(), None
-        except BaseException as exc:  # handed to the awaiting coroutine
-            result, error = None, exc
-        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-            loop.call_soon_threadsafe(deliver, result, error)
-
-    threading.Thread(target=work, name="profibus-port", daemon=True).start()
-    return await future
+    """An open port set to 8E1 at ``baudrate`` (:func:`adapters.link.serial.open_port`)."""
+    return open_serial_port(port, baudrate, PROFIBUS_CHARS, rs485)
 
 
 async def open_link(
@@ -236,212 +61,12 @@ async def open_link(
     *,
     rs485: Rs485 = Rs485.AUTO,
 ) -> SerialLink:
-    """Open ``port`` without blocking the loop and wrap it in a :class:`SerialLink`."""
-    if is_url(port):
-        ser = await in_thread(lambda: open_port(port, baudrate, rs485))
-    else:
-        ser = open_port(port, baudrate, rs485)
-    return SerialLink(ser, loop, on_data, on_error, port)
+    """Open ``port`` at 8E1 without blocking the loop (:func:`adapters.link.serial.open_link`)."""
+    return await open_serial_link(
+        port, baudrate, loop, on_data, on_error, char=PROFIBUS_CHARS, rs485=rs485
+    )
 
 
-class SerialLink:
-    """One open port on the event loop (see the module docstring)."""
-
-    def __init__(
-        self,
-        ser: Any,
-        loop: asyncio.AbstractEventLoop,
-        on_data: Callable[[bytes, float], None],
-        on_error: Callable[[BaseException], None],
-        name: str = "",
-    ) -> None:
-        self.ser = ser
-        self.loop = loop
-        self.name = name or str(getattr(ser, "port", "port"))
-        self.on_data = on_data
-        self.on_error = on_error
-        self.bytes_in = 0
-        self.bytes_out = 0
-        self._out = bytearray()
-        self._fd: int | None = _fileno(ser)
-        self._writer = False
-        self._poll: asyncio.TimerHandle | None = None
-        self._closed = False
-        self._failed = False
-        if self._fd is not None:
-            os.set_blocking(self._fd, False)
-            loop.add_reader(self._fd, self._readable)
-        else:
-            self._poll = loop.call_later(POLL_INTERVAL, self._polled)
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
-    # ------------------------------------------------------------------ reading
-
-    def _readable(self) -> None:
-        if self._closed or self._fd is None:
-            return
-        try:
-            data = os.read(self._fd, READ_CHUNK)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._fail(exc)
-            return
-        if not data:
-            self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
-            return
-        self.bytes_in += len(data)
-        self.on_data(data, self.loop.time())
-
-    def wait_readable(self, timeout: float) -> bool:
-        """Block up to ``timeout`` s (sub-millisecond: a driver's wait for TSYN) until bytes
-        can be read; a port without a file descriptor is only waited out."""
-        if timeout <= 0 or self._closed:
-            return False
-        if self._fd is None:
-            end = time.monotonic() + timeout
-            while time.monotonic() < end:
-                pass
-            return False
-        try:
-            readable, _, _ = select.select([self._fd], [], [], timeout)
-        except (OSError, ValueError):
-            return False
-        return bool(readable)
-
-    def read_now(self) -> None:
-        """Read what has arrived now (as the reader callback would) and hand it on."""
-        if self._fd is None:
-            self._polled_once()
-        else:
-            self._readable()
-
-    def _polled_once(self) -> None:
-        if self._closed:
-            return
-        try:
-            waiting = self.ser.in_waiting
-            data = self.ser.read(waiting) if waiting else b""
-        except OPEN_ERRORS as exc:
-            self._fail(exc)
-            return
-        if data:
-            self.bytes_in += len(data)
-            self.on_data(data, self.loop.time())
-
-    def _polled(self) -> None:
-        self._poll = None
-        self._polled_once()
-        if not self._closed:
-            self._poll = self.loop.call_later(POLL_INTERVAL, self._polled)
-
-    # ------------------------------------------------------------------ writing
-
-    def write(self, data: bytes) -> None:
-        """Queue ``data``; it goes out now, or as soon as the port takes more."""
-        if self._closed:
-            return
-        self.bytes_out += len(data)
-        if self._out or self._fd is None:
-            self._out += data
-            self._flush()
-            return
-        try:
-            n = os.write(self._fd, data)
-        except (BlockingIOError, InterruptedError):
-            n = 0
-        except OSError as exc:
-            self._fail(exc)
-            return
-        if n < len(data):
-            self._out += data[n:]
-            self._want_writer()
-
-    def _flush(self) -> None:
-        if self._closed or not self._out:
-            return
-        try:
-            if self._fd is None:
-                n = self.ser.write(bytes(self._out)) or 0
-            else:
-                n = os.write(self._fd, self._out)
-        except (BlockingIOError, InterruptedError):
-            n = 0
-        except OPEN_ERRORS as exc:
-            self._fail(exc)
-            return
-        del self._out[:n]
-        if self._out:
-            self._want_writer()
-        elif self._writer and self._fd is not None:
-            self.loop.remove_writer(self._fd)
-            self._writer = False
-
-    def _want_writer(self) -> None:
-        if self._fd is None:
-            self.loop.call_later(POLL_INTERVAL, self._flush)
-        elif not self._writer:
-            self.loop.add_writer(self._fd, self._flush)
-            self._writer = True
-
-    @property
-    def pending_output(self) -> int:
-        return len(self._out)
-
-    # ------------------------------------------------------------------ closing
-
-    def _fail(self, exc: BaseException) -> None:
-        if self._failed or self._closed:
-            return
-        self._failed = True
-        log.warning("serial port %s failed: %s", self.name, exc)
-        self._detach()
-        self.on_error(exc)
-
-    def _detach(self) -> None:
-        if self._fd is not None:
-            with contextlib.suppress(ValueError, OSError):
-                self.loop.remove_reader(self._fd)
-                if self._writer:
-                    self.loop.remove_writer(self._fd)
-        self._writer = False
-        if self._poll is not None:
-            self._poll.cancel()
-            self._poll = None
-
-    def close(self) -> None:
-        """Close now (a URL port closes in a thread: its close may block)."""
-        if self._closed:
-            return
-        self._detach()
-        self._closed = True
-        if is_url(self.name):
-            threading.Thread(target=self._close_port, name="profibus-close", daemon=True).start()
-        else:
-            self._close_port()
-
-    async def aclose(self) -> None:
-        """Close, waiting for a URL port's close to finish."""
-        if self._closed:
-            return
-        self._detach()
-        self._closed = True
-        if is_url(self.name):
-            await in_thread(self._close_port)
-        else:
-            self._close_port()
-
-    def _close_port(self) -> None:
-        with contextlib.suppress(*OPEN_ERRORS):
-            self.ser.close()
-
-
-def _fileno(ser: Any) -> int | None:
-    try:
-        fd = ser.fileno()
-    except (AttributeError, OSError, ValueError, serial.SerialException):
-        return None
-    return fd if isinstance(fd, int) and fd >= 0 else None
+def profibus_port(port: str, baudrate: int, rs485: Rs485 = Rs485.AUTO) -> SerialPort:
+    """The real line's link factory: ``port`` at 8E1."""
+    return SerialPort(port, baudrate, PROFIBUS_CHARS, rs485)

@@ -43,7 +43,7 @@ the MCD 600 ``mode``): a difference is a config error saying both.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -122,6 +122,15 @@ class ProfibusDriveOptions:
     profile: Any = None
     watchdog: float | None = None  # None: the bus's watchdog
     setup: SetupOverride | None = None  # None: the profile's built-in setup
+
+
+def profile_config(drive: DriveConfig) -> tuple[DriveConfig, SetupOverride | None]:
+    """``drive`` as its profile (and its simulator) sees it, with its profile's own options,
+    and what its config sets up instead of the profile's built-in values."""
+    options = drive.options if isinstance(drive.options, ProfibusDriveOptions) else None
+    if options is None:
+        return drive, None
+    return replace(drive, options=options.profile), options.setup
 
 
 def parse_bus_options(t: Table) -> ProfibusOptions:

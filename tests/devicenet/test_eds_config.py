@@ -10,6 +10,7 @@ from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.dupmac import DupMacCheck
 from adapters.devicenet.options import SCANNER_VENDOR_ID, DriveOptions
 from adapters.devicenet.scanner import Scanner, Send
+from adapters.devicenet.sim.simulated import sim_configs
 from gateway.config import load
 from gateway.errors import ConfigErrors
 
@@ -44,7 +45,7 @@ def test_identity_sizes_and_parameters_come_from_the_eds(tmp_path: Path) -> None
     assert opts.params[100].name == "Acceleration time"
     node = DeviceNetAdapter(config.buses[0]).node_configs()[0]
     assert (node.identity.product_type, node.identity.revision) == (2, (4, 6))
-    sim = DeviceNetAdapter(config.buses[0]).sim_configs()[0]
+    sim = sim_configs(config.buses[0])[0]
     assert sim.identity is not None and sim.identity.revision == (4, 6)
     assert sim.io_sizes == (4, 4)
 

@@ -15,17 +15,19 @@ import pytest
 from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
-    LINK_DOWN_ERRNOS,
-    RX_BATCH,
-    RX_BUFFER_BYTES,
     CanLink,
     LinkConfig,
     RxBad,
     RxError,
     RxFailed,
     RxFrame,
-    _Notifier,
     convert,
+)
+from adapters.link.can import (
+    LINK_DOWN_ERRNOS,
+    RX_BATCH,
+    RX_BUFFER_BYTES,
+    _Notifier,
     enlarge_receive_buffer,
     error_number,
     open_problem,

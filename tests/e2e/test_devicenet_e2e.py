@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
-from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.cfw08 import AssemblyPair
 from adapters.devicenet.sim import Cfw08Node, SimRunner
 from gateway.config import DEFAULT_CONFIG, load
 from gateway.model import CommState, Device
 from tests.e2e.harness import PREFIX, RESET, REVERSE, RUN, TIMEOUT, Gateway, parsed, running_gateway
+from tests.support import simulated
 
 UNIT = 5
 MAC = 5
@@ -58,9 +58,9 @@ async def gateway(tmp_path: Path) -> AsyncIterator[Gateway]:
 
 
 def sim(gateway: Gateway) -> SimRunner:
-    adapter = gateway.adapter("dn")
-    assert isinstance(adapter, DeviceNetAdapter) and adapter.sim is not None
-    return adapter.sim
+    runner = simulated.sim_runner(gateway.adapter("dn"))
+    assert runner is not None
+    return runner
 
 
 def state_key() -> str:

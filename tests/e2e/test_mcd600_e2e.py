@@ -19,7 +19,6 @@ from typing import Any
 import pytest_asyncio
 
 from adapters.mcd600.sim import Mcd600Sim
-from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.slave import DpSlave
 from gateway.model import DriveState, DriveStatus
 from tests.e2e.harness import (
@@ -33,6 +32,7 @@ from tests.e2e.harness import (
     running_gateway,
     simulated_profibus,
 )
+from tests.support import simulated
 from tests.zenoh.client import Got, Inbox
 
 BUS = "pb"
@@ -93,9 +93,9 @@ async def gateway(tmp_path: Path) -> AsyncIterator[Gateway]:
 
 
 def slave(gw: Gateway, address: int = ADDRESS) -> DpSlave:
-    adapter = gw.adapter(BUS)
-    assert isinstance(adapter, ProfibusAdapter) and adapter.sim_line is not None
-    return adapter.sim_line[address]
+    line = simulated.sim_line(gw.adapter(BUS))
+    assert line is not None
+    return line[address]
 
 
 def starter(gw: Gateway) -> Mcd600Sim:

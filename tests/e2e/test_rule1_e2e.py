@@ -27,11 +27,9 @@ from typing import Any
 import pytest
 import pytest_asyncio
 
-from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.sim import SimRunner
 from adapters.mcd600.sim import Mcd600Sim
 from adapters.mcd600.simparams import AUTO_RESET_ACTION, AUTO_RESET_DELAY, AutoResetAction
-from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.weg.sim import WegSim
 from gateway.cli import main
@@ -46,6 +44,7 @@ from tests.e2e.harness import (
     running_gateway,
     simulated_profibus,
 )
+from tests.support import simulated
 
 PB, DN = "pb", "dn"
 NETWORK = "P0105 = 5, P0220 = 10, P0222 = 11, P0226 = 9, P0227 = 4, P0228 = 5"
@@ -168,15 +167,15 @@ def now() -> float:
 
 
 def slave(gw: Gateway, drive: Drive) -> DpSlave:
-    adapter = gw.adapter(PB)
-    assert isinstance(adapter, ProfibusAdapter) and adapter.sim_line is not None
-    return adapter.sim_line[drive.address]
+    line = simulated.sim_line(gw.adapter(PB))
+    assert line is not None
+    return line[drive.address]
 
 
 def dn_sim(gw: Gateway) -> SimRunner:
-    adapter = gw.adapter(DN)
-    assert isinstance(adapter, DeviceNetAdapter) and adapter.sim is not None
-    return adapter.sim
+    runner = simulated.sim_runner(gw.adapter(DN))
+    assert runner is not None
+    return runner
 
 
 class Sim:

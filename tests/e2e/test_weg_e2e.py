@@ -23,7 +23,6 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
-from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.weg.sim import WegSim
 from gateway.config import DEFAULT_CONFIG
@@ -40,6 +39,7 @@ from tests.e2e.harness import (
     running_gateway,
     simulated_profibus,
 )
+from tests.support import simulated
 from tests.zenoh.client import Got, Inbox
 
 BUS = "pb"
@@ -140,9 +140,9 @@ def every_model(
 
 
 def slave(gw: Gateway, model: Model) -> DpSlave:
-    adapter = gw.adapter(BUS)
-    assert isinstance(adapter, ProfibusAdapter) and adapter.sim_line is not None
-    return adapter.sim_line[model.address]
+    line = simulated.sim_line(gw.adapter(BUS))
+    assert line is not None
+    return line[model.address]
 
 
 def drive(gw: Gateway, model: Model) -> WegSim:

@@ -17,6 +17,7 @@ from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.hub import EventSubscription, Hub
 from gateway.model import CommState, DriveCommand, DriveStatus, Source
+from tests.support import simulated
 
 ADDRESS = 6
 WITHIN = 8.0
@@ -30,7 +31,7 @@ class Line:
 
     @property
     def sim(self) -> Mcd600Sim:
-        line = self.adapter.sim_line
+        line = simulated.sim_line(self.adapter)
         assert line is not None
         device = line[ADDRESS].device
         assert isinstance(device, Mcd600Sim)
@@ -60,7 +61,7 @@ async def line(**drive: Any) -> AsyncIterator[Line]:
     }
     config = parse({"buses": {"pb": table}}, "line.toml")
     hub = build_hub(config)
-    adapter = ProfibusAdapter(config.buses[0])
+    adapter = simulated.profibus(ProfibusAdapter, config.buses[0])
     hub.attach_params(["ss"], adapter)
     task = asyncio.create_task(adapter.run(hub))
     try:

@@ -26,7 +26,6 @@ from adapters.profibus.profile import (
     RecordChannel,
     SlaveSetup,
 )
-from adapters.profibus.sim.devices import SIM_DEVICES
 from adapters.profibus.sim.echo import ECHO_IDENT, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from gateway.adapter import Capabilities, ParamValue
@@ -36,6 +35,7 @@ from gateway.errors import GatewayError, ParameterError
 from gateway.hub import Hub
 from gateway.model import DesiredCommand, Device, Direction, DriveState, DriveStatus, SpeedScale
 from gateway.schema import Table
+from tests.support import simulated
 
 ADAPTER = "echo-profibus"  # registered by tests/support/plugins.py
 
@@ -149,7 +149,6 @@ class EchoProfibusAdapter(ProfibusAdapter):
         **PROFILES,
         Device.TEST: "tests.profibus.support:EchoProfile",
     }
-    sim_devices: ClassVar[Mapping[Device, str] | None] = SIM_DEVICES
 
 
 # ---------------------------------------------------------------------------------------
@@ -190,8 +189,9 @@ class Line:
 
     @property
     def sim(self) -> SimLine:
-        assert self.adapter.sim_line is not None
-        return self.adapter.sim_line
+        line = simulated.sim_line(self.adapter)
+        assert line is not None
+        return line
 
     async def online(self, *ids: str, limit: float = 5.0) -> None:
         async with asyncio.timeout(limit):
@@ -215,12 +215,12 @@ async def until(cond: Callable[[], bool], limit: float = 5.0) -> None:
 async def running_line(config: Config) -> AsyncIterator[Line]:
     bus: BusConfig = config.buses[0]
     hub = build_hub(config)
-    adapter = EchoProfibusAdapter(bus)
+    adapter = simulated.profibus(EchoProfibusAdapter, bus)
     hub.attach_params([d.id for d in bus.drives], adapter)
     task = asyncio.create_task(adapter.run(hub), name="profibus-test-line")
     try:
         for _ in range(100):  # the simulated line is made as the adapter starts
-            if adapter.sim_line is not None or not adapter.options.simulate:
+            if not bus.simulate or simulated.sim_line(adapter) is not None:
                 break
             await asyncio.sleep(0)
         yield Line(adapter, hub, task)

@@ -215,6 +215,9 @@ class _Engine:
     def next_deadline(self) -> float | None:
         return self.deadline
 
+    def awaiting_reply(self) -> bool:
+        return False
+
 
 async def test_the_driver_keeps_the_idle_time_before_a_request() -> None:
     loop = asyncio.get_running_loop()

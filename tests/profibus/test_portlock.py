@@ -1,5 +1,5 @@
 """One master per line at the port: a second open of a held port is refused, naming the
-holder, before anything is set or sent (adapters/profibus/portlock.py)."""
+holder, before anything is set or sent (adapters/link/portlock.py)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from adapters.link.portlock import Holder, PortHeld, find_holder
 from adapters.profibus.link import open_port
-from adapters.profibus.portlock import Holder, PortHeld, find_holder
 from gateway.cli import main
 from gateway.errors import LineHeld
 

@@ -24,6 +24,7 @@ from adapters.profibus.sim.slave import DpSlave
 from gateway.adapter import Event
 from gateway.model import DriveState
 from tests.e2e.harness import TIMEOUT, Gateway, running_gateway
+from tests.support import simulated
 from tests.zenoh.client import Got, Inbox
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -165,7 +166,7 @@ def profibus_adapter(gw: Gateway) -> ProfibusAdapter:
 
 
 def sim_line(gw: Gateway) -> SimLine:
-    line = profibus_adapter(gw).sim_line
+    line = simulated.sim_line(profibus_adapter(gw))
     assert line is not None, "the Profibus line is not simulated"
     return line
 
@@ -181,7 +182,7 @@ def devicenet_adapter(gw: Gateway) -> DeviceNetAdapter:
 
 
 def can_sim(gw: Gateway) -> SimRunner:
-    runner = devicenet_adapter(gw).sim
+    runner = simulated.sim_runner(devicenet_adapter(gw))
     assert runner is not None, "the DeviceNet line is not simulated"
     return runner
 

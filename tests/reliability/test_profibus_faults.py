@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
+import adapters.link.serial as serial_link
 import adapters.profibus.adapter as profibus_adapter_module
-import adapters.profibus.link as profibus_link
 from adapters.profibus.cli import build_line
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.port import SimPort
@@ -152,13 +152,13 @@ async def test_the_serial_port_vanishing_is_reopened_with_back_off(
     bus = {"simulate": False, "port": str(port)}
     monkeypatch.setattr(profibus_adapter_module, "REOPEN_BACKOFF", (0.1, 0.8))
     attempts: list[float] = []
-    real_open = profibus_link.open_link
+    real_open = serial_link.open_link
 
     async def counted(*args: Any, **kwargs: Any) -> Any:
         attempts.append(now())
         return await real_open(*args, **kwargs)
 
-    monkeypatch.setattr(profibus_adapter_module, "open_link", counted)
+    monkeypatch.setattr(serial_link, "open_link", counted)  # the real port's factory opens it
     no_action = {d: {"startup_params": {"P0313": 0}} for d in WEG}  # drives keep turning
     with external_line(tmp_path, demo_buses(new_channel(), no_action, profibus=bus)) as line:
         sim, path = SimPort.on_pty(line)

@@ -22,6 +22,7 @@ import pytest
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.link import LinkConfig
 from adapters.devicenet.sim import SimNodeConfig, SimPhase, SimRunner
+from adapters.devicenet.sim.simulated import sim_configs
 from gateway.adapter import Event
 from gateway.config import parse
 from gateway.daemon import build_hub
@@ -197,7 +198,7 @@ async def rig(
     hub = build_hub(config)
     adapter = DeviceNetAdapter(config.buses[0])
     hub.attach_params([d["id"] for d in drives], adapter)
-    runner = SimRunner(line, adapter.sim_configs() if sims is None else sims)
+    runner = SimRunner(line, sim_configs(config.buses[0]) if sims is None else sims)
     sim_task = asyncio.create_task(runner.run(), name="sim")
     await asyncio.wait_for(runner.started.wait(), scaled(5))
     if settle:  # the simulated nodes finish their Duplicate MAC ID check first

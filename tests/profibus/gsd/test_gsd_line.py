@@ -20,6 +20,7 @@ from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState
+from tests.support import simulated
 
 GSD_DIR = Path(__file__).resolve().parents[2] / "data" / "gsd"
 CONFIG = str(GSD_DIR / "site.toml")  # GSD paths are relative to the config file
@@ -71,7 +72,7 @@ async def running(
     table.update({"port": port} if port else {"simulate": True})
     config = parse({"buses": {"profibus": table}}, CONFIG)
     hub = build_hub(config)
-    adapter = ProfibusAdapter(config.buses[0])
+    adapter = simulated.profibus(ProfibusAdapter, config.buses[0])
     hub.attach_params([d["id"] for d in drives], adapter)
     task = asyncio.create_task(adapter.run(hub))
     try:
@@ -87,7 +88,7 @@ async def test_every_device_from_its_gsd_reaches_data_exchange_with_the_files_by
         async with asyncio.timeout(10):
             for d in DRIVES:
                 await hub.wait_for(d["id"], lambda s: s.comm is CommState.ONLINE)
-        line = adapter.sim_line
+        line = simulated.sim_line(adapter)
         assert line is not None
         sims = {a: s for a in (3, 4, 5, 6) if isinstance(s := line[a].device, GsdSim)}
         assert len(sims) == 4  # every simulated drive judges by its GSD

@@ -14,6 +14,7 @@ from adapters.profibus.adapter import ProfibusAdapter
 from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.model import CommState
+from tests.support import simulated
 
 DRIVES: list[dict[str, Any]] = [
     {"id": "cfw11", "device": "CFW-11", "address": 3, "data_profile": "profidrive", "frame": 20},
@@ -27,7 +28,7 @@ async def test_every_device_of_the_demo_line_comes_online_and_leaves_with_clear(
     table = {"adapter": "profibus", "simulate": True, "latency": 0.02, "drives": DRIVES}
     config = parse({"buses": {"profibus": table}}, "demo-line.toml")
     hub = build_hub(config)
-    adapter = ProfibusAdapter(config.buses[0])
+    adapter = simulated.profibus(ProfibusAdapter, config.buses[0])
     hub.attach_params([d["id"] for d in DRIVES], adapter)
     task = asyncio.create_task(adapter.run(hub))
     try:
@@ -41,6 +42,6 @@ async def test_every_device_of_the_demo_line_comes_online_and_leaves_with_clear(
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
-    line = adapter.sim_line
+    line = simulated.sim_line(adapter)
     assert line is not None
     assert all(line[a].counters.clears >= 1 for a in (3, 4, 5, 6))

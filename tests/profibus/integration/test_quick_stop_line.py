@@ -22,6 +22,7 @@ from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState, DriveCommand, DriveState, Source
+from tests.support import simulated
 
 NETWORK = {"P0220": 10, "P0222": 11, "P0226": 9, "P0227": 4, "P0228": 5, "P0105": 5}
 RAMPS = {"P0100": 10, "P0101": 10, "P0313": 1}  # 1.0 s from 0 to P0134 = 1800 rpm
@@ -39,7 +40,7 @@ async def line() -> AsyncIterator[tuple[Hub, ProfibusAdapter]]:
     table = {"adapter": "profibus", "simulate": True, "latency": 0.02, "drives": drives}
     config = parse({"buses": {"profibus": table}}, "quick-stop-line.toml")
     hub = build_hub(config)
-    adapter = ProfibusAdapter(config.buses[0])
+    adapter = simulated.profibus(ProfibusAdapter, config.buses[0])
     hub.attach_params([d["id"] for d in drives], adapter)
     task = asyncio.create_task(adapter.run(hub))
     try:
@@ -57,8 +58,9 @@ async def until(hub: Hub, drive_id: str, pred: Any) -> DriveState:
 
 
 def sim(adapter: ProfibusAdapter, address: int) -> WegSim:
-    assert adapter.sim_line is not None
-    device = adapter.sim_line[address].device
+    line = simulated.sim_line(adapter)
+    assert line is not None
+    device = line[address].device
     assert isinstance(device, WegSim)
     return device
 
@@ -95,8 +97,9 @@ async def test_quick_stop_stops_and_its_release_does_not_restart(
         assert drive_sim.net.quick_stop is (drive_id == "vector")  # V/f: no bit 6 sent
         assert drive_sim.motor.speed == 0.0
         # released: whatever the hub's desired run still says, the motor stays stopped
-        assert adapter.sim_line is not None
-        slave = adapter.sim_line[address]
+        sims = simulated.sim_line(adapter)
+        assert sims is not None
+        slave = sims[address]
         hub.submit(drive_id, Source.ZENOH, DriveCommand(quick_stop=False))
         after = slave.counters.exchanges + 20  # twenty data exchanges after the release
         async with asyncio.timeout(LIMIT):

@@ -1,0 +1,142 @@
+"""The driver loop of a frame engine on a :class:`~adapters.link.can.CanLink`.
+
+One pass of :meth:`CanDriver.run`: the adapter's work before the step
+(:meth:`CanProtocol.before_step`: new outputs from the hub, once per poll), a step of the
+engine when its deadline has come (or when it has none), the adapter's work after it
+(:meth:`CanProtocol.after_step`: a second engine sharing the line), the frames asked for
+sent in one batch; then a wait for frames until the earliest of the engine's deadline and
+the adapter's (:meth:`CanProtocol.wake_at`), each received event stepped at the time it was
+taken (and shown to :meth:`CanProtocol.received`), and what that asked for sent.
+
+A send that fails (a full transmit queue, the interface down) goes back to the engine as
+the events :meth:`CanProtocol.send_failed` makes of it, so it backs off; the frames not
+sent are dropped, never retried here. The clock is injected (``time.monotonic`` unless a
+test gives another).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Final, Generic, Protocol, TypeVar
+
+from .can import CanEvent, CanLink, Frame, FrameT, SendResult
+from .engine import Engine
+
+IDLE_WAIT: Final = 1.0  # s: the longest wait for frames when nothing else is due
+
+EventT = TypeVar("EventT")
+ActionT = TypeVar("ActionT")
+FrameT_contra = TypeVar("FrameT_contra", bound=Frame, contravariant=True)
+EventT_co = TypeVar("EventT_co", covariant=True)
+ActionT_contra = TypeVar("ActionT_contra", contravariant=True)
+
+
+class CanProtocol(Protocol[FrameT_contra, EventT_co, ActionT_contra]):
+    """What the driver needs of one protocol on CAN and of its adapter; the hooks with a
+    body are optional (their default does nothing)."""
+
+    def event(self, received: CanEvent[FrameT_contra]) -> EventT_co:
+        """A link event as the engine's event."""
+        ...
+
+    def frame(self, action: ActionT_contra) -> Frame | None:
+        """The frame ``action`` sends, or None for an action :meth:`handle` takes."""
+        ...
+
+    def handle(self, now: float, action: ActionT_contra) -> None:
+        """An action that is no frame (a report for the adapter)."""
+        ...
+
+    def send_failed(self, result: SendResult) -> Sequence[EventT_co]:
+        """The events telling the engine a send failed (it backs off)."""
+        ...
+
+    def before_step(self, now: float) -> None:
+        """Each pass, before the engine's step."""
+        return
+
+    def after_step(self, now: float) -> None:
+        """Each pass, after the engine's step, before the frames go out."""
+        return
+
+    def wake_at(self) -> float | None:
+        """When the adapter wants a pass without a frame (None: only the engine decides)."""
+        return None
+
+    def received(self, now: float, event: CanEvent[FrameT_contra]) -> None:
+        """A link event, after the engine stepped it (a second engine on the line)."""
+        return
+
+
+class CanDriver(Generic[FrameT, EventT, ActionT]):
+    """Glue between one engine and one CAN link (see the module docstring)."""
+
+    def __init__(
+        self,
+        engine: Engine[EventT, ActionT],
+        link: CanLink[FrameT],
+        protocol: CanProtocol[FrameT, EventT, ActionT],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.engine = engine
+        self.link = link
+        self.protocol = protocol
+        self.clock = clock
+        self._outbox: list[Frame] = []
+
+    async def run(self) -> None:
+        """Pass after pass until cancelled (see the module docstring)."""
+        engine, protocol, clock = self.engine, self.protocol, self.clock
+        while True:
+            now = clock()
+            protocol.before_step(now)
+            deadline = engine.next_deadline()
+            if deadline is None or now >= deadline:
+                self.act(now, engine.step(now))
+            protocol.after_step(now)
+            self.flush(now)
+            events = await self.link.receive(max(self._wake() - clock(), 0.0))
+            now = clock()
+            self.take(now, events)
+            self.flush(now)
+
+    def _wake(self) -> float:
+        deadline = self.engine.next_deadline()
+        other = self.protocol.wake_at()
+        times = [t for t in (deadline, other) if t is not None]
+        return min(times) if times else self.clock() + IDLE_WAIT
+
+    def take(self, now: float, events: Sequence[CanEvent[FrameT]]) -> None:
+        """Step each received event (then show it to the adapter)."""
+        for event in events:
+            self.act(now, self.engine.step(now, self.protocol.event(event)))
+            self.protocol.received(now, event)
+
+    def act(self, now: float, actions: Sequence[ActionT]) -> None:
+        """Frames to the outbox, the rest to the adapter, in order."""
+        for action in actions:
+            frame = self.protocol.frame(action)
+            if frame is not None:
+                self._outbox.append(frame)
+            else:
+                self.protocol.handle(now, action)
+
+    def queue(self, frame: Frame) -> None:
+        """A frame from elsewhere (a second engine on the line) for the next send."""
+        self._outbox.append(frame)
+
+    def discard(self) -> None:
+        """Forget the frames not sent yet (leaving the line)."""
+        self._outbox.clear()
+
+    def flush(self, now: float) -> None:
+        """Send what was asked for; a failure goes back to the engine (it backs off)."""
+        frames, self._outbox = self._outbox, []
+        if not frames:
+            return
+        result = self.link.send(frames)
+        if result.error is None:
+            return
+        for event in self.protocol.send_failed(result):
+            self.act(now, self.engine.step(now, event))

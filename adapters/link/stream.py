@@ -1,0 +1,293 @@
+"""The driver loop of a byte-stream engine on a :class:`~adapters.link.serial.SerialLink`.
+
+Everything happens in loop callbacks, never in a blocking call: bytes from the link go
+through the protocol's stream codec (:class:`StreamProtocol`) into ``engine.step(now,
+event)``; each resulting transmission (:meth:`StreamProtocol.transmission`) is written once
+its ``not_before`` has come and confirmed to the engine with
+:meth:`StreamProtocol.written` carrying the time the write actually happened (a loop
+callback can run late: the engine counts every idle time and reply deadline from that
+time, never from the planned one); the other actions go to ``on_action`` once the step's
+requests are on their way (a reply's handling is not part of the turnaround); a timer
+steps the engine at ``engine.next_deadline()``. Before each request the codec is told the
+line was idle (:meth:`StreamProtocol.idle`), so a reply cut short by noise cannot swallow
+the next one.
+
+A deadline closer than :data:`SPIN_LIMIT` (Profibus TSYN is 66 us at 500 kbit/s) is waited
+for on the port itself (``select`` with a sub-millisecond timeout) instead of a loop timer,
+which cannot sleep less than a millisecond: bytes arriving meanwhile are read and stepped
+at once, so a stray reply restarts the idle time before the next request is decided. At
+most :data:`MAX_SHORT_WAITS` such waits per step, so the rest of the loop always gets its
+turn.
+
+A reply deadline whose timer fires late (the process was not scheduled) is judged once more
+that much later (:meth:`StreamDriver._postpone`): what could not run meanwhile includes a
+simulated line's devices, which share the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any, Final, Generic, Protocol, TypeVar
+
+from .engine import Engine
+from .serial import SerialLink
+
+log = logging.getLogger(__name__)
+
+SPIN_LIMIT: Final = 0.001  # s: shorter waits are spent watching the port, longer ones slept
+MAX_SHORT_WAITS: Final = 8  # short waits in one step before the loop gets its turn back
+LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
+MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
+MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
+
+EventT = TypeVar("EventT")
+EventT_co = TypeVar("EventT_co", covariant=True)
+EventT_contra = TypeVar("EventT_contra", contravariant=True)
+
+
+class ReplyEngine(Engine[EventT_contra, Any], Protocol[EventT_contra]):
+    """A master's engine on a serial line: it also says whether it waits for a reply."""
+
+    def awaiting_reply(self) -> bool:
+        """True while the next deadline is a reply's (a late timer then postpones it)."""
+        ...
+
+
+class Transmission(Protocol):
+    """Bytes to write at ``not_before`` at the earliest (the line's idle time is in it)."""
+
+    @property
+    def data(self) -> bytes: ...
+
+    @property
+    def not_before(self) -> float: ...
+
+
+class StreamProtocol(Protocol[EventT_co]):
+    """What the driver needs of one byte-stream protocol: its stream codec (bytes ->
+    engine events) and which of its engine's actions are transmissions."""
+
+    def whole(self, data: bytes) -> EventT_co | None:
+        """The event of ``data`` when it is one whole frame and nothing is held (one read,
+        one reply: the common case); None: :meth:`feed` it."""
+        ...
+
+    def feed(self, data: bytes) -> Sequence[EventT_co]:
+        """Take bytes off the line; the events of the frames (and noise) they complete."""
+        ...
+
+    def receiving(self) -> EventT_co | None:
+        """The event saying a frame has begun (bytes held), or None when nothing is held."""
+        ...
+
+    def idle(self) -> Sequence[EventT_co]:
+        """The line was idle (a request goes next): what is held is no frame; the events of
+        what that flushed (noise), for ``on_flushed``."""
+        ...
+
+    def transmission(self, action: Any) -> Transmission | None:
+        """``action`` as bytes to write, or None for an action ``on_action`` handles."""
+        ...
+
+    def written(self, at: float) -> EventT_co:
+        """The event confirming the oldest unconfirmed transmission, written at ``at``."""
+        ...
+
+
+class StreamDriver(Generic[EventT]):
+    """Glue between one engine and one serial link (see the module docstring)."""
+
+    def __init__(
+        self,
+        engine: ReplyEngine[EventT],
+        link: SerialLink,
+        protocol: StreamProtocol[EventT],
+        *,
+        on_action: Callable[[Any], None] = lambda action: None,
+        on_flushed: Callable[[EventT], None] = lambda event: None,
+        on_stepped: Callable[[], None] = lambda: None,
+    ) -> None:
+        self.engine = engine
+        self.link = link
+        self.protocol = protocol
+        self.loop = link.loop
+        self.on_action = on_action
+        self.on_flushed = on_flushed
+        self.on_stepped = on_stepped
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+        self._delayed: asyncio.TimerHandle | None = None
+        self._stepping = False
+        self._queued: deque[EventT | None] = deque()
+        self._postponed_for: float | None = None
+        self._postpones = 0
+        self.postponed = 0  # reply deadlines judged later because their timer ran late
+        self._stopped = False
+        link.on_data = self._on_data
+
+    def start(self) -> None:
+        self.poke()
+
+    def stop(self) -> None:
+        """No more stepping (the link stays open: the caller closes it)."""
+        self._stopped = True
+        for handle in (self._timer, self._delayed):
+            if handle is not None:
+                handle.cancel()
+        self._timer = self._delayed = None
+
+    def poke(self) -> None:
+        """Step the engine now (after a command: new outputs, an acyclic job...)."""
+        self._step(None)
+
+    # ------------------------------------------------------------------ stepping
+
+    def _step(self, event: EventT | None) -> None:
+        if self._stopped:
+            return
+        if self._stepping:  # from inside a step (a callback, bytes read in a short wait)
+            self._queued.append(event)
+            return
+        self._stepping = True
+        try:
+            self._queued.append(event)
+            self._drain()
+            waits = 0
+            while waits < MAX_SHORT_WAITS and self._short_wait():
+                waits += 1
+                self._drain()
+        finally:
+            self._stepping = False
+        self._arm()
+        self.on_stepped()
+
+    def _drain(self) -> None:
+        while self._queued and not self._stopped:
+            self._run(self.engine.step(self.loop.time(), self._queued.popleft()))
+
+    def _short_wait(self) -> bool:
+        """Wait for a deadline closer than SPIN_LIMIT on the port itself; True if it came
+        (or bytes did, read and queued meanwhile) and the engine wants stepping again."""
+        if self._stopped:
+            return False
+        deadline = self.engine.next_deadline()
+        if deadline is None or deadline - self.loop.time() > SPIN_LIMIT:
+            return False
+        if self.link.wait_readable(deadline - self.loop.time()):
+            self.link.read_now()  # -> _on_data -> queued events
+        if not self._queued:
+            self._queued.append(None)
+        return True
+
+    def _run(self, actions: Sequence[Any]) -> None:
+        """Requests first, then the other actions in their order.
+
+        What a request carries was fixed by the engine when it built it, so nothing a
+        handler does can change it; the line must not wait while the adapter decodes a
+        reply's inputs and updates the hub (the master's turnaround).
+        """
+        others: list[Any] = []
+        todo = deque(actions)
+        transmission = self.protocol.transmission
+        while todo:
+            action = todo.popleft()
+            out = transmission(action)
+            if out is None:
+                others.append(action)
+                continue
+            at = self._transmit(out)
+            if at is not None:  # confirmed at once: what the engine does next comes first
+                todo.extend(self.engine.step(self.loop.time(), self.protocol.written(at)))
+        for action in others:
+            try:
+                self.on_action(action)
+            except Exception:  # a profile bug must not stop the line
+                log.exception("handling %r failed", action)
+
+    def _arm(self) -> None:
+        """A timer for the engine's next deadline.
+
+        A timer already armed for an earlier time is kept: it fires early, the step finds
+        nothing due and arms again. The deadline of a request moves on with every message,
+        so this saves a timer per message; a later deadline is rescheduled only when due.
+        """
+        if self._stopped:
+            return
+        deadline = self.engine.next_deadline()
+        if deadline is None:
+            return  # nothing due: an armed timer only causes one idle step
+        if self._timer is not None and self._timer_at is not None and self._timer_at <= deadline:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = deadline
+        self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        armed = self._timer_at
+        self._timer = None
+        self._timer_at = None
+        if armed is not None and self._postpone(armed):
+            return
+        self._step(None)
+
+    def _postpone(self, armed: float) -> bool:
+        """A reply deadline whose timer ran late (the loop did not run meanwhile) is judged
+        as much later, at most :data:`MAX_POSTPONES` times: a device simulated on the same
+        loop, and the pty between, could not answer while the loop stood still. (On a real
+        line the reply is in the port by then and read first: the loop runs its I/O
+        callbacks before its timers.)"""
+        deadline = self.engine.next_deadline()
+        if deadline is None or not self.engine.awaiting_reply():
+            return False
+        if deadline != self._postponed_for:
+            self._postponed_for, self._postpones = deadline, 0
+        lag = self.loop.time() - max(armed, deadline)
+        if lag <= LATE_TIMER or self._postpones >= MAX_POSTPONES:
+            return False
+        self._postpones += 1
+        self.postponed += 1
+        self._timer_at = self.loop.time() + min(lag, MAX_POSTPONE)
+        self._timer = self.loop.call_at(self._timer_at, self._on_timer)
+        return True
+
+    # ------------------------------------------------------------------ receiving
+
+    def _on_data(self, data: bytes, now: float) -> None:
+        protocol = self.protocol
+        whole = protocol.whole(data)
+        if whole is not None:
+            self._step(whole)
+            return
+        for event in protocol.feed(data):
+            self._step(event)
+        receiving = protocol.receiving()
+        if receiving is not None:
+            self._step(receiving)
+
+    # ------------------------------------------------------------------ sending
+
+    def _transmit(self, out: Transmission) -> float | None:
+        """Write ``out`` when due; the time it was written, or None if it waits for a
+        timer (confirmed to the engine from there)."""
+        for event in self.protocol.idle():  # the line was idle before this request
+            self.on_flushed(event)
+        wait = out.not_before - self.loop.time()
+        if wait > SPIN_LIMIT:
+            self._delayed = self.loop.call_at(out.not_before, self._write, out.data)
+            return None
+        while time.monotonic() < out.not_before:  # the loop's clock is time.monotonic
+            pass
+        self.link.write(out.data)
+        return self.loop.time()
+
+    def _write(self, data: bytes) -> None:
+        self._delayed = None
+        if self._stopped:
+            return
+        self.link.write(data)
+        self._step(self.protocol.written(self.loop.time()))  # when it really went, however late
