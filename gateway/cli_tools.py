@@ -32,7 +32,7 @@ from typing import Any, TextIO
 import zenoh
 
 from gateway.config import read_zenoh_config_file
-from gateway.errors import ConfigError
+from gateway.errors import ConfigError, GatewayError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "demo"
@@ -95,7 +95,7 @@ FOLLOWS: dict[str, tuple[str, Predicate]] = {
 """Action -> what the drive's state shows once it followed (the others: the state as it is)."""
 
 
-class NoGateway(Exception):
+class NoGateway(GatewayError):
     """No gateway answered (exit 3)."""
 
 

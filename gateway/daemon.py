@@ -34,6 +34,7 @@ from gateway.adapter import DriveAdapter, load_adapter
 from gateway.config import BusConfig, Config, load
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.hub import DrivePolicy, Hub
+from gateway.loader import load as load_target
 from gateway.loader import load_optional
 from gateway.model import CommState, DriveState
 from gateway.systemd import Notifier
@@ -182,10 +183,7 @@ def simulated_line(bus: BusConfig) -> object:
             f"buses.{bus.name}.simulate",
             f"adapter {bus.adapter!r} has no simulator",
         )
-    module_name, _, class_name = target.partition(":")
-    factory: Callable[[BusConfig], object] = getattr(
-        importlib.import_module(module_name), class_name
-    )
+    factory: Callable[[BusConfig], object] = load_target(target)
     return factory(bus)
 
 

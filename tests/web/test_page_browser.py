@@ -18,9 +18,9 @@ import pytest
 import pytest_asyncio
 from playwright.async_api import Page, async_playwright
 
-from adapters.devicenet.adapter import DeviceNetAdapter
 from gateway.model import CommState, DriveStatus, Source
 from gateway.web.feed import PUSH_PERIOD
+from tests.support.simulated import sim_runner
 from tests.support.timing import scaled
 from tests.web.harness import (
     ARTEFACTS,
@@ -173,9 +173,9 @@ async def test_a_run_command_over_zenoh_shows_in_the_table_and_the_trend_within_
 async def test_a_drive_that_goes_offline_is_shown_offline(page: Page) -> None:
     async with demo_daemon() as demo:
         await open_page(page, demo.url, len(DEMO_DRIVES))
-        adapter = demo.daemon.runtime.adapters["devicenet"]
-        assert isinstance(adapter, DeviceNetAdapter) and adapter.sim is not None
-        adapter.sim.power_off(5)  # the demo's CFW-08, MAC 5
+        sim = sim_runner(demo.daemon.runtime.adapters["devicenet"])
+        assert sim is not None
+        sim.power_off(5)  # the demo's CFW-08, MAC 5
         await demo.wait_for("cfw08", lambda s: s.comm is CommState.OFFLINE)
         await page.wait_for_selector(
             '#drives-body tr[data-drive="cfw08"][data-comm="offline"]', timeout=WAIT_MS
@@ -186,7 +186,7 @@ async def test_a_drive_that_goes_offline_is_shown_offline(page: Page) -> None:
         badge = page.locator('#drives-body tr[data-drive="cfw08"] td[data-col="comm"]')
         assert await badge.text_content() == "offline"
         await screenshot(page, "demo-cfw08-offline")
-        adapter.sim.power_on(5)
+        sim.power_on(5)
 
 
 async def test_with_commands_off_the_page_offers_no_command(page: Page) -> None:

@@ -174,11 +174,6 @@ def test_parameters_read_and_write_round_trip(client: Client) -> None:
         ("params/999", None, {"error": "impermissible parameter number", "code": 0}),
         ("params/2", {"value": 1}, {"error": "parameter 2 is not in writable_params of drive d2"}),
         ("params/abc", None, {"error": "parameter number must be a decimal number, not 'abc'"}),
-        (
-            "params",
-            None,
-            {"error": "a parameter key is params/<number> or params/<number>/<subindex>"},
-        ),
         ("params/100", {"value": "high"}, {"error": "value must be a number, not 'high'"}),
         (
             "params/100",
@@ -240,3 +235,12 @@ def test_every_token_disappears_when_the_gateway_process_is_killed(tmp_path: Pat
     finally:
         c.close()
         gw.kill()
+
+
+def test_params_without_a_number_is_the_whole_backup(client: Client) -> None:
+    """``<prefix>/drives/<id>/params`` (issue 24): the backup document, not an error."""
+    reply = client.one(key("d2", "params"))
+    assert reply.ok, reply.payload
+    doc = reply.json()
+    assert doc["schema"] == "drive-gateway/params-backup" and doc["version"] == 1
+    assert any(p["number"] == 100 and p["raw"] == 50 for p in doc["params"])

@@ -16,7 +16,8 @@ from collections.abc import Callable
 import can
 import pytest
 
-from adapters.devicenet.link import RX_BUFFER_BYTES, CanLink, LinkConfig, RxFrame
+from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
+from adapters.link.can import RX_BUFFER_BYTES
 from gateway.adapter import Event, EventKind
 from gateway.model import CommState, DriveCommand, DriveState, DriveStatus, Source
 from tests.devicenet.integration.conftest import (
