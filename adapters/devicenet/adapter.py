@@ -33,7 +33,7 @@ from adapters.devicenet.link import (
     RxFailed,
     RxFrame,
 )
-from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus
 from adapters.devicenet.profile import (
     PROFILES,
     RESET_OFFLINE_WINDOW,
@@ -201,7 +201,8 @@ class DeviceNetAdapter:
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
-        return parse_drive(table, drive)
+        """The drive's keys, as the profile of its device reads them."""
+        return load_profile(drive.device).parse_options(table, drive)
 
     def __init__(self, bus: BusConfig, *, clock: Callable[[], float] = time.monotonic) -> None:
         self.bus = bus

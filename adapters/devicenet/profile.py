@@ -36,6 +36,8 @@ from gateway.model import DesiredCommand, Device
 
 if TYPE_CHECKING:
     from adapters.devicenet.options import DriveOptions
+    from gateway.config import DriveConfig
+    from gateway.schema import Table
 
 PROFILES: dict[Device, str] = {
     Device.CFW08: "adapters.devicenet.cfw08.profile:Cfw08Profile",
@@ -90,6 +92,12 @@ class DnProfile(Protocol):
     """
 
     device: ClassVar[Device]
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+        """The drive's keys of the config table (``options.parse_drive`` reads the
+        DeviceNet node keys a device shares: connection, identity, EDS, ADR)."""
+        ...
 
     reset_note: ClassVar[str | None] = None
     """What a fault reset does to the drive's connection, added to the fault reset event
@@ -181,6 +189,9 @@ class ProfileFactory(Protocol):
     """A :class:`DnProfile` class, built from a drive's id and its parsed drive table."""
 
     device: ClassVar[Device]
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> DriveOptions: ...
 
     def __call__(self, drive_id: str, options: DriveOptions) -> DnProfile: ...
 

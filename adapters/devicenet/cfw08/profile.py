@@ -51,12 +51,14 @@ from adapters.devicenet.cip import CipClass
 from adapters.devicenet.datatypes import AttributeValue
 from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import GetAttributeSingle, SetAttributeSingle
-from adapters.devicenet.options import DriveOptions
+from adapters.devicenet.options import DriveOptions, parse_drive
 from adapters.devicenet.profile import DnProfile, DrivePort, NotConfigured, reply_data
 from adapters.devicenet.scanner.api import IoKind
 from gateway.adapter import Capabilities, EventKind, ParamValue
+from gateway.config import DriveConfig
 from gateway.errors import FrameEncodeError, ParameterError
 from gateway.model import DesiredCommand, Device
+from gateway.schema import Table
 
 
 @dataclass(slots=True)
@@ -73,6 +75,10 @@ class Cfw08Profile(DnProfile):
     in_force: str | None = None  # the assembly pair the I/O connection's paths name
     io_values: dict[str, int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+        return parse_drive(table, drive)
 
     def __post_init__(self) -> None:
         if self.opts.max_rpm is not None:

@@ -11,11 +11,13 @@ import pytest
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.cfw08.profile import Cfw08Profile
 from adapters.devicenet.link import LinkConfig
-from adapters.devicenet.options import DriveOptions
+from adapters.devicenet.options import DriveOptions, parse_drive
 from adapters.devicenet.profile import PROFILES, DnProfile, DrivePort, load_profile
 from gateway.adapter import Capabilities, EventKind, ParamValue
+from gateway.config import DriveConfig
 from gateway.errors import ParameterError
 from gateway.model import CommState, DesiredCommand, Device, SpeedScale
+from gateway.schema import Table
 from tests.devicenet.integration.conftest import drive, rig
 from tests.test_layering import MODULES, under
 
@@ -49,6 +51,10 @@ class PlainProfile(DnProfile):
 
     drive_id: str
     opts: DriveOptions
+
+    @classmethod
+    def parse_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+        return parse_drive(table, drive)
 
     @property
     def ready(self) -> bool:
