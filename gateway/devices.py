@@ -92,6 +92,7 @@ class Device(Enum):
         code=4,
         bus="devicenet",
         package="adapters.devicenet.cfw08",
+        profile="adapters.devicenet.cfw08.profile:Cfw08Profile",
         doc="WEG CFW-08 frequency inverter (docs/devices.md, WEG CFW-08 (DeviceNet))",
     )
     MCD600 = DeviceSpec(

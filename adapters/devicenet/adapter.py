@@ -1,13 +1,12 @@
-"""The DeviceNet adapter: python-can link + scanner engine + CFW-08 profile, as a DriveAdapter.
+"""The DeviceNet adapter: python-can link + scanner engine + device profiles, as a DriveAdapter.
 
-Per drive, once the scanner has it online (allocated, identity and sizes checked, EPR
-set), the adapter configures it through explicit messages: the I/O connection's paths
-must name the configured assembly pair (seed tables 13-14; P710 counts only after a
-reset, seed 4.1.8), P313 is read (the drive's own reaction to a
-communication error, seed 4.1.3), the maximum speed is read if the config asks, and
-``startup_params`` are written and read back. Until that succeeds the scanner sends
-idle (zero-length) I/O and the drive stays ``connecting``: it never runs half-set.
-Then I/O carries the desired command and the readings make the drive ``online``.
+Each drive has the :class:`~adapters.devicenet.profile.DnProfile` its device registers
+(``adapters.devicenet.profile.PROFILES``); the adapter names no device. Per drive, once
+the scanner has it online (allocated, identity and sizes checked, EPR set), the profile
+configures it through explicit messages (:meth:`DnProfile.on_connect`). Until that
+succeeds the scanner sends idle (zero-length) I/O and the drive stays ``connecting``: it
+never runs half-set. Then I/O carries the desired command and the readings make the
+drive ``online``.
 """
 
 from __future__ import annotations
@@ -17,53 +16,13 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
-from adapters.devicenet import objects
-from adapters.devicenet.cfw08 import (
-    P070_COMM_ERROR,
-    P070_TEXT,
-    P081_IDLE,
-    P081_TEXT,
-    P313_TEXT,
-    SPEED_REF_MAX_RPM,
-    AssemblyPair,
-    AttributePath,
-    ProfileSettings,
-    capabilities,
-    command_assembly,
-    decode_parameter,
-    encode_parameter,
-    fault_text,
-    parameter_path,
-    state_changes,
-    value_text,
-)
-from adapters.devicenet.cfw08_objects import (
-    P070,
-    P081,
-    P313,
-    P702,
-    P702_BAUD,
-    P710,
-    SEED_PARAMETERS,
-    STANDARD_OBJECTS,
-    AttributeSpec,
-    Value,
-    decode_attribute,
-    encode_attribute,
-)
-from adapters.devicenet.cip import CipClass
+from adapters.devicenet.datatypes import AttributeValue
 from adapters.devicenet.eds import Param
 from adapters.devicenet.errors import DeviceNetDecodeError
-from adapters.devicenet.explicit import (
-    ErrorResponse,
-    GetAttributeSingle,
-    Request,
-    Response,
-    SetAttributeSingle,
-)
+from adapters.devicenet.explicit import Request, Response
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
     DeviceNetBus,
@@ -75,7 +34,13 @@ from adapters.devicenet.link import (
     RxFailed,
     RxFrame,
 )
-from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus
+from adapters.devicenet.profile import (
+    RESET_OFFLINE_WINDOW,
+    DnProfile,
+    NotConfigured,
+    load_profile,
+)
 from adapters.devicenet.scanner import (
     Action,
     BadFrame,
@@ -85,7 +50,6 @@ from adapters.devicenet.scanner import (
     FrameIn,
     IdentityCheck,
     InputData,
-    IoKind,
     LineFault,
     LineOnline,
     LinkDown,
@@ -113,7 +77,6 @@ from adapters.link.can import CanLinks, SendResult
 from adapters.link.candriver import CanDriver, CanProtocol
 from adapters.link.config import missing_options, unsimulated
 from gateway.adapter import (
-    Capabilities,
     EventKind,
     HubPort,
     ParamInfo,
@@ -126,7 +89,6 @@ from gateway.devices import devices_of
 from gateway.errors import (
     AdapterError,
     DriveOffline,
-    FrameEncodeError,
     GatewayTimeout,
     LineHeld,
     ParameterError,
@@ -153,26 +115,18 @@ REPORT_EVENTS: dict[ReportKind, EventKind] = {
 }
 
 
-class NotConfigured(AdapterError):
-    """A drive's configuration at connect failed; the text says why."""
-
-
 @dataclass(slots=True)
 class _Drive:
     cfg: DriveConfig
     opts: DriveOptions
-    settings: ProfileSettings | None
+    profile: DnProfile
     configured: bool = False
     setup: asyncio.Task[None] | None = None
     status: asyncio.Task[None] | None = None
     reset_seen: int = 0
     reset_until: float = 0.0
     reset_sent_at: float | None = None
-    p313: int | None = None
     problem: str | None = None
-    in_force: str | None = None  # the assembly pair the I/O connection's paths name
-    io_values: dict[str, float | int] = field(default_factory=dict)
-    params: dict[str, int] = field(default_factory=dict)
     bad_inputs: int = 0
     output_key: object = None  # what the current output was computed from
     input_key: object = None  # the last input data and desired command mapped
@@ -187,7 +141,32 @@ class _Drive:
 
     @property
     def values(self) -> dict[str, float | int]:
-        return {**self.io_values, **self.params}
+        return self.profile.values
+
+
+@dataclass(frozen=True, slots=True)
+class _Port:
+    """One drive as its profile sees it (adapters.devicenet.profile.DrivePort)."""
+
+    adapter: DeviceNetAdapter
+    drive: _Drive
+
+    @property
+    def bitrate(self) -> int:
+        return self.adapter.options.bitrate
+
+    async def request(self, body: Request) -> Response:
+        return await self.adapter._request(self.drive, body)
+
+    def event(self, kind: EventKind, text: str, **data: Any) -> None:
+        self.adapter._hub_port().event(self.drive.id, kind, text, **data)
+
+    def capabilities_changed(self) -> None:
+        self.adapter._publish_capabilities(self.drive)
+
+    def values_changed(self) -> None:
+        d = self.drive
+        self.adapter._hub_port().update(d.id, values=d.values)
 
 
 def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
@@ -209,24 +188,8 @@ def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
     )
 
 
-def seed_param_table() -> ParamTable:
-    """The CFW-08 parameters the DeviceNet manual gives (seed section 4: P070, P081,
-    P220-P231, P313, P700-P710, with their ranges): the drive's table when it has no EDS,
-    so a parameter backup knows what to read (docs/devices.md)."""
-    return param_table(
-        ParamInfo(
-            number=p.number,
-            name=p.name,
-            minimum=p.minimum,
-            maximum=p.maximum,
-            code=f"P{p.number:03d}",
-        )
-        for p in sorted(SEED_PARAMETERS.values(), key=lambda p: p.number)
-    )
-
-
 class DeviceNetAdapter:
-    """One DeviceNet line scanned by the gateway, with WEG CFW-08 drives."""
+    """One DeviceNet line scanned by the gateway, with the drives of :data:`PROFILES`."""
 
     devices: ClassVar[frozenset[Device]] = devices_of("devicenet")  # the registry's
     address_range: ClassVar[tuple[int, int]] = (0, 63)
@@ -237,7 +200,8 @@ class DeviceNetAdapter:
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
-        return parse_drive(table, drive)
+        """The drive's keys, as the profile of its device reads them."""
+        return load_profile(drive.device).parse_options(table, drive)
 
     def __init__(
         self,
@@ -267,10 +231,7 @@ class DeviceNetAdapter:
                     f"drive {d.id} has the scanner's MAC ID {d.address} (bus key 'mac')"
                 )
             opts: DriveOptions = d.options
-            settings = None
-            if opts.max_rpm is not None:
-                settings = _settings(opts, opts.max_rpm)
-            drive = _Drive(d, opts, settings)
+            drive = _Drive(d, opts, load_profile(d.device)(d.id, opts))
             self.drives[d.address] = drive
             self._by_id[d.id] = drive
         self.engine: Scanner | None = None
@@ -330,8 +291,8 @@ class DeviceNetAdapter:
                     mac=d.mac,
                     io=o.connection,
                     ack=o.ack,
-                    # every CFW-08 assembly is 4 bytes (seed 4.1.8, table 11); an EDS's
-                    # sizes are checked against that when the config is read
+                    # the sizes of the device's assemblies; an EDS's sizes are checked
+                    # against them when the config is read (options.py)
                     produced_size=o.io_sizes[0],
                     consumed_size=o.io_sizes[1],
                     epr=self.options.expected_packet_rate,
@@ -349,8 +310,7 @@ class DeviceNetAdapter:
         self._hub = hub
         for d in self.drives.values():
             hub.update(d.id, comm=CommState.OFFLINE)
-            if d.settings is not None:
-                hub.set_capabilities(d.id, self._capabilities(d, d.settings))
+            self._publish_capabilities(d)
         link = links.link()
         engine = Scanner(self.scanner_config(), self.node_configs())
         self._next_refresh = 0.0
@@ -472,21 +432,21 @@ class DeviceNetAdapter:
         d.configured = False
         d.input_key = d.output_key = None
         text = f"drive offline: {action.reason}"
-        if d.reset_sent_at is not None and now - d.reset_sent_at < 10.0:
-            text += " after a fault reset (the drive goes offline during a reset, seed 3.4)"
+        note = d.profile.reset_note
+        offline_note = d.profile.offline_note()
+        recent = d.reset_sent_at is not None and now - d.reset_sent_at < RESET_OFFLINE_WINDOW
+        if note is not None and recent:
+            text += f" after a fault reset ({note})"
             d.reset_sent_at = None
-        elif d.p313 is not None:
-            text += (
-                f"; on its I/O timeout (E37) the drive applies P313 = "
-                f"{value_text(P313_TEXT, d.p313)}"
-            )
+        elif offline_note is not None:
+            text += f"; {offline_note}"
         hub = self._hub_port()
         hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
         hub.event(d.id, EventKind.COMM, text, mac=d.mac)
 
     def _on_input(self, now: float, action: InputData) -> None:
         d = self.drives[action.mac]
-        if not d.configured or d.settings is None:
+        if not d.configured or not d.profile.ready:
             return
         hub = self._hub_port()
         desired = hub.desired(d.id)
@@ -495,12 +455,11 @@ class DeviceNetAdapter:
             return  # the same reading for the same command: nothing new to publish
         d.input_key = key
         try:
-            changes = state_changes(d.settings, action.data, desired)
+            changes = d.profile.inputs(action.data, desired)
         except DeviceNetDecodeError:
             d.bad_inputs += 1
             return
-        d.io_values = dict(changes.pop("values"))
-        changes["values"] = d.values
+        changes["values"] = d.values  # the I/O words with the parameters read
         hub.update(d.id, comm=CommState.ONLINE, **changes)
 
     def _on_result(self, now: float, action: ExplicitResult) -> None:
@@ -602,7 +561,7 @@ class DeviceNetAdapter:
         for d in self.drives.values():
             if engine.nodes[d.mac].phase is not Phase.ONLINE:
                 continue
-            if not d.configured or d.settings is None:
+            if not d.configured or not d.profile.ready:
                 if d.output_key != IDLE:
                     engine.set_output(d.mac, None)  # idle: the master is not driving it
                     d.output_key = IDLE
@@ -612,15 +571,16 @@ class DeviceNetAdapter:
                 d.reset_seen = desired.fault_reset_seq
                 d.reset_until = now + self._reset_pulse()
                 d.reset_sent_at = now
+                note = d.profile.reset_note
                 hub.event(
                     d.id,
                     EventKind.FAULT,
-                    "fault reset sent (the drive goes offline during a reset, seed 3.4)",
+                    "fault reset sent" if note is None else f"fault reset sent ({note})",
                 )
-            key = (desired, now < d.reset_until, d.settings)
+            key = (desired, now < d.reset_until)
             if key != d.output_key:
                 d.output_key = key
-                engine.set_output(d.mac, command_assembly(d.settings, desired, key[1]).encode())
+                engine.set_output(d.mac, d.profile.outputs(desired, key[1]))
 
     def _reset_pulse(self) -> float:
         """Long enough for at least one production with the bit set (edge, seed 3.1.2)."""
@@ -651,143 +611,22 @@ class DeviceNetAdapter:
             pause = min(2 * pause, self.options.retry_max)
 
     async def _try_configure(self, d: _Drive) -> None:
-        await self._check_assembly(d)
-        d.p313 = await self._checked_read(d, P313)
-        d.params["P313"] = d.p313
-        if d.opts.max_rpm_param is not None:
-            await self._read_max_rpm(d, d.opts.max_rpm_param)
-        for number, value in d.opts.startup_params:
-            try:
-                await self.write_param(d.id, number, 0, value)
-            except ParameterError as exc:
-                raise NotConfigured(
-                    f"startup parameter P{number} = {value} refused: {exc.text}"
-                ) from None
-            back = await self._checked_read(d, number)
-            if back != value & 0xFFFF:
-                raise NotConfigured(
-                    f"startup parameter P{number} reads back {back} after writing {value}"
-                )
-        await self._check_baud_rate(d)
-        await self._read_status(d, (P070,))  # P081 is idle until I/O starts: read later
+        await d.profile.on_connect(_Port(self, d))
         hub = self._hub_port()
         d.reset_seen = hub.desired(d.id).fault_reset_seq
         d.configured, d.problem = True, None
         d.input_key = d.output_key = None
-        hub.event(
-            d.id,
-            EventKind.CONFIG,
-            f"configured: assembly {d.opts.assembly.label}, "
-            f"{d.opts.connection.value} I/O; P313 = {value_text(P313_TEXT, d.p313)}",
-        )
+        hub.event(d.id, EventKind.CONFIG, d.profile.configured_text())
         d.status = asyncio.get_running_loop().create_task(
             self._watch_status(d), name=f"devicenet-status-{d.id}"
         )
 
-    async def _check_assembly(self, d: _Drive) -> None:
-        """The assembly pair in force must be the configured one, or no I/O.
-
-        P710 is only what the drive will use after its next reset (seed 4.1.8 note), so
-        the pair in force is read from the I/O connection itself: its produced and
-        consumed connection paths (Connection 05h, seed tables 13-14). A P710 that
-        differs while the pair in force is right is reported: the drive runs correctly
-        until its next reset, and is refused then.
-        """
-        want = d.opts.assembly
-        instance = _IO_INSTANCE[d.opts.connection]
-        produced = await self._path_assembly(d, instance, objects.ConnectionAttribute.PRODUCED_PATH)
-        consumed = await self._path_assembly(d, instance, objects.ConnectionAttribute.CONSUMED_PATH)
-        p710 = await self._checked_read(d, P710)
-        d.params["P710"] = p710
-        stored = AssemblyPair.from_p710(p710)
-        in_force = f"{consumed}/{produced}"
-        d.in_force = in_force
-        if (consumed, produced) != (want.output_instance, want.input_instance):
-            raise NotConfigured(_assembly_problem(want, in_force, instance, p710, stored))
-        if stored is not want:
-            shown = stored.label if stored is not None else "none"
-            self._hub_port().event(
-                d.id,
-                EventKind.CONFIG,
-                f"P710 = {p710} selects assembly {shown}, the config says {want.label}: "
-                f"{want.label} is in force until the drive's next reset, then the drive "
-                "will not be brought online (seed 4.1.8)",
-                P710=p710,
-            )
-
-    async def _path_assembly(self, d: _Drive, instance: int, attribute: int) -> int:
-        """The Assembly instance a connection path of the I/O connection names; a path
-        that names none (or cannot be read) leaves the pair in force unknown: refused."""
-        where = f"Connection 05h instance {instance} attribute {attribute}"
-        body = GetAttributeSingle(CipClass.CONNECTION, instance, attribute)
-        try:
-            data = _success(await self._request(d, body))
-        except ParameterError as exc:
-            raise NotConfigured(
-                f"reading the assembly in force ({where}) refused: {exc.text}"
-            ) from None
-        try:
-            assembly = objects.decode_path(data).assembly
-        except DeviceNetDecodeError:
-            assembly = None
-        if assembly is None:
-            shown = data.hex(" ") or "empty"
-            raise NotConfigured(
-                f"the assembly in force is unknown: {where} names no assembly ({shown})"
-            )
-        return assembly
-
-    async def _check_baud_rate(self, d: _Drive) -> None:
-        """P702 against the line's expected rate (seed 4.1.6; effective after a reset).
-
-        The drive talks now, so the rates match today; a P702 fixed to another rate
-        means it will not come back after its next reset. Reported, not refused.
-        """
-        p702 = await self._checked_read(d, P702)
-        d.params["P702"] = p702
-        rate = P702_BAUD.get(p702)
-        expected = self.options.bitrate
-        if rate is not None and rate != expected:
-            self._hub_port().event(
-                d.id,
-                EventKind.CONFIG,
-                f"P702 = {p702} sets {rate // 1000} kbit/s, the line is configured for "
-                f"{expected // 1000} kbit/s (bus key 'bitrate'): the drive will not "
-                "communicate after its next reset",
-                P702=p702,
-            )
-
-    async def _checked_read(self, d: _Drive, number: int) -> int:
-        try:
-            value = await self.read_param(d.id, number, 0)
-        except ParameterError as exc:
-            raise NotConfigured(f"reading P{number} refused: {exc.text}") from None
-        return int(value)
-
-    async def _read_max_rpm(self, d: _Drive, number: int) -> None:
-        rpm = await self._checked_read(d, number)
-        if not 1 <= rpm <= SPEED_REF_MAX_RPM:
-            raise NotConfigured(f"P{number} = {rpm} is not a usable maximum speed (rpm)")
-        d.settings = _settings(d.opts, float(rpm))
-        self._hub_port().set_capabilities(d.id, self._capabilities(d, d.settings))
-
-    async def _read_status(self, d: _Drive, numbers: tuple[int, ...] = (P070, P081)) -> None:
-        """P070 and P081 (seed 4.1.1, 4.1.2) into the values, with an event on change."""
-        hub = self._hub_port()
-        for number in numbers:
-            name = f"P{number:03d}"
-            value = int(await self.read_param(d.id, number, 0))
-            old = d.params.get(name)
-            d.params[name] = value
-            if old is not None and old != value:
-                hub.event(d.id, EventKind.BUS, _status_text(number, value), **{name: value})
-        hub.update(d.id, values=d.values)
-
     async def _watch_status(self, d: _Drive) -> None:
+        port = _Port(self, d)
         while True:
             await asyncio.sleep(self.options.status_interval)
             with contextlib.suppress(GatewayTimeout, DriveOffline, ParameterError):
-                await self._read_status(d)
+                await d.profile.poll_status(port)
 
     # ------------------------------------------------------------ parameters
 
@@ -828,39 +667,23 @@ class DeviceNetAdapter:
 
     async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
         d = self._drive(drive_id)
-        path = _path(number, subindex)
-        response = await self._request(
-            d, GetAttributeSingle(path.class_id, path.instance_id, path.attribute_id)
-        )
-        data = _success(response)
-        try:
-            return decode_parameter(data)
-        except DeviceNetDecodeError as exc:
-            raise ParameterError(f"bad reply: {exc.message}") from None
+        return await d.profile.read_param(_Port(self, d), number, subindex)
 
     async def write_param(
         self, drive_id: str, number: int, subindex: int, value: ParamValue
     ) -> None:
         d = self._drive(drive_id)
-        path = _path(number, subindex)
-        if isinstance(value, float):
-            if not value.is_integer():
-                raise ParameterError(f"P{number}: CFW-08 parameters are integers, not {value}")
-            value = int(value)
-        try:
-            data = encode_parameter(value)
-        except FrameEncodeError:
-            raise ParameterError(f"P{number}: {value} does not fit a 16-bit parameter") from None
-        body = SetAttributeSingle(path.class_id, path.instance_id, path.attribute_id, data)
-        _success(await self._request(d, body))
+        await d.profile.write_param(_Port(self, d), number, subindex, value)
 
-    @staticmethod
-    def _capabilities(d: _Drive, settings: ProfileSettings) -> Capabilities:
-        """The profile's capabilities with the parameter table of the drive's EDS (the
-        lookup the front ends name parameter values with, gateway.adapter.ParamInfo), or
-        without an EDS the seed's parameters (:func:`seed_param_table`)."""
-        table = eds_param_table(d.opts.params) if d.opts.params else seed_param_table()
-        return replace(capabilities(settings), params=table)
+    def _publish_capabilities(self, d: _Drive) -> None:
+        """The profile's capabilities, once it has them, with the parameter table of the
+        drive's EDS (the lookup the front ends name parameter values with,
+        gateway.adapter.ParamInfo); without an EDS, the profile's own table."""
+        caps = d.profile.capabilities()
+        if caps is not None:
+            if d.opts.params:  # without an EDS: the profile's own table
+                caps = replace(caps, params=eds_param_table(d.opts.params))
+            self._hub_port().set_capabilities(d.id, caps)
 
     def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
         """What the drive's EDS says of parameter P<number>: its ``name``, ``unit`` and the
@@ -876,42 +699,24 @@ class DeviceNetAdapter:
 
     async def read_object(
         self, drive_id: str, class_id: int, instance_id: int, attribute_id: int
-    ) -> Value:
-        """Get_Attribute_Single on a standard object of seed tables 8-18, decoded with the
-        table's type; an attribute the table marks Set only is refused here."""
+    ) -> AttributeValue:
+        """Get_Attribute_Single on a standard object the drive's profile lists."""
         d = self._drive(drive_id)
-        spec = _object_attribute(class_id, instance_id, attribute_id)
-        if not spec.gettable:
-            raise ParameterError(_rights_text(class_id, spec, "Set"))
-        response = await self._request(d, GetAttributeSingle(class_id, instance_id, attribute_id))
-        try:
-            return decode_attribute(spec.kind, _success(response))
-        except DeviceNetDecodeError as exc:
-            raise ParameterError(f"bad reply: {exc.message}") from None
+        return await d.profile.read_object(_Port(self, d), class_id, instance_id, attribute_id)
 
     async def write_object(
-        self, drive_id: str, class_id: int, instance_id: int, attribute_id: int, value: Value
+        self,
+        drive_id: str,
+        class_id: int,
+        instance_id: int,
+        attribute_id: int,
+        value: AttributeValue,
     ) -> None:
-        """Set_Attribute_Single on a standard object of seed tables 8-18, encoded with the
-        table's type; Get-only attributes are refused here, and so are the command
-        attributes (run, direction, reference, network control, fault reset, assembly
-        data): the drive takes its commands from the hub, never as a write (rule 1).
-        The drive checks the value and answers with its CIP status."""
+        """Set_Attribute_Single on a standard object the drive's profile lists; the
+        profile refuses the attributes that command the drive (rule 1)."""
         d = self._drive(drive_id)
-        spec = _object_attribute(class_id, instance_id, attribute_id)
-        if not spec.settable:
-            raise ParameterError(_rights_text(class_id, spec, "Get"))
-        if (class_id, attribute_id) in COMMAND_ATTRIBUTES or class_id == CipClass.ASSEMBLY:
-            raise ParameterError(
-                f"{_object_name(class_id)} attribute {attribute_id} ({spec.name}) commands "
-                "the drive: use the command service"
-            )
-        try:
-            data = encode_attribute(spec.kind, value)
-        except FrameEncodeError as exc:
-            raise ParameterError(f"{spec.name}: {exc}") from None
-        body = SetAttributeSingle(class_id, instance_id, attribute_id, data)
-        _success(await self._request(d, body))
+        port = _Port(self, d)
+        await d.profile.write_object(port, class_id, instance_id, attribute_id, value)
 
     # ------------------------------------------------------------ diagnostics
 
@@ -934,14 +739,11 @@ class DeviceNetAdapter:
         for d in self.drives.values():
             entry: dict[str, Any] = {
                 "mac": d.mac,
-                "assembly": d.opts.assembly.label,
-                "assembly_in_force": d.in_force,
                 "connection": d.opts.connection.value,
                 "configured": d.configured,
                 "problem": d.problem,
-                "p313": None if d.p313 is None else value_text(P313_TEXT, d.p313),
                 "bad_inputs": d.bad_inputs,
-                **d.params,
+                **d.profile.diagnostics(),
             }
             if engine is not None:
                 entry.update(engine.node_diagnostics(d.mac))
@@ -967,38 +769,6 @@ def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
         and (opts.product_type is None or info.product_type == opts.product_type)
         and revision_ok
     )
-
-
-def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:
-    return ProfileSettings(
-        pair=opts.assembly,
-        max_rpm=max_rpm,
-        weg_speed_scale=opts.weg_speed_scale,
-        at_reference_rpm=opts.at_reference_rpm,
-    )
-
-
-_IO_INSTANCE: dict[IoKind, int] = {
-    IoKind.POLLED: objects.ConnectionInstance.POLL,  # seed table 13
-    IoKind.COS: objects.ConnectionInstance.COS_CYCLIC,  # seed table 14
-    IoKind.CYCLIC: objects.ConnectionInstance.COS_CYCLIC,
-}
-
-
-def _assembly_problem(
-    want: AssemblyPair, in_force: str, instance: int, p710: int, stored: AssemblyPair | None
-) -> str:
-    text = (
-        f"the drive's I/O uses assembly {in_force} (Connection 05h instance {instance} "
-        f"paths), the config says {want.label}"
-    )
-    if stored is want:
-        return (
-            f"{text}; P710 = {p710} selects {want.label} but takes effect only after a "
-            "reset of the drive (seed 4.1.8): reset or power-cycle it"
-        )
-    shown = stored.label if stored is not None else "none"
-    return f"{text}; P710 = {p710} selects assembly {shown}"
 
 
 class _Line(CanProtocol[CanFrame, Event, Action]):
@@ -1046,73 +816,3 @@ def _event(event: LinkEvent) -> Event:
     if isinstance(event, RxFailed):
         return LinkDown(event.reason) if event.link_down else BadFrame(event.reason)
     raise TypeError(event)
-
-
-def _path(number: int, subindex: int) -> AttributePath:
-    if subindex:
-        raise ParameterError("the CFW-08 has no parameter subindexes (use subindex 0)")
-    try:
-        return parameter_path(number)
-    except ValueError as exc:
-        raise ParameterError(str(exc)) from None
-
-
-def _success(response: Response) -> bytes:
-    """The data of a success reply; an error reply is a ParameterError with its CIP text."""
-    if isinstance(response, ErrorResponse):
-        raise ParameterError(response.text, code=response.general_status)
-    return response.encode_data()
-
-
-# Attributes of seed tables 16 and 17 that command the drive (Run1, Run2, NetCtrl,
-# Fault Reset; NetRef, Speed Ref): only through the command path, never written as data.
-COMMAND_ATTRIBUTES: frozenset[tuple[int, int]] = frozenset(
-    {
-        (CipClass.CONTROL_SUPERVISOR, 3),
-        (CipClass.CONTROL_SUPERVISOR, 4),
-        (CipClass.CONTROL_SUPERVISOR, 5),
-        (CipClass.CONTROL_SUPERVISOR, 12),
-        (CipClass.AC_DC_DRIVE, 4),
-        (CipClass.AC_DC_DRIVE, 8),
-    }
-)
-
-
-def _object_name(class_id: int) -> str:
-    spec = STANDARD_OBJECTS[class_id]
-    return f"{spec.name} ({class_id:02X}h)"
-
-
-def _object_attribute(class_id: int, instance_id: int, attribute_id: int) -> AttributeSpec:
-    """The attribute as seed tables 8-18 define it; ParameterError when they do not."""
-    spec = STANDARD_OBJECTS.get(class_id)
-    if spec is None:
-        known = ", ".join(f"{c:02X}h" for c in STANDARD_OBJECTS)
-        raise ParameterError(f"class {class_id:#04x} is not a CFW-08 object ({known})")
-    if instance_id not in spec.instances:
-        raise ParameterError(
-            f"{_object_name(class_id)} has no instance {instance_id} ({spec.source})"
-        )
-    attr = spec.attributes.get(attribute_id)
-    if attr is None:
-        raise ParameterError(
-            f"{_object_name(class_id)} has no attribute {attribute_id} ({spec.source})"
-        )
-    return attr
-
-
-def _rights_text(class_id: int, attr: AttributeSpec, only: str) -> str:
-    source = STANDARD_OBJECTS[class_id].source
-    return (
-        f"{_object_name(class_id)} attribute {attr.attribute} ({attr.name}) is {only} only "
-        f"({source})"
-    )
-
-
-def _status_text(number: int, value: int) -> str:
-    if number == P070:
-        text = f"P070 CAN controller: {value_text(P070_TEXT, value)}"
-        code = P070_COMM_ERROR.get(value)
-        return f"{text} (E{code}: {fault_text(code)})" if code else text
-    text = f"P081 network master: {value_text(P081_TEXT, value)}"
-    return f"{text} (E36: {fault_text(36)})" if value == P081_IDLE else text

@@ -13,6 +13,10 @@ from enum import Enum, auto
 from adapters.devicenet.errors import DataTypeDecodeError
 from gateway.errors import FrameEncodeError
 
+AttributeValue = int | str | bytes | tuple[int, int]
+"""A decoded attribute value: an integer, a SHORT_STRING, opaque bytes, or a revision
+(major, minor)."""
+
 
 class CipType(Enum):
     """Fixed-size integer types of CIP."""

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from adapters.devicenet.canerror import decode_error_frame
 from adapters.devicenet.cfw08 import INPUT_DECODERS, OUTPUT_DECODERS, decode_parameter
-from adapters.devicenet.cfw08_objects import Kind, decode_attribute
+from adapters.devicenet.cfw08.objects import Kind, decode_attribute
 from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value
 from adapters.devicenet.dupmac import DupMacCheck
 from adapters.devicenet.errors import DeviceNetDecodeError

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from adapters.devicenet.cfw08 import In71, Out21, encode_parameter
-from adapters.devicenet.cfw08_objects import STANDARD_OBJECTS, AttributeSpec, Kind, wire_size
+from adapters.devicenet.cfw08.objects import STANDARD_OBJECTS, AttributeSpec, Kind, wire_size
 from adapters.devicenet.cip import GeneralStatus
 from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
 from adapters.devicenet.explicit import (

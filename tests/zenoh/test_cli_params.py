@@ -186,7 +186,7 @@ def test_backup_of_the_mcd600_in_parameter_mode(gw: GatewayProcess, tmp_path: Pa
 def test_backup_of_the_cfw08_without_eds_reads_the_seed_table(
     gw: GatewayProcess, tmp_path: Path
 ) -> None:
-    from adapters.devicenet.cfw08_objects import SEED_PARAMETERS
+    from adapters.devicenet.cfw08.objects import SEED_PARAMETERS
 
     doc = backup(gw, tmp_path, "cfw08")
     params = by_number(doc)

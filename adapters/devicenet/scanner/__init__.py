@@ -1,7 +1,10 @@
 """The DeviceNet scanner engine (sans-IO, stepped with an injected clock).
 
-``api`` holds the config, events and actions; ``engine`` the :class:`Scanner`;
-``node`` its per-node state. It imports codecs only: no python-can, no asyncio.
+``api`` holds the config, events and actions; ``engine`` the :class:`Scanner` (the line,
+events in, deadlines, public API) and its parts: ``machine`` the per-node state machine,
+``schedule`` the poll cycle and the explicit and bring-up windows, ``jobs`` the explicit
+message job queue, ``context`` what they share; ``node`` the per-node state. It imports
+codecs only: no python-can, no asyncio (docs/architecture.md, "DeviceNet scanner").
 """
 
 from adapters.devicenet.scanner.api import (

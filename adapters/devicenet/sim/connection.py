@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
-from adapters.devicenet.cfw08_objects import Value
+from adapters.devicenet.cfw08.objects import Value
 from adapters.devicenet.objects import (
     INACTIVITY_EPR_FACTOR,
     ConnectionInstance,

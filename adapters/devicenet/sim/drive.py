@@ -27,7 +27,7 @@ from adapters.devicenet.cfw08 import (
     decode_output,
     rpm_to_counts,
 )
-from adapters.devicenet.cfw08_objects import P070, P081, P313, P710
+from adapters.devicenet.cfw08.objects import P070, P081, P313, P710
 from adapters.devicenet.errors import AssemblyDecodeError
 from adapters.devicenet.sim.params import SIM_PARAMETERS
 from gateway.sim import Motor, MotorParams

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from adapters.devicenet.cfw08 import decode_output, encode_parameter, parameter_of
-from adapters.devicenet.cfw08_objects import (
+from adapters.devicenet.cfw08.objects import (
     ASSEMBLY_INPUTS,
     STANDARD_OBJECTS,
     AttributeSpec,

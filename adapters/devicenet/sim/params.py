@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from adapters.devicenet.cfw08_objects import SEED_PARAMETERS, ParamSpec
+from adapters.devicenet.cfw08.objects import SEED_PARAMETERS, ParamSpec
 
 SIM_ASSUMED = "simulator assumption (CFW-08 user manual numbering, not in the seed)"
 

@@ -14,6 +14,7 @@ from enum import Enum, Flag
 
 from adapters.devicenet.cip import CipClass
 from adapters.devicenet.datatypes import (
+    AttributeValue,
     CipType,
     decode_short_string,
     decode_value,
@@ -57,7 +58,7 @@ _INT_KINDS: Mapping[Kind, CipType] = {
     Kind.BYTE: CipType.BYTE,
 }
 
-Value = int | str | bytes | tuple[int, int]
+Value = AttributeValue
 
 
 def encode_attribute(kind: Kind, value: Value) -> bytes:

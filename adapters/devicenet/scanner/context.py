@@ -1,0 +1,113 @@
+"""What the parts of the scanner share: the config, the nodes, the actions going out,
+the line figures, the send hold, the spacing of unconnected requests, and the soonest
+deadline (:meth:`LineContext.fold`)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from adapters.devicenet.fragment import UNFRAGMENTED_MAX, fragment_io
+from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.ids import PredefinedId, PredefinedMessage
+from adapters.devicenet.scanner.api import Action, Report, ReportKind, ScannerConfig, Send
+from adapters.devicenet.scanner.node import Node
+
+
+@dataclass(slots=True)
+class LineFigures:
+    frames_tx: int = 0
+    frames_rx: int = 0
+    bad_frames: int = 0
+    foreign_frames: int = 0
+    unknown_nodes: int = 0
+    tx_failures: int = 0
+    tx_dropped: int = 0
+    last_tx_failure: str | None = None
+    link_down: int = 0  # times the interface was found down
+    cycles: int = 0
+    cycle_last: float | None = None
+    cycle_sum: float = 0.0
+    cycle_max: float = 0.0
+    conditions: dict[str, int] = field(default_factory=dict)
+    duplicate_macs: dict[int, str] = field(default_factory=dict)
+
+
+class LineContext:
+    """The state every part of the scanner reads and writes, and the ways out of it."""
+
+    def __init__(self, config: ScannerConfig, nodes: dict[int, Node]) -> None:
+        self.config = config
+        self.nodes = nodes
+        self.figures = LineFigures()
+        self.out: list[Action] = []
+        self.leaving = False
+        self.touched: Node | None = None  # the node an event step concerns
+        self.soonest: float | None = 0.0  # see Scanner.next_deadline
+        self.request_slot = 0.0  # no Allocate/Release before this (request_spacing)
+        self.tx_hold_until = 0.0
+        self.tx_backoff = config.tx_backoff_min
+        self.last_tx_failure: float | None = None
+
+    def take(self) -> list[Action]:
+        """The actions gathered since the last call."""
+        out, self.out = self.out, []
+        return out
+
+    def fold(self, times: Iterable[float]) -> None:
+        """Bring the soonest deadline forward to any of ``times``."""
+        for t in times:
+            if self.soonest is None or t < self.soonest:
+                self.soonest = t
+
+    # ------------------------------------------------------------ send hold
+
+    def tx_ok(self, now: float) -> bool:
+        if now < self.tx_hold_until:
+            return False
+        self.tx_hold_until = 0.0
+        return True
+
+    def gated(self, t: float) -> float:
+        """When something due at ``t`` can be sent: not before the send hold ends.
+
+        Every deadline that leads to a send goes through here, so a held line is not
+        stepped again until the hold ends (no busy loop while sends fail).
+        """
+        return t if t >= self.tx_hold_until else self.tx_hold_until
+
+    # ------------------------------------------------------------ out
+
+    def send(self, node: Node, message: PredefinedMessage, data: bytes) -> None:
+        node.figures.frames_tx += 1
+        self.emit(_frame(message, node.mac, data))
+
+    def send_io(self, node: Node, data: bytes) -> None:
+        """Our I/O data to a node, fragmented when longer than one frame (fact sheet 2.8)."""
+        if len(data) <= UNFRAGMENTED_MAX:
+            self.send(node, PredefinedMessage.MASTER_POLL_COMMAND, data)
+            return
+        for payload in fragment_io(data):
+            self.send(node, PredefinedMessage.MASTER_POLL_COMMAND, payload)
+
+    def emit(self, frame: CanFrame) -> None:
+        self.figures.frames_tx += 1
+        self.out.append(Send(frame))
+
+    def report(self, mac: int | None, kind: ReportKind, text: str, **data: object) -> None:
+        self.out.append(Report(mac, kind, text, dict(data)))
+
+
+_FRAME_IDS: dict[tuple[PredefinedMessage, int], int] = {}
+
+
+def _frame(message: PredefinedMessage, mac: int, data: bytes) -> CanFrame:
+    key = (message, mac)
+    arbitration_id = _FRAME_IDS.get(key)
+    if arbitration_id is None:
+        arbitration_id = _FRAME_IDS[key] = PredefinedId(message, mac).arbitration_id
+    return CanFrame(arbitration_id, data)
+
+
+def ms(seconds: float | None) -> float | None:
+    return None if seconds is None else round(seconds * 1000.0, 3)

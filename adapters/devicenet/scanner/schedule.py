@@ -1,0 +1,127 @@
+"""The scanner's scheduler: the poll cycle and the windows that bound the line's load.
+
+- the poll cycle: every ``poll_interval`` each polled node online gets its output, at
+  most ``poll_window`` polls in flight at once, each answered within ``response_timeout``;
+- the explicit window: at most ``explicit_window`` explicit requests in flight on the line;
+- the bring-up window: at most ``bringup_window`` nodes allocating or configuring at once.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from adapters.devicenet.scanner.api import IoKind
+from adapters.devicenet.scanner.context import LineContext
+from adapters.devicenet.scanner.node import Phase
+
+_BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
+
+
+class Scheduler:
+    """When polls, explicit requests and bring-ups may go out."""
+
+    def __init__(self, ctx: LineContext) -> None:
+        self.ctx = ctx
+        self.poll_queue: deque[int] = deque()
+        self.in_flight: dict[int, float] = {}
+        self.explicit_busy: set[int] = set()  # nodes with an explicit request in flight
+        self.bringing = 0  # nodes in bring-up, counted at each step (bringup_window)
+        self.cycle_started: float | None = None
+        self.cycle_due = 0.0
+
+    # ------------------------------------------------------------ bring-up window
+
+    def bringups(self) -> int:
+        return sum(1 for n in self.ctx.nodes.values() if n.phase in _BRINGUP_PHASES)
+
+    def bringup_free(self) -> bool:
+        """Whether another node may start its bring-up (``bringup_window``)."""
+        return self.bringing < self.ctx.config.bringup_window
+
+    # ------------------------------------------------------------ explicit window
+
+    def explicit_free(self) -> bool:
+        """Whether another explicit request may go out (``explicit_window``)."""
+        return len(self.explicit_busy) < self.ctx.config.explicit_window
+
+    def explicit_started(self, mac: int) -> None:
+        self.explicit_busy.add(mac)
+
+    def explicit_ended(self, mac: int) -> None:
+        """A node's explicit request is over; a node waiting for the window may go."""
+        full = not self.explicit_free()
+        self.explicit_busy.discard(mac)
+        if full:
+            self.ctx.fold((0.0,))  # wake the next step: every waiting node is ticked
+
+    # ------------------------------------------------------------ poll cycle
+
+    def any_polled_online(self) -> bool:
+        return any(
+            n.phase is Phase.ONLINE and n.cfg.io is IoKind.POLLED for n in self.ctx.nodes.values()
+        )
+
+    def polls(self, now: float) -> None:
+        """Poll timeouts, the start of a cycle when due, and the polls the window allows."""
+        ctx = self.ctx
+        timeout = ctx.config.response_timeout
+        for mac, sent in list(self.in_flight.items()):
+            if now >= sent + timeout:
+                del self.in_flight[mac]
+                ctx.nodes[mac].figures.poll_timeouts += 1
+        if self.cycle_started is None and now >= self.cycle_due and ctx.tx_ok(now):
+            self.cycle_due = now + ctx.config.poll_interval
+            macs = [
+                m
+                for m, n in ctx.nodes.items()
+                if n.phase is Phase.ONLINE and n.cfg.io is IoKind.POLLED
+            ]
+            if macs:
+                self.cycle_started = now
+                self.poll_queue = deque(macs)
+        while self.poll_queue and len(self.in_flight) < ctx.config.poll_window and ctx.tx_ok(now):
+            node = ctx.nodes[self.poll_queue.popleft()]
+            if node.phase is Phase.ONLINE:
+                ctx.send_io(node, node.output)
+                self.in_flight[node.mac] = now
+        if self.cycle_started is not None and not self.poll_queue and not self.in_flight:
+            self._cycle_done(now - self.cycle_started)
+            self.cycle_started = None
+
+    def _cycle_done(self, seconds: float) -> None:
+        f = self.ctx.figures
+        f.cycles += 1
+        f.cycle_last = seconds
+        f.cycle_sum += seconds
+        f.cycle_max = max(f.cycle_max, seconds)
+
+    def answered(self, mac: int) -> float | None:
+        """A poll response came: when its poll was sent (None: no poll in flight)."""
+        return self.in_flight.pop(mac, None)
+
+    def forget(self, mac: int) -> None:
+        """The node went offline: its poll in flight no longer matters."""
+        self.in_flight.pop(mac, None)
+
+    def stop(self) -> None:
+        """Leaving the line: polls are over, their timeouts no longer matter."""
+        self.in_flight.clear()
+
+    # ------------------------------------------------------------ deadlines
+
+    def deadlines(self) -> list[float]:
+        """The poll timeouts and the next cycle (the full recomputation)."""
+        ctx = self.ctx
+        times = [sent + ctx.config.response_timeout for sent in self.in_flight.values()]
+        if self.cycle_started is None and not ctx.leaving and self.any_polled_online():
+            times.append(ctx.gated(self.cycle_due))
+        return times
+
+    def after_frame(self, now: float) -> None:
+        """After a received frame: the polls it allows, and their deadlines folded in."""
+        ctx = self.ctx
+        self.polls(now)
+        timeout = ctx.config.response_timeout
+        ctx.fold(sent + timeout for sent in self.in_flight.values())
+        if self.cycle_started is None:
+            ctx.fold((ctx.gated(self.cycle_due),))
