@@ -47,6 +47,8 @@ FAST_BUS: dict[str, Any] = {
         "status_interval": 0.2,
     }.items()
 }
+# the EPR attribute is 16-bit ms (fact sheet 2.9): a time scale over 26 would pass it
+FAST_BUS["explicit_epr"] = min(FAST_BUS["explicit_epr"], 65.0)
 EPR: float = FAST_BUS["expected_packet_rate"]
 DUPMAC: float = FAST_BUS["dupmac_timeout"]
 
