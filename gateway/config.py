@@ -359,7 +359,8 @@ def _bus(name: str, t: Table) -> BusConfig:
         for dt in _drive_tables(t)
         if (drive := _read(_named_by_id(dt), lambda dt: _drive(dt, name, cls))) is not None
     ]
-    _read(t, lambda t: None)  # the bus table's unknown keys
+    if options is not None:  # the bus table's unknown keys, once its options were read:
+        _read(t, lambda t: None)  # a table the adapter gave up on was never read to the end
     owners = [(d.address, d.id) for d in drives]
     _check_unique(t, "drives", "address", owners)
     # the adapter's options checked ``simulate`` (a key it does not know is refused above)

@@ -272,8 +272,9 @@ async def test_sigkill_and_restart_bring_every_drive_back_stopped(tmp_path: Path
             command = {"run": True, "speed_rpm": 900}
             reply = await client.aone(f"{PREFIX}/drives/cfw11/command", command)
             assert reply.json() == {"accepted": True}
-            plc.word = 0
-            await until(lambda: plc.writes_ok > writes_before + 15)
+            plc.word = 0  # the PLC's edge: its 0 must reach the gateway before its run
+            zero_from = plc.writes_ok
+            await until(lambda: plc.writes_ok > zero_from + 2)
             plc.word = RUN
             await until(lambda: cfw11.motor.speed == 900.0 and cfw700.motor.speed == 900.0)
             gw.proc.send_signal(signal.SIGTERM)
