@@ -32,12 +32,18 @@ BUSY = RecordRefused(RecordAccessError("resource error", 0xC3))  # 4.2.3: not av
 READ_47 = ReadRecord(0, 47, 240)
 
 
+def deadline_of(seq: ParamSequence) -> float:
+    deadline = seq.next_deadline()
+    assert deadline is not None, "the sequence waits for nothing"
+    return deadline
+
+
 def test_a_read_waits_between_ds_reads_by_its_deadline() -> None:
     seq = RecordParams(retry_delay=0.5).reading([(2, 0), (3, 0)])
     assert seq.step(10.0) == WriteRecord(0, 47, READ_P2_P3)
     assert seq.step(10.01, RecordWritten()) == READ_47
     assert seq.step(10.02, BUSY) is None
-    deadline = seq.next_deadline()
+    deadline = deadline_of(seq)
     assert deadline == pytest.approx(10.52)
     assert seq.step(10.5) is None  # not yet: nothing asked
     assert seq.step(deadline) == READ_47
@@ -54,7 +60,7 @@ def test_the_retries_end_in_a_timeout_reached_by_the_fake_clock() -> None:
     reads = 1
     while True:
         assert seq.step(now, BUSY) is None  # the drive has no answer yet
-        deadline = seq.next_deadline()
+        deadline = deadline_of(seq)
         assert deadline == pytest.approx(now + 1.0)
         now = deadline  # the fake clock jumps to the deadline
         access = seq.step(now)
@@ -74,7 +80,7 @@ def test_a_stale_answer_is_read_again_after_the_delay() -> None:
     seq.step(0.0, RecordWritten())
     stale = b(9, 1, 0, 1, 0x42, 1, 0, 7)  # another request's reference
     assert seq.step(0.1, RecordRead(stale)) is None
-    deadline = seq.next_deadline()
+    deadline = deadline_of(seq)
     assert deadline == pytest.approx(0.3)
     assert seq.step(deadline) == READ_47
     assert seq.step(0.4, RecordRead(b(1, 1, 0, 1, 0x42, 1, 0, 8))) is None
