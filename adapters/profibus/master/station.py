@@ -78,11 +78,11 @@ class StationContext:
 class Station:
     """The state machine of one DP slave (see the module docstring)."""
 
-    def __init__(self, params: SlaveParams, line: StationContext, now: float) -> None:
+    def __init__(self, params: SlaveParams, context: StationContext, now: float) -> None:
         self.params = params
         self.address = params.address
-        self.line = line
-        self.set_prm = params.set_prm(line.bus.min_tsdr).encode()
+        self.context = context
+        self.set_prm = params.set_prm(context.bus.min_tsdr).encode()
         self.outputs = bytes(params.output_len)
         self.outputs_pending = False  # set_outputs given, no Data_Exchange built from them yet
         self.state = SlaveState.WAIT_DIAG
@@ -114,20 +114,20 @@ class Station:
         return _REQUESTS[purpose](self, fc)
 
     def _diag_request(self, fc: RequestFc) -> DataTelegram:
-        return build_request(SlaveDiagRequest(), da=self.address, sa=self.line.master, fc=fc)
+        return build_request(SlaveDiagRequest(), da=self.address, sa=self.context.master, fc=fc)
 
     def _set_prm_request(self, fc: RequestFc) -> DataTelegram:
         return DataTelegram(
-            self.address, self.line.master, fc, SlaveSap.SET_PRM, MasterSap.MS0, self.set_prm
+            self.address, self.context.master, fc, SlaveSap.SET_PRM, MasterSap.MS0, self.set_prm
         )
 
     def _chk_cfg_request(self, fc: RequestFc) -> DataTelegram:
         return DataTelegram(
-            self.address, self.line.master, fc, SlaveSap.CHK_CFG, MasterSap.MS0, self.params.cfg
+            self.address, self.context.master, fc, SlaveSap.CHK_CFG, MasterSap.MS0, self.params.cfg
         )
 
     def _get_cfg_request(self, fc: RequestFc) -> DataTelegram:
-        return build_request(GetCfgRequest(), da=self.address, sa=self.line.master, fc=fc)
+        return build_request(GetCfgRequest(), da=self.address, sa=self.context.master, fc=fc)
 
     def data_frame(self, fc: RequestFc, operate: bool) -> bytes:
         """The Data_Exchange telegram (1.5 step 6; zero outputs in Clear), kept encoded:
@@ -140,7 +140,7 @@ class Station:
             if len(self.frames) >= FRAME_MEMO:
                 self.frames.clear()
             request = build_request(
-                DataExchange(outputs), da=self.address, sa=self.line.master, fc=fc
+                DataExchange(outputs), da=self.address, sa=self.context.master, fc=fc
             )
             frame = self.frames[key] = request.encode()
         return frame
@@ -214,25 +214,25 @@ class Station:
 
     def took_inputs(self, data: bytes) -> None:
         self.stats.exchanges += 1
-        self.line.out.append(InputsReceived(self.address, data))
+        self.context.out.append(InputsReceived(self.address, data))
 
     def _invalid(self, text: str, now: float) -> None:
         """A reply that is no answer to the request: counted; the state decides what next."""
         self.stats.invalid_replies += 1
-        self.line.stats.invalid_replies += 1
+        self.context.stats.invalid_replies += 1
         if self.state is SlaveState.DATA_EXCHANGE:
             self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def _restart_bad(self, text: str, now: float) -> None:
         self.stats.invalid_replies += 1
-        self.line.stats.invalid_replies += 1
+        self.context.stats.invalid_replies += 1
         self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def gave_up(self, pending: Pending, now: float) -> None:
         """No (valid) reply after every try (1.5 step 7)."""
         what = "no valid reply" if pending.garbled else "no reply"
         if self.state in (SlaveState.WAIT_DIAG, SlaveState.ABSENT):
-            self.retry_at = now + self.line.bus.absent_retry
+            self.retry_at = now + self.context.bus.absent_retry
             self.enter(SlaveState.ABSENT, now, what)
             return
         wait = (pending.deadline - pending.sent_at) * 1000
@@ -248,7 +248,7 @@ class Station:
 
     def _on_diag(self, diag: SlaveDiag, ext: bytes, now: float) -> None:
         self.last_diag = diag
-        self.line.out.append(DiagnosisRead(self.address, diag, ext))
+        self.context.out.append(DiagnosisRead(self.address, diag, ext))
         _DIAG_HANDLERS.get(self.state, Station._diag_ignored)(self, diag, now)
 
     def _diag_ignored(self, diag: SlaveDiag, now: float) -> None:
@@ -257,7 +257,7 @@ class Station:
     def _diag_start(self, diag: SlaveDiag, now: float) -> None:
         """1.5 step 2: a valid diagnosis; go on with Set_Prm unless another master has it."""
         owner = diag.master_address
-        if owner not in (0xFF, self.line.master) and not diag.prm_req:
+        if owner not in (0xFF, self.context.master) and not diag.prm_req:
             self.fault_with(FaultKind.LOCKED, f"the slave is parameterised by master {owner}", now)
             return
         self.enter(SlaveState.SET_PRM, now)
@@ -325,10 +325,10 @@ class Station:
     ) -> None:
         changed = self.fault != text
         self.fault = text
-        self.retry_at = now + self.line.bus.fault_retry
+        self.retry_at = now + self.context.bus.fault_retry
         self.enter(SlaveState.FAULT, now, text)
         if changed:
-            self.line.out.append(SlaveFault(self.address, kind, text, slave_cfg))
+            self.context.out.append(SlaveFault(self.address, kind, text, slave_cfg))
 
     def enter(self, new: SlaveState, now: float, reason: str = "") -> None:
         old = self.state
@@ -339,28 +339,28 @@ class Station:
         if old is new:
             return
         self.state = new
-        line = self.line
+        context = self.context
         if new in TIMED_STATES:
-            line.timed[self.address] = self
+            context.timed[self.address] = self
         else:
-            line.timed.pop(self.address, None)
+            context.timed.pop(self.address, None)
         if old is SlaveState.DATA_EXCHANGE:
             self.stats.restarts += 1
             self.diag_pending = False
-            line.out.append(SlaveDown(self.address, reason or new.value))
-            line.left_exchange(self)
-        line.out.append(SlaveStateChanged(self.address, old, new))
+            context.out.append(SlaveDown(self.address, reason or new.value))
+            context.left_exchange(self)
+        context.out.append(SlaveStateChanged(self.address, old, new))
         if new is SlaveState.DATA_EXCHANGE:
             self.fault = None
             self.turn.count = MAX_TURN  # first Data_Exchange next turn, with the caller's outputs
-            line.out.append(SlaveUp(self.address))
+            context.out.append(SlaveUp(self.address))
 
     def check_timeout(self, now: float, busy: list[int]) -> None:
         """A start-up state that lasted too long (1.5): start again, or not ready."""
         limit = STATE_TIMEOUTS.get(self.state)
         if limit is None or self.state not in TIMED_STATES:
             return
-        bus = self.line.bus
+        bus = self.context.bus
         limit = max(limit, 4 * bus.cycle_time, 4 * _retry_bound(bus))
         if now - self.since <= limit or self.address in busy:
             return
