@@ -70,6 +70,7 @@ class Master:
         self._out: list[Action] = []
         self._line = Line(bus, self.stats, self._out, now)
         self._acyclic = JobQueue(bus, self._line, self._out)
+        self._jobs = self._acyclic.jobs  # the unfinished DP-V1 jobs (looked at every step)
         context = StationContext(bus, self._out, self.stats, self._acyclic.station_left)
         self._timed = context.timed  # stations in a start-up state with a timeout
         self._slaves: dict[int, Station] = {}
@@ -201,7 +202,7 @@ class Master:
             if type(event) is Received and self._steady_reply(event.telegram, now):
                 return self._take()
             self._on_event(event, now)
-        if self._acyclic.jobs:
+        if self._jobs:
             self._acyclic.expire(now)
         line = self._line
         if line.pending is not None and now >= line.pending.deadline:
@@ -229,7 +230,7 @@ class Master:
         # in a cycle (after a broadcast): go on when the line is free; else the next cycle
         scheduler = self._scheduler
         base = line.busy_until if scheduler.cycle_started is not None else scheduler.next_cycle
-        times = [base, *(j.deadline for j in self._acyclic.jobs.values())]
+        times = [base, *(j.deadline for j in self._jobs.values())]
         return max(line_free, min(times))
 
     def awaiting_reply(self) -> bool:
@@ -306,7 +307,8 @@ class Master:
         sl = self._steady_slave(p, t)
         if p is None or sl is None or not isinstance(t, DataTelegram):
             return False
-        line.end_request(now)
+        line.pending = None  # line.end_request(now), inline on the path of every reply
+        line.idle_since = max(line.idle_since, now)
         sl.answered(p, now)
         sl.took_inputs(bytes(t.data))
         scheduler = self._scheduler
@@ -320,7 +322,7 @@ class Master:
             p is None
             or not p.written
             or p.purpose is not Purpose.DATA
-            or self._acyclic.jobs
+            or self._jobs
             or self._timed
             or type(t) is not DataTelegram
             or type(t.fc) is not ResponseFc

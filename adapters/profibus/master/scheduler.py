@@ -216,7 +216,8 @@ class Scheduler:
             tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
         sl.stats.requests += 1
         pending = Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
-        self._transmit(pending, now, fresh=True)
+        self._cycle_sent += 1
+        self.line.transmit(pending, now, fresh=True)
 
     def _count_in_turn(self, sl: Station, purpose: Purpose) -> Job | None:
         """Note a telegram other than Data_Exchange in the slave's turn; a DP-V1 one's job."""

@@ -82,6 +82,7 @@ class Station:
         self.params = params
         self.address = params.address
         self.context = context
+        self._out = context.out  # what the station reports (the master's actions)
         self.set_prm = params.set_prm(context.bus.min_tsdr).encode()
         self.outputs = bytes(params.output_len)
         self.outputs_pending = False  # set_outputs given, no Data_Exchange built from them yet
@@ -214,7 +215,7 @@ class Station:
 
     def took_inputs(self, data: bytes) -> None:
         self.stats.exchanges += 1
-        self.context.out.append(InputsReceived(self.address, data))
+        self._out.append(InputsReceived(self.address, data))
 
     def _invalid(self, text: str, now: float) -> None:
         """A reply that is no answer to the request: counted; the state decides what next."""
@@ -248,7 +249,7 @@ class Station:
 
     def _on_diag(self, diag: SlaveDiag, ext: bytes, now: float) -> None:
         self.last_diag = diag
-        self.context.out.append(DiagnosisRead(self.address, diag, ext))
+        self._out.append(DiagnosisRead(self.address, diag, ext))
         _DIAG_HANDLERS.get(self.state, Station._diag_ignored)(self, diag, now)
 
     def _diag_ignored(self, diag: SlaveDiag, now: float) -> None:
@@ -328,7 +329,7 @@ class Station:
         self.retry_at = now + self.context.bus.fault_retry
         self.enter(SlaveState.FAULT, now, text)
         if changed:
-            self.context.out.append(SlaveFault(self.address, kind, text, slave_cfg))
+            self._out.append(SlaveFault(self.address, kind, text, slave_cfg))
 
     def enter(self, new: SlaveState, now: float, reason: str = "") -> None:
         old = self.state
@@ -347,13 +348,13 @@ class Station:
         if old is SlaveState.DATA_EXCHANGE:
             self.stats.restarts += 1
             self.diag_pending = False
-            context.out.append(SlaveDown(self.address, reason or new.value))
+            self._out.append(SlaveDown(self.address, reason or new.value))
             context.left_exchange(self)
-        context.out.append(SlaveStateChanged(self.address, old, new))
+        self._out.append(SlaveStateChanged(self.address, old, new))
         if new is SlaveState.DATA_EXCHANGE:
             self.fault = None
             self.turn.count = MAX_TURN  # first Data_Exchange next turn, with the caller's outputs
-            context.out.append(SlaveUp(self.address))
+            self._out.append(SlaveUp(self.address))
 
     def check_timeout(self, now: float, busy: list[int]) -> None:
         """A start-up state that lasted too long (1.5): start again, or not ready."""
