@@ -1,0 +1,305 @@
+"""Which station is served when: the cycle, each station's turn, and the line tasks.
+
+One request is outstanding on the line at a time. A cycle visits every slave once, in
+address order; a slave's turn is a short burst: in data exchange its Data_Exchange, then a
+Slave_Diag if one is waiting (DH/RDH, Stat_Diag), then at most two DP-V1 telegrams of its
+head job (request and a first poll, :mod:`.acyclic`); during start-up up to four start-up
+telegrams. After the slaves come the line tasks: queued Sync/Freeze, the periodic
+Operate/Clear broadcast and one live-list probe when due. An absent slave is probed once
+per ``absent_retry`` with a single try, so it costs one slot time per period, never a
+whole retry series every cycle. A cycle starts no sooner than ``cycle_time`` after the
+last one started.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from typing import Final
+
+from ..dp import GlobalControl
+from ..events import LineMode, Purpose, SlaveState
+from ..fdl import MAX_STATION, DataTelegram, RequestFunction, ResponseFc, StationType
+from ..scan import status_request
+from ..timing import BusParams
+from .acyclic import JobQueue
+from .common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
+from .line import Line
+from .station import Station
+
+IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
+
+
+class Scheduler:
+    """The cycle of one line (see the module docstring)."""
+
+    def __init__(
+        self,
+        bus: BusParams,
+        stations: dict[int, Station],
+        line: Line,
+        jobs: JobQueue,
+        now: float,
+    ) -> None:
+        self.bus = bus
+        self.stations = stations
+        self.line = line
+        self.jobs = jobs
+        self.mode = LineMode.OPERATE
+        self.cycle_started: float | None = None
+        self._cycle_sent = 0
+        self.next_cycle = now
+        self.queue: deque[int] = deque()
+        self._current: int | None = None
+        self.line_done = False
+        self._one_shot: deque[GlobalControl] = deque()
+        self._gc_due = now
+        self._probe_due = now + bus.live_list_period if bus.live_list_period > 0 else math.inf
+        self._probe_next = 0
+        self.probed: dict[int, StationType] = {}  # stations that answered a live-list probe
+
+    # ------------------------------------------------------------------ commands
+
+    def set_mode(self, mode: LineMode, now: float) -> None:
+        if mode is not self.mode:
+            self.mode = mode
+            self._gc_due = now
+
+    def global_control(self, control: GlobalControl) -> None:
+        control.encode()  # FrameEncodeError now rather than on the line
+        self._one_shot.append(control)
+
+    def reset(self, now: float) -> None:
+        """A new cycle from ``now`` (the port was reopened)."""
+        self.cycle_started = None
+        self.queue.clear()
+        self._current = None
+        self.next_cycle = now
+
+    # ------------------------------------------------------------------ the cycle
+
+    def send_next(self, now: float) -> None:
+        """Transmit what comes next, if the line is free for it (1.1)."""
+        # 1.1: a request only after the line was idle TSYN (counted from the last byte
+        # written or received), and only once the previous telegram was confirmed written
+        line = self.line
+        if line.unwritten or now < line.busy_until or now < line.idle_since + line.tsyn:
+            return
+        if line.retry is not None:
+            retry, line.retry = line.retry, None
+            self._transmit(retry, now)
+            return
+        for _ in range(len(self.stations) + 8):  # bounded: each pass ends or starts a cycle
+            if self.cycle_started is None:
+                if now < self.next_cycle:
+                    return
+                self.begin_cycle(now)
+            if self._next_in_cycle(now):
+                return
+            self.end_cycle(now)
+
+    def begin_cycle(self, now: float) -> None:
+        self.cycle_started = now
+        self._cycle_sent = 0
+        self.queue = deque(self.stations)
+        self._current = None
+        self.line_done = False
+
+    def end_cycle(self, now: float) -> None:
+        started = self.cycle_started if self.cycle_started is not None else now
+        self.cycle_started = None
+        if self._cycle_sent:
+            stats = self.line.stats
+            stats.cycles += 1
+            stats.cycle.add(now - started)
+            self.next_cycle = max(now, started + self.bus.cycle_time)
+        else:
+            self.next_cycle = max(now + IDLE_GUARD, started + self.bus.cycle_time, self._due())
+
+    def _due(self) -> float:
+        """The earliest time something wants the line when nobody is exchanging."""
+        times = [self._gc_due, self._probe_due]
+        for sl in self.stations.values():
+            if sl.state in (SlaveState.ABSENT, SlaveState.FAULT):
+                times.append(sl.retry_at)
+            else:
+                times.append(-math.inf)
+        return min(times) if times else math.inf
+
+    def _next_in_cycle(self, now: float) -> bool:
+        """Transmit the next telegram of this cycle; False when the cycle is over."""
+        while True:
+            if self._current is not None:
+                sl = self.stations[self._current]
+                purpose = _WANTS[sl.state](self, sl, now) if sl.turn.count < MAX_TURN else None
+                if purpose is not None:
+                    self.send_for(sl, purpose, now)
+                    return True
+                self._current = None
+            if not self.queue:
+                break
+            self.start_turn()
+        if not self.line_done:
+            if self._line_task(now):
+                return True
+            self.line_done = True
+        return False
+
+    def start_turn(self) -> Station:
+        """The next slave of the cycle; its turn begins."""
+        self._current = self.queue.popleft()
+        sl = self.stations[self._current]
+        sl.turn = Turn()
+        return sl
+
+    def steady_next(self, now: float) -> bool:
+        """After a turn that ended with its Data_Exchange: the next slave's, if it is in
+        data exchange; at the end of the cycle, with no line task due, the cycle ends and
+        the next begins the same way. False: :meth:`send_next` decides, nothing changed
+        but what it would change first itself (an ended and a begun cycle)."""
+        line = self.line
+        if self.cycle_started is None or now < line.busy_until or now < line.idle_since + line.tsyn:
+            return False
+        if not self.queue:
+            if self.line_done or self._line_due(now):
+                return False
+            self.end_cycle(now)
+            if now < self.next_cycle:
+                return True  # the cycle time is not over: the timer starts the next
+            self.begin_cycle(now)
+        # a turn in data exchange starts with its Data_Exchange
+        if self.stations[self.queue[0]].state is not SlaveState.DATA_EXCHANGE:
+            return False
+        self.send_for(self.start_turn(), Purpose.DATA, now)
+        return True
+
+    # ------------------------------------------------------------------ a station's turn
+
+    def _want_start_up(self, sl: Station, now: float) -> Purpose | None:
+        return _START_UP[sl.state]
+
+    def _want_ready(self, sl: Station, now: float) -> Purpose | None:
+        return None if sl.turn.ready_polls else Purpose.DIAG
+
+    def _want_exchange(self, sl: Station, now: float) -> Purpose | None:
+        turn = sl.turn
+        if not turn.data:
+            return Purpose.DATA
+        if sl.diag_pending and not turn.diag:
+            return Purpose.DIAG
+        return self.jobs.want(sl, now) if self.jobs.jobs else None
+
+    def _want_probe(self, sl: Station, now: float) -> Purpose | None:
+        if sl.turn.count or now < sl.retry_at:
+            return None
+        if sl.state is SlaveState.FAULT:
+            sl.enter(SlaveState.WAIT_DIAG, now, "retrying after a fault")
+        return Purpose.DIAG
+
+    def send_for(self, sl: Station, purpose: Purpose, now: float) -> None:
+        sl.turn.count += 1
+        fc = sl.fcb.fc(RequestFunction.SRD_HIGH)
+        job: Job | None = None
+        if purpose is Purpose.DATA:  # the message of every cycle: nothing else to decide
+            sl.turn.data = True
+            data = sl.data_frame(fc, self.mode is LineMode.OPERATE)
+            dsap, tries = None, 1 + self.bus.retries
+        else:
+            job = self._count_in_turn(sl, purpose)
+            telegram: DataTelegram
+            if purpose in DPV1_PURPOSES:
+                telegram = self.jobs.request(purpose, sl, fc, job)
+            else:
+                telegram = sl.request(purpose, fc)
+            data, dsap = telegram.encode(), telegram.dsap
+            tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
+        sl.stats.requests += 1
+        pending = Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
+        self._cycle_sent += 1
+        self.line.transmit(pending, now, fresh=True)
+
+    def _count_in_turn(self, sl: Station, purpose: Purpose) -> Job | None:
+        """Note a telegram other than Data_Exchange in the slave's turn; a DP-V1 one's job."""
+        turn = sl.turn
+        if purpose is Purpose.DIAG and sl.state is SlaveState.DATA_EXCHANGE:
+            turn.diag = True
+        elif purpose is Purpose.DIAG and sl.state is SlaveState.WAIT_READY:
+            turn.ready_polls += 1
+        elif purpose in DPV1_PURPOSES:
+            turn.acyclic += 1
+            return self.jobs.head(sl.address)
+        elif purpose is Purpose.SET_PRM:
+            sl.prm_attempts += 1
+        return None
+
+    def _transmit(self, pending: Pending, now: float, fresh: bool = False) -> None:
+        self._cycle_sent += 1
+        self.line.transmit(pending, now, fresh)
+
+    # ------------------------------------------------------------------ line tasks
+
+    def _line_due(self, now: float) -> bool:
+        """A line task waits (each is looked at by :meth:`_line_task`, in this order)."""
+        return bool(self._one_shot) or now >= self._gc_due or now >= self._probe_due
+
+    def _line_task(self, now: float) -> bool:
+        """After the slaves: Sync/Freeze, the Operate/Clear broadcast, a live-list probe."""
+        if self._one_shot:
+            self._broadcast(self._one_shot.popleft(), now)
+            return True
+        if now >= self._gc_due:
+            self._gc_due = now + self.bus.global_control_period
+            clear = self.mode is LineMode.CLEAR
+            self._broadcast(GlobalControl(clear_data=clear), now)
+            return True
+        if now >= self._probe_due:
+            self._probe_due = now + self.bus.live_list_period
+            address = self._next_probe()
+            if address is not None:
+                data = status_request(address, self.bus.master_address)
+                pending = Pending(address, Purpose.STATUS, data, now, now, 1, False)
+                self._transmit(pending, now, fresh=True)
+                return True
+        return False
+
+    def _broadcast(self, control: GlobalControl, now: float) -> None:
+        self._cycle_sent += 1
+        self.line.broadcast(control, now)
+
+    def _next_probe(self) -> int | None:
+        for _ in range(MAX_STATION + 1):
+            address = self._probe_next
+            self._probe_next = (self._probe_next + 1) % (MAX_STATION + 1)
+            if address != self.bus.master_address and address not in self.stations:
+                return address
+        return None
+
+    def on_status_reply(self, p: Pending, t: Reply) -> None:
+        """A live-list probe was answered: the station is there, as what it says it is."""
+        if isinstance(t, DataTelegram) and isinstance(t.fc, ResponseFc):
+            self.probed[p.address] = t.fc.station_type
+        else:
+            self.probed[p.address] = StationType.SLAVE
+
+
+# ---------------------------------------------------------------------------------------
+# Tables
+
+_START_UP: Final[dict[SlaveState, Purpose]] = {
+    SlaveState.WAIT_DIAG: Purpose.DIAG,
+    SlaveState.SET_PRM: Purpose.SET_PRM,
+    SlaveState.CHK_CFG: Purpose.CHK_CFG,
+    SlaveState.GET_CFG: Purpose.GET_CFG,
+}
+
+_WANTS: Final[dict[SlaveState, Callable[[Scheduler, Station, float], Purpose | None]]] = {
+    SlaveState.WAIT_DIAG: Scheduler._want_start_up,
+    SlaveState.SET_PRM: Scheduler._want_start_up,
+    SlaveState.CHK_CFG: Scheduler._want_start_up,
+    SlaveState.WAIT_READY: Scheduler._want_ready,
+    SlaveState.GET_CFG: Scheduler._want_start_up,
+    SlaveState.DATA_EXCHANGE: Scheduler._want_exchange,
+    SlaveState.ABSENT: Scheduler._want_probe,
+    SlaveState.FAULT: Scheduler._want_probe,
+}
