@@ -14,9 +14,10 @@ from adapters.devicenet.scanner.probe import NodeInfo, ProbeConfig, Progress
 from adapters.devicenet.sim import SimNodeConfig, SimPhase, SimRunner
 from gateway.model import CommState
 from tests.devicenet.integration.conftest import drive, rig
+from tests.support.timing import scaled
 
 CFW08_EDS = Path(__file__).resolve().parents[3] / "config" / "eds" / "cfw08-test.eds"
-FAST = {"timeout": 0.1, "dupmac_timeout": 0.05, "window": 8}
+FAST = {"timeout": scaled(0.1), "dupmac_timeout": scaled(0.05), "window": 8}
 
 
 async def _sims(line: LinkConfig, macs: list[int]) -> tuple[SimRunner, asyncio.Task[None]]:
@@ -66,8 +67,11 @@ async def test_scan_refuses_beside_a_running_scanner(can_line: LinkConfig) -> No
     async with rig(can_line, [drive(4)]) as r:
         await r.wait("d4", lambda s: s.comm is CommState.ONLINE)
         before = r.adapter.diagnostics()["drives"]["d4"]["allocations"]
+        # the running scanner must answer the tool's Duplicate MAC ID check in time: the
+        # fact sheet's 1 s (2.3), not the fast scans' 50 ms (a loaded machine missed that)
+        config = {**FAST, "dupmac_timeout": scaled(1.0)}
         with pytest.raises(ScanRefused, match="MAC ID 0 is taken on the line"):
-            await scan_line(can_line, ProbeConfig(**FAST))  # type: ignore[arg-type]
+            await scan_line(can_line, ProbeConfig(**config))  # type: ignore[arg-type]
         state = r.hub.state("d4")
         assert state.comm is CommState.ONLINE
         assert r.adapter.diagnostics()["drives"]["d4"]["allocations"] == before
