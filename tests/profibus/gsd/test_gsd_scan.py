@@ -19,8 +19,13 @@ from adapters.profibus.sim.port import SimPort
 from adapters.profibus.timing import BusParams
 from gateway.cli import main
 from gateway.config import parse
+from tests.support.timing import scaled
 
 from .test_gsd_line import CONFIG, DRIVES, GSD_DIR
+
+# The simulated slaves answer from a thread of this process: on a loaded machine a reply
+# came later than the slot time plus 10 ms and a station went unseen (3 of 4 answered).
+TOLERANT = ["--latency", f"{scaled(0.05):g}", "--retries", "3"]
 
 
 @pytest.fixture
@@ -59,7 +64,7 @@ def sim_path() -> Iterator[str]:
 def test_scan_matches_each_station_to_its_gsd_and_module(
     sim_path: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    args = ["profibus", "scan", "--port", sim_path, "--from", "2", "--to", "7"]
+    args = ["profibus", "scan", "--port", sim_path, "--from", "2", "--to", "7", *TOLERANT]
     assert main([*args, "--gsd-dir", str(GSD_DIR)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0] == f"{sim_path}: 4 station(s) answered, addresses 2-7"
@@ -76,7 +81,7 @@ def test_scan_matches_each_station_to_its_gsd_and_module(
 def test_the_toml_stanzas_load_and_reach_data_exchange(
     sim_path: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    args = ["profibus", "scan", "--port", sim_path, "--from", "2", "--to", "7"]
+    args = ["profibus", "scan", "--port", sim_path, "--from", "2", "--to", "7", *TOLERANT]
     assert main([*args, "--gsd-dir", str(GSD_DIR), "--toml"]) == 0
     stanzas = capsys.readouterr().out
     assert 'device = "CFW-11"\naddress = 3\n' in stanzas
