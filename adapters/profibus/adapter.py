@@ -38,19 +38,11 @@ from enum import Enum
 from typing import Any, ClassVar, Final
 
 from adapters.link.config import missing_options, unsimulated
-from gateway.adapter import EventKind, HubPort, ParamValue
-from gateway.config import BusConfig, DriveConfig
-from gateway.devices import devices_of
-from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
-from gateway.loader import load
-from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
-from gateway.schema import Table
-
-from . import options as opts
-from .dp import GlobalControl
-from .driver import LineDriver
-from .link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
-from .master import (
+from adapters.profibus import options as opts
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.driver import LineDriver
+from adapters.profibus.link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
+from adapters.profibus.master import (
     DiagnosisRead,
     FaultKind,
     InputsReceived,
@@ -66,7 +58,7 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
-from .profile import (
+from adapters.profibus.profile import (
     BUS,
     PROFILES,
     SET_SLAVE_ADD_DEFAULT,
@@ -77,6 +69,13 @@ from .profile import (
     RecordAccessError,
     SlaveSetup,
 )
+from gateway.adapter import EventKind, HubPort, ParamValue
+from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
+from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.loader import load
+from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
+from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
@@ -453,7 +452,7 @@ class ProfibusAdapter:
         override = self._overrides.get(drive.id)
         if override is None or override.gsd is None or slave_cfg is None:
             return ""
-        from .gsd import match_modules
+        from adapters.profibus.gsd import match_modules
 
         modules = match_modules(override.gsd, slave_cfg)
         if modules is None:

@@ -15,9 +15,15 @@ from typing import Any, Final
 
 from adapters.link.serial import SerialLink
 from adapters.link.stream import SPIN_LIMIT, ReplyEngine, StreamDriver, Transmission
-
-from .fdl import DataTelegram, Discarded, NeedMore, ShortAck, TelegramDecoder, TokenTelegram
-from .master import Event, LineNoise, Received, Receiving, Transmit, Written
+from adapters.profibus.fdl import (
+    DataTelegram,
+    Discarded,
+    NeedMore,
+    ShortAck,
+    TelegramDecoder,
+    TokenTelegram,
+)
+from adapters.profibus.master import Event, LineNoise, Received, Receiving, Transmit, Written
 
 __all__ = ["SPIN_LIMIT", "FdlStream", "LineDriver"]
 

@@ -47,17 +47,16 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
+from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.gsd import Gsd, GsdError, GsdSetupError, build_setup
+from adapters.profibus.gsd import load as load_gsd
+from adapters.profibus.link import URL_SCHEMES, Rs485, is_url
+from adapters.profibus.profile import BUILTIN_TELEGRAM
+from adapters.profibus.timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
 from gateway.schema import Table
-
-from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
-from .errors import ProfibusDecodeError
-from .gsd import Gsd, GsdError, GsdSetupError, build_setup
-from .gsd import load as load_gsd
-from .link import URL_SCHEMES, Rs485, is_url
-from .profile import BUILTIN_TELEGRAM
-from .timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 
 WATCHDOG_MIN: Final = 0.01  # 1.6: 10 ms base x 1 x 1
 WATCHDOG_MAX: Final = 650.25  # 1.6: 10 ms x 255 x 255

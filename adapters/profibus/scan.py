@@ -13,11 +13,11 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .diag import SlaveDiag
-from .dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
-from .errors import ProfibusDecodeError
-from .events import Event, LineNoise, Received, Transmit, Written
-from .fdl import (
+from adapters.profibus.diag import SlaveDiag
+from adapters.profibus.dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.events import Event, LineNoise, Received, Transmit, Written
+from adapters.profibus.fdl import (
     DataTelegram,
     FcbState,
     RequestFc,
@@ -25,8 +25,8 @@ from .fdl import (
     ResponseFc,
     StationType,
 )
-from .linestats import LineStats
-from .timing import BusParams
+from adapters.profibus.linestats import LineStats
+from adapters.profibus.timing import BusParams
 
 
 def status_request(address: int, master: int) -> bytes:

@@ -19,8 +19,7 @@ from adapters.profibus.driver import SPIN_LIMIT, LineDriver
 from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
 from adapters.profibus.master import Received, Transmit, Written
-
-from .support import until
+from tests.profibus.support import until
 
 
 @contextlib.contextmanager

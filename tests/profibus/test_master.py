@@ -26,9 +26,8 @@ from adapters.profibus.master import (
 )
 from adapters.profibus.sim.slave import SlaveMode
 from gateway.errors import FrameEncodeError
-
-from .script import Script
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.script import Script
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 DE = SlaveState.DATA_EXCHANGE
 

@@ -44,8 +44,7 @@ from adapters.profibus.master import (
 from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.sim.slave import DpSlave
 from gateway.sim import FaultInjector
-
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 FAST = settings(max_examples=15, deadline=None)
 ADDRESSES = st.lists(st.integers(3, 12), min_size=1, max_size=5, unique=True)

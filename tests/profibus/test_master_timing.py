@@ -23,9 +23,8 @@ from adapters.profibus.master import (
     Transmit,
 )
 from adapters.profibus.timing import BusParams
-
-from .script import Script
-from .test_master_golden import (
+from tests.profibus.script import Script
+from tests.profibus.test_master_golden import (
     CHK_CFG,
     DIAG_FRESH,
     DIAG_READY,
@@ -36,7 +35,7 @@ from .test_master_golden import (
     SET_PRM,
     slave,
 )
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 SLOW = BusParams.for_baudrate(19200)  # the line: TSYN 1.72 ms, reply wait ~15 ms
 FAST = BusParams.for_baudrate(500000, latency=0.001)  # TSYN 66 us

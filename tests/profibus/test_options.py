@@ -15,8 +15,7 @@ from gateway.cli import main
 from gateway.config import parse
 from gateway.errors import ConfigErrors
 from gateway.model import Device
-
-from .support import ADAPTER
+from tests.profibus.support import ADAPTER
 
 FILE = "config/site.toml"
 

@@ -25,12 +25,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from gateway.errors import FrameEncodeError
-
-from .. import dpv1
-from ..dp import GlobalControl
-from ..errors import FdlDecodeError
-from ..events import (
+from adapters.profibus import dpv1
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.errors import FdlDecodeError
+from adapters.profibus.events import (
     Action,
     Event,
     LineMode,
@@ -43,7 +41,7 @@ from ..events import (
     Written,
     check_slave,
 )
-from ..fdl import (
+from adapters.profibus.fdl import (
     DataTelegram,
     FcbState,
     ResponseFc,
@@ -51,13 +49,14 @@ from ..fdl import (
     ShortAck,
     TokenTelegram,
 )
-from ..linestats import LineStats, SlaveStats
-from ..timing import BusParams
-from .acyclic import JobQueue
-from .common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
-from .line import Line
-from .scheduler import Scheduler
-from .station import Station, StationContext
+from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.master.acyclic import JobQueue
+from adapters.profibus.master.common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
+from adapters.profibus.master.line import Line
+from adapters.profibus.master.scheduler import Scheduler
+from adapters.profibus.master.station import Station, StationContext
+from adapters.profibus.timing import BusParams
+from gateway.errors import FrameEncodeError
 
 
 class Master:

@@ -14,12 +14,12 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from ..dp import GlobalControl, global_control_request
-from ..errors import DecodeFailure, FdlDecodeError
-from ..events import Action, Transmit
-from ..linestats import LineStats, SlaveStats
-from ..timing import MAX_TELEGRAM, BusParams
-from .common import Job, Pending
+from adapters.profibus.dp import GlobalControl, global_control_request
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError
+from adapters.profibus.events import Action, Transmit
+from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.master.common import Job, Pending
+from adapters.profibus.timing import MAX_TELEGRAM, BusParams
 
 
 class Line:

@@ -18,15 +18,21 @@ from collections import deque
 from collections.abc import Callable
 from typing import Final
 
-from ..dp import GlobalControl
-from ..events import LineMode, Purpose, SlaveState
-from ..fdl import MAX_STATION, DataTelegram, RequestFunction, ResponseFc, StationType
-from ..scan import status_request
-from ..timing import BusParams
-from .acyclic import JobQueue
-from .common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
-from .line import Line
-from .station import Station
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.events import LineMode, Purpose, SlaveState
+from adapters.profibus.fdl import (
+    MAX_STATION,
+    DataTelegram,
+    RequestFunction,
+    ResponseFc,
+    StationType,
+)
+from adapters.profibus.master.acyclic import JobQueue
+from adapters.profibus.master.common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
+from adapters.profibus.master.line import Line
+from adapters.profibus.master.station import Station
+from adapters.profibus.scan import status_request
+from adapters.profibus.timing import BusParams
 
 IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
 

@@ -16,12 +16,17 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
-from gateway.errors import FrameEncodeError
-
-from ..diag import SlaveDiag, describe_blocks
-from ..dp import DataExchange, GetCfgRequest, MasterSap, SlaveDiagRequest, SlaveSap, build_request
-from ..errors import ProfibusDecodeError
-from ..events import (
+from adapters.profibus.diag import SlaveDiag, describe_blocks
+from adapters.profibus.dp import (
+    DataExchange,
+    GetCfgRequest,
+    MasterSap,
+    SlaveDiagRequest,
+    SlaveSap,
+    build_request,
+)
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.events import (
     Action,
     DiagnosisRead,
     FaultKind,
@@ -35,10 +40,20 @@ from ..events import (
     SlaveUp,
     describe_cfg,
 )
-from ..fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
-from ..linestats import LineStats, SlaveStats
-from ..timing import MAX_TELEGRAM, BusParams
-from .common import DATA_OK, MAX_TURN, REQUEST_NAMES, Pending, Reply, Turn, show, status_of
+from adapters.profibus.fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
+from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.master.common import (
+    DATA_OK,
+    MAX_TURN,
+    REQUEST_NAMES,
+    Pending,
+    Reply,
+    Turn,
+    show,
+    status_of,
+)
+from adapters.profibus.timing import MAX_TELEGRAM, BusParams
+from gateway.errors import FrameEncodeError
 
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"
 FRAME_MEMO: Final = 4  # Data_Exchange telegrams kept encoded per slave (2 FCBs x outputs)

@@ -31,15 +31,14 @@ from adapters.profibus.profile import (
     RecordChannel,
     SlaveSetup,
 )
+from adapters.profibus.weg import words as w
+from adapters.profibus.weg.options import WegOptions, parse_options
+from adapters.profibus.weg.paramtable import PARAM_TABLES
+from adapters.profibus.weg.records import RecordParams
+from adapters.profibus.weg.spec import SIGNED, DataProfile, ModelSpec, scaled
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, Readings, SpeedScale
-
-from . import words as w
-from .options import WegOptions, parse_options
-from .paramtable import PARAM_TABLES
-from .records import RecordParams
-from .spec import SIGNED, DataProfile, ModelSpec, scaled
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

@@ -19,8 +19,7 @@ from adapters.profibus.sim.port import SimPort
 from adapters.profibus.timing import BusParams
 from gateway.cli import main
 from gateway.config import parse
-
-from .test_gsd_line import CONFIG, DRIVES, GSD_DIR
+from tests.profibus.gsd.test_gsd_line import CONFIG, DRIVES, GSD_DIR
 
 
 @pytest.fixture

@@ -14,8 +14,7 @@ from adapters.profibus.sim.slave import SlaveMode
 from gateway.adapter import EventKind
 from gateway.errors import DriveOffline, ParameterError
 from gateway.model import CommState, DriveCommand, DriveState, Source
-
-from ..support import line_config, running_line, until
+from tests.profibus.support import line_config, running_line, until
 
 pytestmark = pytest.mark.filterwarnings("error")
 
