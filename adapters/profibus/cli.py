@@ -311,7 +311,7 @@ def _device_of(gsd: Any) -> Device | None:
 
 def stanza(address: int, match: GsdMatch) -> str:
     """A ``[[buses.profibus.drives]]`` table for a matched slave, ready to paste."""
-    from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
+    from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 
     device = _device_of(match.gsd)
     lines = [

@@ -22,7 +22,7 @@ from enum import IntEnum
 from typing import ClassVar, Final, Self
 
 from adapters.profibus._pdu import bit, bits, exact, fail, need
-from adapters.profibus.cfg import Configuration
+from adapters.profibus.chkcfg import Configuration
 from adapters.profibus.diag import SlaveDiag
 from adapters.profibus.errors import DecodeFailure, require_length
 from adapters.profibus.fdl import (

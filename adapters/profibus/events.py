@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from adapters.profibus import dpv1
-from adapters.profibus.cfg import Configuration
+from adapters.profibus.chkcfg import Configuration
 from adapters.profibus.diag import SlaveDiag
 from adapters.profibus.dp import Dpv1Status, SetPrm, watchdog_factors
 from adapters.profibus.errors import FdlDecodeError, ProfibusDecodeError
@@ -82,7 +82,7 @@ class RecordFailure(Enum):
 
 
 @dataclass(frozen=True)
-class Received:
+class FrameIn:
     """A telegram decoded off the line."""
 
     telegram: DataTelegram | ShortAck | TokenTelegram
@@ -115,7 +115,7 @@ class Written:
     at: float
 
 
-Event = Received | LineNoise | Receiving | Written
+Event = FrameIn | LineNoise | Receiving | Written
 
 
 @dataclass(frozen=True)

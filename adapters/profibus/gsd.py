@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
-from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 from adapters.profibus.errors import ProfibusDecodeError
 from gateway.errors import GatewayError
 

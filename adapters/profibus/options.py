@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
-from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 from adapters.profibus.errors import ProfibusDecodeError
 from adapters.profibus.gsd import Gsd, GsdError, GsdSetupError, build_setup
 from adapters.profibus.gsd import load as load_gsd

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from adapters.profibus.diag import SlaveDiag
 from adapters.profibus.dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.events import Event, LineNoise, Received, Transmit, Written
+from adapters.profibus.events import Event, FrameIn, LineNoise, Transmit, Written
 from adapters.profibus.fdl import (
     DataTelegram,
     FcbState,
@@ -25,7 +25,7 @@ from adapters.profibus.fdl import (
     ResponseFc,
     StationType,
 )
-from adapters.profibus.linestats import LineStats
+from adapters.profibus.figures import LineFigures
 from adapters.profibus.timing import BusParams
 
 
@@ -89,7 +89,7 @@ class Scanner:
         self.identify = identify
         self.found: dict[int, StationType] = {}
         self.slaves: dict[int, SlaveInfo] = {}
-        self.stats = LineStats()
+        self.stats = LineFigures()
         self._probe: _Probe | None = None
         self._idle_since = now - bus.tsyn
 
@@ -118,7 +118,7 @@ class Scanner:
             self._idle_since = max(self._idle_since, now)
         if probe is not None and not probe.written:
             return out
-        if probe is not None and isinstance(event, Received):
+        if probe is not None and isinstance(event, FrameIn):
             t = event.telegram
             if isinstance(t, DataTelegram) and not t.is_request and t.sa == probe.address:
                 self._answered(probe, t)

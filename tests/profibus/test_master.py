@@ -9,7 +9,7 @@ import pytest
 from adapters.profibus.diag import SlaveDiag
 from adapters.profibus.dp import GlobalControl
 from adapters.profibus.fdl import SHORT_ACK, DataTelegram, ResponseFc, ResponseStatus
-from adapters.profibus.linestats import Samples
+from adapters.profibus.figures import Samples
 from adapters.profibus.master import (
     DiagnosisRead,
     FaultKind,

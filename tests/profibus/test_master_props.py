@@ -31,11 +31,11 @@ from adapters.profibus.fdl import (
     decode_telegram,
 )
 from adapters.profibus.master import (
+    FrameIn,
     InputsReceived,
     LineMode,
     LineNoise,
     Master,
-    Received,
     Receiving,
     SlaveState,
     SlaveUp,
@@ -119,15 +119,15 @@ responses = st.builds(
     data=st.binary(max_size=40),
 )
 events = st.one_of(
-    responses.map(Received),
-    st.just(Received(ShortAck())),
+    responses.map(FrameIn),
+    st.just(FrameIn(ShortAck())),
     st.builds(
         lambda raw: LineNoise(FdlDecodeError(DecodeFailure.BAD_CHECKSUM, "noise", raw)),
         st.binary(min_size=1, max_size=8),
     ),
     st.just(Receiving()),
     st.builds(
-        lambda sa: Received(DataTelegram(5, 2, RequestFc(RequestFunction.SRD_HIGH), data=b"x")),
+        lambda sa: FrameIn(DataTelegram(5, 2, RequestFc(RequestFunction.SRD_HIGH), data=b"x")),
         st.just(0),
     ),
 )

@@ -29,13 +29,13 @@ from collections.abc import Callable, Iterable
 from enum import Enum
 from typing import Any
 
-from adapters.devicenet.canerror import LineCondition, LineHealth, health_after
 from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanId
 from adapters.devicenet.explicit import Request
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import PredefinedId, PredefinedMessage, match_predefined
-from adapters.devicenet.scanner.api import (
+from adapters.devicenet.scanner.context import LineContext, ms
+from adapters.devicenet.scanner.events import (
     Action,
     BadFrame,
     BusErrorIn,
@@ -51,11 +51,11 @@ from adapters.devicenet.scanner.api import (
     ScannerConfig,
     TxFailed,
 )
-from adapters.devicenet.scanner.context import LineContext, ms
 from adapters.devicenet.scanner.jobs import ExplicitJobs
 from adapters.devicenet.scanner.machine import NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
 from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.link.canerror import LineCondition, LineHealth, health_after
 from gateway.errors import FrameEncodeError
 
 

@@ -31,10 +31,10 @@ from adapters.profibus.errors import FdlDecodeError
 from adapters.profibus.events import (
     Action,
     Event,
+    FrameIn,
     LineMode,
     LineNoise,
     Purpose,
-    Received,
     SlaveParams,
     SlaveState,
     Transmit,
@@ -49,7 +49,7 @@ from adapters.profibus.fdl import (
     ShortAck,
     TokenTelegram,
 )
-from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.acyclic import JobQueue
 from adapters.profibus.master.common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
 from adapters.profibus.master.line import Line
@@ -65,7 +65,7 @@ class Master:
     def __init__(self, bus: BusParams, slaves: Iterable[SlaveParams], now: float = 0.0) -> None:
         self.bus = bus
         self.address = bus.master_address
-        self.stats = LineStats()
+        self.stats = LineFigures()
         self._out: list[Action] = []
         self._line = Line(bus, self.stats, self._out, now)
         self._acyclic = JobQueue(bus, self._line, self._out)
@@ -100,7 +100,7 @@ class Master:
     def state_of(self, address: int) -> SlaveState:
         return self._slave(address).state
 
-    def slave_stats(self, address: int) -> SlaveStats:
+    def slave_stats(self, address: int) -> SlaveFigures:
         return self._slave(address).stats
 
     def fault_of(self, address: int) -> str | None:
@@ -198,7 +198,7 @@ class Master:
         if self._stopped:
             return []
         if event is not None:
-            if type(event) is Received and self._steady_reply(event.telegram, now):
+            if type(event) is FrameIn and self._steady_reply(event.telegram, now):
                 return self._take()
             self._on_event(event, now)
         if self._jobs:
@@ -251,7 +251,7 @@ class Master:
             return
         # 1.1: any byte on the line restarts the idle time before the next request
         line.heard(now)
-        if isinstance(event, Received):
+        if isinstance(event, FrameIn):
             self._on_received(event.telegram, now)
         elif isinstance(event, LineNoise):
             pending = line.pending
@@ -343,7 +343,7 @@ class Master:
             self._scheduler.probed.pop(pending.address, None)
             return
         sl = self._slaves[pending.address]
-        counters: list[LineStats | SlaveStats] = [self.stats, sl.stats]
+        counters: list[LineFigures | SlaveFigures] = [self.stats, sl.stats]
         if pending.tries < pending.max_tries:
             for c in counters:
                 c.retries += 1

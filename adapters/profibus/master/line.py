@@ -17,7 +17,7 @@ from collections import deque
 from adapters.profibus.dp import GlobalControl, global_control_request
 from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from adapters.profibus.events import Action, Transmit
-from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.common import Job, Pending
 from adapters.profibus.timing import MAX_TELEGRAM, BusParams
 
@@ -25,7 +25,7 @@ from adapters.profibus.timing import MAX_TELEGRAM, BusParams
 class Line:
     """The request on the line, the idle time before the next, and what is unconfirmed."""
 
-    def __init__(self, bus: BusParams, stats: LineStats, out: list[Action], now: float) -> None:
+    def __init__(self, bus: BusParams, stats: LineFigures, out: list[Action], now: float) -> None:
         self.bus = bus
         self.address = bus.master_address
         self.stats = stats
@@ -127,10 +127,10 @@ class Line:
             pending.garbled = True
             pending.deadline = max(pending.deadline, now + self.bus.reply_wait)
 
-    def count_noise(self, error: FdlDecodeError, slave: SlaveStats | None) -> None:
+    def count_noise(self, error: FdlDecodeError, slave: SlaveFigures | None) -> None:
         """Count undecodable bytes (line level, and for a slave if given)."""
         self.stats.discarded_bytes += len(error.raw)
-        counters: list[LineStats | SlaveStats] = [self.stats]
+        counters: list[LineFigures | SlaveFigures] = [self.stats]
         if slave is not None:
             counters.append(slave)
         for c in counters:

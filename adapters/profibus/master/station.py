@@ -41,7 +41,7 @@ from adapters.profibus.events import (
     describe_cfg,
 )
 from adapters.profibus.fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
-from adapters.profibus.linestats import LineStats, SlaveStats
+from adapters.profibus.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.common import (
     DATA_OK,
     MAX_TURN,
@@ -81,7 +81,7 @@ class StationContext:
 
     bus: BusParams
     out: list[Action]
-    stats: LineStats
+    stats: LineFigures
     left_exchange: Callable[[Station], None]
     timed: dict[int, Station] = field(default_factory=dict)
 
@@ -111,7 +111,7 @@ class Station:
         self.last_diag: SlaveDiag | None = None
         self.frames: dict[tuple[bool, bool, bytes], bytes] = {}
         self.turn = Turn()
-        self.stats = SlaveStats()
+        self.stats = SlaveFigures()
 
     # ------------------------------------------------------------------ outputs
 

@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
-from adapters.profibus.cfg import CompactId, IoDirection
+from adapters.profibus.chkcfg import CompactId, IoDirection
 from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
 from adapters.profibus.profile import (
     AddressRange,

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, ClassVar, Final
 
 from adapters.profibus import profidrive as pd
 from adapters.profibus import wegrecord
-from adapters.profibus.cfg import CompactId, IoDirection
+from adapters.profibus.chkcfg import CompactId, IoDirection
 from adapters.profibus.dpv1 import WEG_ERROR_CODE_1_TEXTS
 from adapters.profibus.errors import ProfibusDecodeError
 from adapters.profibus.profile import RecordAccessError, SimDeviceBase
