@@ -89,7 +89,7 @@ class Scanner:
         self.identify = identify
         self.found: dict[int, StationType] = {}
         self.slaves: dict[int, SlaveInfo] = {}
-        self.stats = LineFigures()
+        self.figures = LineFigures()
         self._probe: _Probe | None = None
         self._idle_since = now - bus.tsyn
 
@@ -125,17 +125,17 @@ class Scanner:
                 self._probe = None
                 self._idle_since = now
         elif probe is not None and isinstance(event, LineNoise):
-            self.stats.framing_errors += 1
+            self.figures.framing_errors += 1
             probe.deadline = max(probe.deadline, now + self.bus.reply_wait)
         probe = self._probe
         if probe is not None and now >= probe.deadline:
             self._probe = None
             self._idle_since = now
             if probe.tries < 1 + self.bus.retries:
-                self.stats.retries += 1
+                self.figures.retries += 1
                 self._send(probe, now, out)
             else:
-                self.stats.timeouts += 1
+                self.figures.timeouts += 1
                 self._finished(probe)
         if self._probe is None and self._todo:
             self._send(self._todo.popleft(), now, out)
@@ -175,5 +175,5 @@ class Scanner:
         probe.tries += 1
         probe.written = False
         self._probe = probe
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         out.append(Transmit(probe.data, not_before, True))

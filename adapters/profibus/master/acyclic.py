@@ -234,11 +234,11 @@ class JobQueue:
         try:
             answer = dpv1.decode_response(data)
         except ProfibusDecodeError as exc:
-            station.stats.invalid_replies += 1
+            station.figures.invalid_replies += 1
             self.finish(job, RecordFailure.BAD_REPLY, f"undecodable DP-V1 answer: {exc.message}")
             return
         if not _answers(job.request, answer):
-            station.stats.invalid_replies += 1  # a stale answer to an older request: poll on
+            station.figures.invalid_replies += 1  # a stale answer to an older request: poll on
             job.requested = True
             station.turn.acyclic_wait = True
             return

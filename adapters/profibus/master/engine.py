@@ -65,12 +65,12 @@ class Master:
     def __init__(self, bus: BusParams, slaves: Iterable[SlaveParams], now: float = 0.0) -> None:
         self.bus = bus
         self.address = bus.master_address
-        self.stats = LineFigures()
+        self.figures = LineFigures()
         self._out: list[Action] = []
-        self._line = Line(bus, self.stats, self._out, now)
+        self._line = Line(bus, self.figures, self._out, now)
         self._acyclic = JobQueue(bus, self._line, self._out)
         self._jobs = self._acyclic.jobs  # the unfinished DP-V1 jobs (looked at every step)
-        context = StationContext(bus, self._out, self.stats, self._acyclic.station_left)
+        context = StationContext(bus, self._out, self.figures, self._acyclic.station_left)
         self._timed = context.timed  # stations in a start-up state with a timeout
         self._slaves: dict[int, Station] = {}
         for params in sorted(slaves, key=lambda s: s.address):
@@ -100,8 +100,8 @@ class Master:
     def state_of(self, address: int) -> SlaveState:
         return self._slave(address).state
 
-    def slave_stats(self, address: int) -> SlaveFigures:
-        return self._slave(address).stats
+    def slave_figures(self, address: int) -> SlaveFigures:
+        return self._slave(address).figures
 
     def fault_of(self, address: int) -> str | None:
         return self._slave(address).fault
@@ -118,7 +118,7 @@ class Master:
             "state": sl.state.value,
             "fault": sl.fault,
             "jobs_queued": self._acyclic.queued(address),
-            **sl.stats.to_json(),
+            **sl.figures.to_json(),
         }
 
     def line_diagnostics(self) -> dict[str, Any]:
@@ -126,7 +126,7 @@ class Master:
             "mode": self.mode.value,
             "baudrate": self.bus.baudrate,
             "master_address": self.address,
-            **self.stats.to_json(),
+            **self.figures.to_json(),
             "live_list": self.live_list(),
         }
 
@@ -190,7 +190,7 @@ class Master:
     def count_noise(self, error: FdlDecodeError, address: int | None = None) -> None:
         """Count undecodable bytes (line level, and for ``address`` if given)."""
         sl = self._slaves.get(address) if address is not None else None
-        self._line.count_noise(error, sl.stats if sl is not None else None)
+        self._line.count_noise(error, sl.figures if sl is not None else None)
 
     # ------------------------------------------------------------------ stepping
 
@@ -265,15 +265,15 @@ class Master:
         if isinstance(telegram, DataTelegram) and telegram.is_request:
             return  # our own echo (half-duplex converters) or another station's request
         if pending is None or not pending.written or isinstance(telegram, TokenTelegram):
-            self.stats.unexpected += 1
+            self.figures.unexpected += 1
             return
         if isinstance(telegram, DataTelegram) and not _answers_request(
             pending, telegram, self.address
         ):
-            self.stats.unexpected += 1  # e.g. a late reply to an earlier request
+            self.figures.unexpected += 1  # e.g. a late reply to an earlier request
             return
         if isinstance(telegram, ShortAck) and not self._takes_short_ack(pending):
-            self.stats.unexpected += 1  # E5 has no address: a late answer to another request
+            self.figures.unexpected += 1  # E5 has no address: a late answer to another request
             return
         self._line.end_request(now)
         if pending.purpose is Purpose.STATUS:
@@ -343,7 +343,7 @@ class Master:
             self._scheduler.probed.pop(pending.address, None)
             return
         sl = self._slaves[pending.address]
-        counters: list[LineFigures | SlaveFigures] = [self.stats, sl.stats]
+        counters: list[LineFigures | SlaveFigures] = [self.figures, sl.figures]
         if pending.tries < pending.max_tries:
             for c in counters:
                 c.retries += 1

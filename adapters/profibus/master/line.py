@@ -25,10 +25,10 @@ from adapters.profibus.timing import MAX_TELEGRAM, BusParams
 class Line:
     """The request on the line, the idle time before the next, and what is unconfirmed."""
 
-    def __init__(self, bus: BusParams, stats: LineFigures, out: list[Action], now: float) -> None:
+    def __init__(self, bus: BusParams, figures: LineFigures, out: list[Action], now: float) -> None:
         self.bus = bus
         self.address = bus.master_address
-        self.stats = stats
+        self.figures = figures
         self.out = out
         self.tsyn = bus.tsyn  # BusParams computes these on every call; each message needs them
         self.reply_wait = bus.reply_wait
@@ -63,14 +63,14 @@ class Line:
         pending.written = False
         self.unwritten.append((len(pending.data), pending))
         self.pending = pending
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         self.out.append(Transmit(pending.data, not_before, True))
 
     def broadcast(self, control: GlobalControl, now: float) -> None:
         data = global_control_request(control, sa=self.address).encode()
         not_before = max(now, self.idle_since + self.tsyn)
         self.unwritten.append((len(data), None))  # busy until Written + line time + TSYN
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         self.out.append(Transmit(data, not_before, False))
 
     def leave(self, now: float) -> list[Transmit]:
@@ -129,8 +129,8 @@ class Line:
 
     def count_noise(self, error: FdlDecodeError, slave: SlaveFigures | None) -> None:
         """Count undecodable bytes (line level, and for a slave if given)."""
-        self.stats.discarded_bytes += len(error.raw)
-        counters: list[LineFigures | SlaveFigures] = [self.stats]
+        self.figures.discarded_bytes += len(error.raw)
+        counters: list[LineFigures | SlaveFigures] = [self.figures]
         if slave is not None:
             counters.append(slave)
         for c in counters:

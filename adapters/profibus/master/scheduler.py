@@ -116,9 +116,9 @@ class Scheduler:
         started = self.cycle_started if self.cycle_started is not None else now
         self.cycle_started = None
         if self._cycle_sent:
-            stats = self.line.stats
-            stats.cycles += 1
-            stats.cycle.add(now - started)
+            figures = self.line.figures
+            figures.cycles += 1
+            figures.cycle.add(now - started)
             self.next_cycle = max(now, started + self.bus.cycle_time)
         else:
             self.next_cycle = max(now + IDLE_GUARD, started + self.bus.cycle_time, self._due())
@@ -220,7 +220,7 @@ class Scheduler:
                 telegram = sl.request(purpose, fc)
             data, dsap = telegram.encode(), telegram.dsap
             tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
-        sl.stats.requests += 1
+        sl.figures.requests += 1
         pending = Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
         self._cycle_sent += 1
         self.line.transmit(pending, now, fresh=True)

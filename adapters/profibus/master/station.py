@@ -81,7 +81,7 @@ class StationContext:
 
     bus: BusParams
     out: list[Action]
-    stats: LineFigures
+    figures: LineFigures
     left_exchange: Callable[[Station], None]
     timed: dict[int, Station] = field(default_factory=dict)
 
@@ -111,7 +111,7 @@ class Station:
         self.last_diag: SlaveDiag | None = None
         self.frames: dict[tuple[bool, bool, bytes], bytes] = {}
         self.turn = Turn()
-        self.stats = SlaveFigures()
+        self.figures = SlaveFigures()
 
     # ------------------------------------------------------------------ outputs
 
@@ -164,7 +164,7 @@ class Station:
     # ------------------------------------------------------------------ replies
 
     def answered(self, pending: Pending, now: float) -> None:
-        self.stats.response.add(now - pending.sent_at)
+        self.figures.response.add(now - pending.sent_at)
         if pending.fcb_function:
             self.fcb = self.fcb.acknowledged()  # 1.3: toggle after each acknowledged SRD
 
@@ -229,19 +229,19 @@ class Station:
         self.took_inputs(data)
 
     def took_inputs(self, data: bytes) -> None:
-        self.stats.exchanges += 1
+        self.figures.exchanges += 1
         self._out.append(InputsReceived(self.address, data))
 
     def _invalid(self, text: str, now: float) -> None:
         """A reply that is no answer to the request: counted; the state decides what next."""
-        self.stats.invalid_replies += 1
-        self.context.stats.invalid_replies += 1
+        self.figures.invalid_replies += 1
+        self.context.figures.invalid_replies += 1
         if self.state is SlaveState.DATA_EXCHANGE:
             self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def _restart_bad(self, text: str, now: float) -> None:
-        self.stats.invalid_replies += 1
-        self.context.stats.invalid_replies += 1
+        self.figures.invalid_replies += 1
+        self.context.figures.invalid_replies += 1
         self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def gave_up(self, pending: Pending, now: float) -> None:
@@ -361,7 +361,7 @@ class Station:
         else:
             context.timed.pop(self.address, None)
         if old is SlaveState.DATA_EXCHANGE:
-            self.stats.restarts += 1
+            self.figures.restarts += 1
             self.diag_pending = False
             self._out.append(SlaveDown(self.address, reason or new.value))
             context.left_exchange(self)
