@@ -174,11 +174,11 @@ class ProfibusAdapter:
     # ------------------------------------------------------------------ config
 
     @classmethod
-    def parse_bus_options(cls, table: Table) -> opts.ProfibusOptions:
+    def parse_bus_options(cls, table: Table) -> opts.BusOptions:
         return opts.parse_bus_options(table)
 
     @classmethod
-    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.DriveOptions:
         profile_class = cls.profile_class(drive.device)
         refusal = profile_class.addresses.refusal(drive.device.value, drive.address)
         if refusal is not None:
@@ -206,16 +206,16 @@ class ProfibusAdapter:
         ``simulate = true``); None: the configured port."""
         self.bus = bus
         self.name = bus.name
-        if not isinstance(bus.options, opts.ProfibusOptions):
+        if not isinstance(bus.options, opts.BusOptions):
             raise missing_options(bus.name)
-        self.options: opts.ProfibusOptions = bus.options
+        self.options: opts.BusOptions = bus.options
         self.links: SerialLinks | None = links if links is not None else self._real_port()
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
         self._overrides: dict[str, opts.SetupOverride] = {}
         for d in bus.drives:
-            drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
+            drive_opts = d.options if isinstance(d.options, opts.DriveOptions) else None
             inner, override = opts.profile_config(d)
             if override is not None:
                 self._overrides[d.id] = override

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 from adapters.profibus.driver import LineDriver
 from adapters.profibus.fdl import MAX_STATION, StationType
 from adapters.profibus.link import OPEN_ERRORS, PortHeld, Rs485, open_link
-from adapters.profibus.options import ProfibusDriveOptions
+from adapters.profibus.options import DriveOptions
 from adapters.profibus.profile import PROFILES, load_profile
 from adapters.profibus.scan import Scanner, SlaveInfo
 from adapters.profibus.timing import BAUD_RATES, BusParams
@@ -424,9 +424,7 @@ def _profibus_drives(config: Config | None) -> list[DriveConfig]:
     """The drives of a config's Profibus buses (their options are the master's)."""
     if config is None:
         return []
-    return [
-        d for bus in config.buses for d in bus.drives if isinstance(d.options, ProfibusDriveOptions)
-    ]
+    return [d for bus in config.buses for d in bus.drives if isinstance(d.options, DriveOptions)]
 
 
 async def run_sim(

@@ -63,7 +63,7 @@ WATCHDOG_MAX: Final = 650.25  # 1.6: 10 ms x 255 x 255
 
 
 @dataclass(frozen=True)
-class ProfibusOptions:
+class BusOptions:
     """A Profibus line's settings (defaults: see the module docstring)."""
 
     port: str | None = None
@@ -115,7 +115,7 @@ class SetupOverride:
 
 
 @dataclass(frozen=True)
-class ProfibusDriveOptions:
+class DriveOptions:
     """A drive's options: its profile's own, and the master's per-slave settings."""
 
     profile: Any = None
@@ -126,20 +126,20 @@ class ProfibusDriveOptions:
 def profile_config(drive: DriveConfig) -> tuple[DriveConfig, SetupOverride | None]:
     """``drive`` as its profile (and its simulator) sees it, with its profile's own options,
     and what its config sets up instead of the profile's built-in values."""
-    options = drive.options if isinstance(drive.options, ProfibusDriveOptions) else None
+    options = drive.options if isinstance(drive.options, DriveOptions) else None
     if options is None:
         return drive, None
     return replace(drive, options=options.profile), options.setup
 
 
-def parse_bus_options(t: Table) -> ProfibusOptions:
-    d = ProfibusOptions()
+def parse_bus_options(t: Table) -> BusOptions:
+    d = BusOptions()
     baudrate: int = t.integer(
         "baudrate", d.baudrate, allowed=BAUD_RATES, what="a Profibus DP baud rate"
     )
     defaults = defaults_for(baudrate)
     simulate: bool = t.boolean("simulate", d.simulate)
-    options = ProfibusOptions(
+    options = BusOptions(
         port=_port(t, simulate),
         simulate=simulate,
         baudrate=baudrate,
@@ -167,7 +167,7 @@ def parse_bus_options(t: Table) -> ProfibusOptions:
     return options
 
 
-def _check_gsd_bus(t: Table, options: ProfibusOptions) -> None:
+def _check_gsd_bus(t: Table, options: BusOptions) -> None:
     """Each drive's GSD must support the line's baud rate, and its MaxTsdr at that rate
     must fit the line's max_tsdr (the master waits that long for a reply)."""
     drives = t.data.get("drives", [])
@@ -250,7 +250,7 @@ def parse_drive_options(
     profile_options: Any,
     builtin: Any = None,
     telegram: str = BUILTIN_TELEGRAM,
-) -> ProfibusDriveOptions:
+) -> DriveOptions:
     """The master's per-drive keys; ``profile_options`` come from the profile's parser.
 
     ``builtin`` is the profile's own :class:`~adapters.profibus.profile.SlaveSetup` (its
@@ -261,7 +261,7 @@ def parse_drive_options(
     setup = _gsd_setup(t) if t.has("gsd") else _explicit_setup(t)
     if setup is not None and builtin is not None and setup.cfg is not None:
         _check_sizes(t, setup, builtin, telegram)
-    return ProfibusDriveOptions(
+    return DriveOptions(
         profile=profile_options, watchdog=_watchdog(t, "watchdog", None), setup=setup
     )
 

@@ -2,7 +2,7 @@
 
 ``events`` holds the config, events and actions; ``engine`` the :class:`Scanner` (the line,
 events in, deadlines, public API) and its parts: ``machine`` the per-node state machine,
-``schedule`` the poll cycle and the explicit and bring-up windows, ``jobs`` the explicit
+``scheduler`` the poll cycle and the explicit and bring-up windows, ``jobs`` the explicit
 message job queue, ``context`` what they share; ``node`` the per-node state. It imports
 codecs only: no python-can, no asyncio (docs/architecture.md, "DeviceNet scanner").
 """

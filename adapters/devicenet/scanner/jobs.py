@@ -33,7 +33,7 @@ from adapters.devicenet.ids import PredefinedMessage
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import ExplicitResult
 from adapters.devicenet.scanner.node import Node, Pending, Phase, Transaction
-from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.devicenet.scanner.scheduler import Scheduler
 from gateway.errors import FrameEncodeError
 
 MAC_MASK = 0x3F

@@ -61,7 +61,7 @@ from adapters.devicenet.scanner.events import (
 )
 from adapters.devicenet.scanner.jobs import EXPLICIT_PHASES, ExplicitJobs
 from adapters.devicenet.scanner.node import Node, Pending, Phase, Purpose, Unconnected
-from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.devicenet.scanner.scheduler import Scheduler
 
 Check = Callable[[Node, bytes], str | None]
 
