@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+import re
 from pathlib import Path
 
 import pytest
@@ -46,3 +48,44 @@ def test_every_registered_class_loads(device: Device) -> None:
         assert callable(load(spec.simulator).for_drive)
     assert spec.package.startswith("adapters.")
     assert load(f"{spec.package}:__name__") == spec.package
+
+
+GLOSSARY = "## Same words on both buses"
+IDEAS = (
+    "engine",
+    "engine events",
+    "line figures",
+    "link",
+    "driver",
+    "profile contract",
+    "simulator",
+    "CLI",
+)
+
+
+def glossary_rows() -> list[list[str]]:
+    text = DOC.read_text()
+    start = text.index(GLOSSARY)
+    end = text.find("\n## ", start + len(GLOSSARY))
+    section = text[start : end if end != -1 else len(text)]
+    rows = [line.strip("|").split(" | ") for line in section.splitlines() if line.startswith("| ")]
+    return [[cell.strip() for cell in row] for row in rows[1:]]  # past the header
+
+
+def test_the_glossary_covers_the_ideas_of_both_buses() -> None:
+    ideas = {row[0].split(":")[0] for row in glossary_rows()}
+    assert set(IDEAS) - ideas == set()
+
+
+def test_the_glossary_names_code_that_exists() -> None:
+    root = DOC.parents[1]
+    for row in glossary_rows():
+        assert len(row) == 3, row
+        for cell in row[1:]:
+            module = None
+            for name in re.findall(r"`([^`]+)`", cell):
+                if name.endswith(".py"):
+                    assert (root / name).is_file(), name
+                    module = importlib.import_module(name.removesuffix(".py").replace("/", "."))
+                else:
+                    assert module is not None and hasattr(module, name), f"{cell}: no {name}"

@@ -24,7 +24,7 @@ CODEC_NAMES = {
         "profidrive",
         "wegrecord",
         "diag",
-        "cfg",
+        "chkcfg",
         "errors",
         "_pdu",
     ),

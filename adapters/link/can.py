@@ -49,9 +49,8 @@ from typing import Any, Generic, Protocol, Self, TypeAlias, TypeVar
 
 import can
 
+from adapters.link.canerror import LineCondition, decode_error_frame
 from gateway.errors import AdapterError, FrameDecodeError
-
-from .canerror import LineCondition, decode_error_frame
 
 log = logging.getLogger(__name__)
 

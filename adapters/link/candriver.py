@@ -20,8 +20,8 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Final, Generic, Protocol, TypeVar
 
-from .can import CanEvent, CanLink, Frame, FrameT, SendResult
-from .engine import Engine
+from adapters.link.can import CanEvent, CanLink, Frame, FrameT, SendResult
+from adapters.link.engine import Engine
 
 IDLE_WAIT: Final = 1.0  # s: the longest wait for frames when nothing else is due
 

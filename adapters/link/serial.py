@@ -57,7 +57,7 @@ from typing import Any, Final, Protocol, TypeVar
 import serial
 import serial.rs485
 
-from .portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
+from adapters.link.portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
 
 log = logging.getLogger(__name__)
 

@@ -33,8 +33,8 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, Final, Generic, Protocol, TypeVar
 
-from .engine import Engine
-from .serial import SerialLink
+from adapters.link.engine import Engine
+from adapters.link.serial import SerialLink
 
 log = logging.getLogger(__name__)
 

@@ -10,9 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
+from adapters.mcd600.errors import Mcd600DecodeError
 from gateway.errors import require_int
-
-from .errors import Mcd600DecodeError
 
 DIAG_LENGTH: Final = 3  # 5.1 byte 0: "always = 3"
 

@@ -24,12 +24,11 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Final, Self
 
+from adapters.mcd600.errors import Mcd600DecodeError, require_size
+from adapters.mcd600.monitoring import MonitorReply
+from adapters.mcd600.programming import IDLE, ParamReply, ParamRequest
+from adapters.mcd600.words import ControlWord, StatusWord
 from gateway.errors import require_int
-
-from .errors import Mcd600DecodeError, require_size
-from .monitoring import MonitorReply
-from .programming import IDLE, ParamReply, ParamRequest
-from .words import ControlWord, StatusWord
 
 
 class Mode(Enum):

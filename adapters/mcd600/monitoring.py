@@ -13,9 +13,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Self
 
+from adapters.mcd600.errors import Mcd600DecodeError, require_size
 from gateway.errors import FrameEncodeError, require_int
-
-from .errors import Mcd600DecodeError, require_size
 
 REPLY_SIZE: Final = 4
 PRODUCT_TYPE_MCD600: Final = 15  # table 6, request 1 bits 8-15

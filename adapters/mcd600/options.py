@@ -24,9 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-from .layout import Mode
-from .simparams import PARAM_DEFS
-from .words import MotorSet
+from adapters.mcd600.layout import Mode
+from adapters.mcd600.simparams import PARAM_DEFS
+from adapters.mcd600.words import MotorSet
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

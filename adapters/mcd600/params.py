@@ -25,9 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum, auto
 
-from gateway.errors import GatewayError, GatewayTimeout, ParameterError
-
-from .programming import (
+from adapters.mcd600.programming import (
     IDLE,
     INVALID_NUMBER_BIT,
     INVALID_VALUE_BIT,
@@ -35,6 +33,7 @@ from .programming import (
     ParamReply,
     ParamRequest,
 )
+from gateway.errors import GatewayError, GatewayTimeout, ParameterError
 
 Clock = Callable[[], float]
 

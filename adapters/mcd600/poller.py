@@ -12,10 +12,9 @@ import logging
 from collections.abc import Mapping
 from typing import Final
 
+from adapters.mcd600.errors import Mcd600DecodeError
+from adapters.mcd600.monitoring import REQUESTS, DataRequest, MonitorReply, Readings, decode_value
 from gateway.model import Readings as DriveReadings
-
-from .errors import Mcd600DecodeError
-from .monitoring import REQUESTS, DataRequest, MonitorReply, Readings, decode_value
 
 log = logging.getLogger(__name__)
 

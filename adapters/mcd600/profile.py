@@ -19,6 +19,14 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
+from adapters.mcd600.diag import ExtDiag
+from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
+from adapters.mcd600.options import Mcd600Options, parse_options, user_prm_data
+from adapters.mcd600.params import ParamChannel
+from adapters.mcd600.poller import DataPoller
+from adapters.mcd600.programming import IDLE, PARAM_NUMBER_MAX, PARAM_VALUE_MAX, ParamRequest
+from adapters.mcd600.trips import trip_text
+from adapters.mcd600.words import CURRENT_RAW_MAX, ControlWord, StatusWord
 from adapters.profibus.profile import (
     AddressRange,
     DiagEvent,
@@ -31,15 +39,6 @@ from adapters.profibus.profile import (
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import DriveOffline, GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, DriveStatus, Readings
-
-from .diag import ExtDiag
-from .layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
-from .options import Mcd600Options, parse_options, user_prm_data
-from .params import ParamChannel
-from .poller import DataPoller
-from .programming import IDLE, PARAM_NUMBER_MAX, PARAM_VALUE_MAX, ParamRequest
-from .trips import trip_text
-from .words import CURRENT_RAW_MAX, ControlWord, StatusWord
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

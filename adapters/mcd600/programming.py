@@ -10,9 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
+from adapters.mcd600.errors import require_size
 from gateway.errors import require_int
-
-from .errors import require_size
 
 REQUEST_SIZE: Final = 4
 REPLY_SIZE: Final = 4

@@ -26,12 +26,9 @@ import logging
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Final, Protocol, Self
 
-from adapters.profibus.profile import RecordAccessError, SimDeviceBase
-from gateway.sim import FaultInjector, MotorParams
-
-from .diag import ExtDiag
-from .layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
-from .monitoring import (
+from adapters.mcd600.diag import ExtDiag
+from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
+from adapters.mcd600.monitoring import (
     FOURTEEN_BITS,
     PRODUCT_TYPE_MCD600,
     DataRequest,
@@ -40,9 +37,9 @@ from .monitoring import (
     StarterState,
     StarterStateWord,
 )
-from .options import DEFAULT_IDENT_NUMBER, Mcd600Options, parse_user_prm
-from .programming import ParamReply, ParamRequest
-from .simparams import (
+from adapters.mcd600.options import DEFAULT_IDENT_NUMBER, Mcd600Options, parse_user_prm
+from adapters.mcd600.programming import ParamReply, ParamRequest
+from adapters.mcd600.simparams import (
     AUTO_RESET_ACTION,
     AUTO_RESET_DELAY,
     AUTO_RESET_MAX,
@@ -63,9 +60,11 @@ from .simparams import (
     ParamStore,
     StopMode,
 )
-from .starter import SoftStarter, StarterSettings
-from .trips import NETWORK_FORCED_TRIP
-from .words import ControlWord, MotorSet, StatusWord, current_to_raw
+from adapters.mcd600.starter import SoftStarter, StarterSettings
+from adapters.mcd600.trips import NETWORK_FORCED_TRIP
+from adapters.mcd600.words import ControlWord, MotorSet, StatusWord, current_to_raw
+from adapters.profibus.profile import RecordAccessError, SimDeviceBase
+from gateway.sim import FaultInjector, MotorParams
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

@@ -25,10 +25,9 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
+from adapters.mcd600.monitoring import StarterState
+from adapters.mcd600.trips import EXCESS_START_TIME, MOTOR_OVERLOAD
 from gateway.sim import Motor, MotorParams
-
-from .monitoring import StarterState
-from .trips import EXCESS_START_TIME, MOTOR_OVERLOAD
 
 THERMAL_TRIP_PCT: Final = 105.0
 MAX_STEP: Final = 0.05  # s: advance in steps no longer than this

@@ -10,9 +10,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Self
 
+from adapters.mcd600.errors import require_size
 from gateway.errors import require_int
-
-from .errors import require_size
 
 WORD_SIZE: Final = 2
 

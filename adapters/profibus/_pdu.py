@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .errors import DecodeFailure, DpDecodeError
+from adapters.profibus.errors import DecodeFailure, DpDecodeError
 
 
 def fail(reason: DecodeFailure, message: str, raw: bytes) -> DpDecodeError:

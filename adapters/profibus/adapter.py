@@ -38,19 +38,11 @@ from enum import Enum
 from typing import Any, ClassVar, Final
 
 from adapters.link.config import missing_options, unsimulated
-from gateway.adapter import EventKind, HubPort, ParamValue
-from gateway.config import BusConfig, DriveConfig
-from gateway.devices import devices_of
-from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
-from gateway.loader import load
-from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
-from gateway.schema import Table
-
-from . import options as opts
-from .dp import GlobalControl
-from .driver import LineDriver
-from .link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
-from .master import (
+from adapters.profibus import options as opts
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.driver import LineDriver
+from adapters.profibus.link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
+from adapters.profibus.master import (
     DiagnosisRead,
     FaultKind,
     InputsReceived,
@@ -66,7 +58,7 @@ from .master import (
     SlaveStateChanged,
     SlaveUp,
 )
-from .profile import (
+from adapters.profibus.profile import (
     BUS,
     PROFILES,
     SET_SLAVE_ADD_DEFAULT,
@@ -77,6 +69,13 @@ from .profile import (
     RecordAccessError,
     SlaveSetup,
 )
+from gateway.adapter import EventKind, HubPort, ParamValue
+from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
+from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.loader import load
+from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
+from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
@@ -175,11 +174,11 @@ class ProfibusAdapter:
     # ------------------------------------------------------------------ config
 
     @classmethod
-    def parse_bus_options(cls, table: Table) -> opts.ProfibusOptions:
+    def parse_bus_options(cls, table: Table) -> opts.BusOptions:
         return opts.parse_bus_options(table)
 
     @classmethod
-    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.ProfibusDriveOptions:
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> opts.DriveOptions:
         profile_class = cls.profile_class(drive.device)
         refusal = profile_class.addresses.refusal(drive.device.value, drive.address)
         if refusal is not None:
@@ -207,16 +206,16 @@ class ProfibusAdapter:
         ``simulate = true``); None: the configured port."""
         self.bus = bus
         self.name = bus.name
-        if not isinstance(bus.options, opts.ProfibusOptions):
+        if not isinstance(bus.options, opts.BusOptions):
             raise missing_options(bus.name)
-        self.options: opts.ProfibusOptions = bus.options
+        self.options: opts.BusOptions = bus.options
         self.links: SerialLinks | None = links if links is not None else self._real_port()
         self._drives: dict[str, _Drive] = {}
         self._by_address: dict[int, _Drive] = {}
         slaves: list[SlaveParams] = []
         self._overrides: dict[str, opts.SetupOverride] = {}
         for d in bus.drives:
-            drive_opts = d.options if isinstance(d.options, opts.ProfibusDriveOptions) else None
+            drive_opts = d.options if isinstance(d.options, opts.DriveOptions) else None
             inner, override = opts.profile_config(d)
             if override is not None:
                 self._overrides[d.id] = override
@@ -453,7 +452,7 @@ class ProfibusAdapter:
         override = self._overrides.get(drive.id)
         if override is None or override.gsd is None or slave_cfg is None:
             return ""
-        from .gsd import match_modules
+        from adapters.profibus.gsd import match_modules
 
         modules = match_modules(override.gsd, slave_cfg)
         if modules is None:

@@ -27,19 +27,18 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
+from adapters.profibus.driver import LineDriver
+from adapters.profibus.fdl import MAX_STATION, StationType
+from adapters.profibus.link import OPEN_ERRORS, PortHeld, Rs485, open_link
+from adapters.profibus.options import DriveOptions
+from adapters.profibus.profile import PROFILES, load_profile
+from adapters.profibus.scan import Scanner, SlaveInfo
+from adapters.profibus.timing import BAUD_RATES, BusParams
 from gateway.config import Config, DriveConfig
 from gateway.model import Device
 
-from .driver import LineDriver
-from .fdl import MAX_STATION, StationType
-from .link import OPEN_ERRORS, PortHeld, Rs485, open_link
-from .options import ProfibusDriveOptions
-from .profile import PROFILES, load_profile
-from .scan import Scanner, SlaveInfo
-from .timing import BAUD_RATES, BusParams
-
 if TYPE_CHECKING:
-    from .sim.line import SimLine
+    from adapters.profibus.sim.line import SimLine
 
 STATION_NAMES = {
     StationType.SLAVE: "slave",
@@ -257,7 +256,7 @@ class GsdMatch:
 
 def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
     """The GSD of ``directory`` with the slave's Ident_Number (the first by file name)."""
-    from .gsd import find_in_dir, match_modules
+    from adapters.profibus.gsd import find_in_dir, match_modules
 
     if directory is None or info.ident_number is None:
         return None
@@ -270,7 +269,7 @@ def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
 
 
 def _station_text(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) -> str:
-    from .events import describe_cfg
+    from adapters.profibus.events import describe_cfg
 
     parts = [STATION_NAMES[station]]
     if info is not None and info.ident_number is not None:
@@ -312,7 +311,7 @@ def _device_of(gsd: Any) -> Device | None:
 
 def stanza(address: int, match: GsdMatch) -> str:
     """A ``[[buses.profibus.drives]]`` table for a matched slave, ready to paste."""
-    from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
+    from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 
     device = _device_of(match.gsd)
     lines = [
@@ -350,7 +349,7 @@ class SlaveSpec:
 
 def parse_spec(text: str) -> list[SlaveSpec]:
     """``5:cfw11``, ``3-34:echo``, ``7:echo:8`` -> one SlaveSpec per address."""
-    from .sim.devices import KINDS
+    from adapters.profibus.sim.devices import KINDS
 
     parts = text.split(":")
     if len(parts) not in (2, 3) or parts[1] not in KINDS:
@@ -370,7 +369,7 @@ def parse_spec(text: str) -> list[SlaveSpec]:
 
 
 def add_sim(sub: Any) -> None:
-    from .sim.devices import KINDS
+    from adapters.profibus.sim.devices import KINDS
 
     p = sub.add_parser("profibus", help="simulated DP slaves on a serial port")
     p.add_argument("--port", required=True, help="device path, pyserial URL, or 'pty'")
@@ -401,12 +400,11 @@ def build_line(
     specs: Iterable[SlaveSpec], config: Config | None = None, noise: float = 0.0, seed: int = 0
 ) -> SimLine:
     """The simulated line of the command line's slaves and a config's Profibus drives."""
+    from adapters.profibus.sim.devices import KINDS, make_device, with_setup
+    from adapters.profibus.sim.echo import EchoSim
+    from adapters.profibus.sim.line import SimLine
+    from adapters.profibus.sim.slave import DpSlave
     from gateway.sim import FaultInjector
-
-    from .sim.devices import KINDS, make_device, with_setup
-    from .sim.echo import EchoSim
-    from .sim.line import SimLine
-    from .sim.slave import DpSlave
 
     line = SimLine(faults=FaultInjector(seed=seed, bit_error_rate=noise))
     for spec in specs:
@@ -426,9 +424,7 @@ def _profibus_drives(config: Config | None) -> list[DriveConfig]:
     """The drives of a config's Profibus buses (their options are the master's)."""
     if config is None:
         return []
-    return [
-        d for bus in config.buses for d in bus.drives if isinstance(d.options, ProfibusDriveOptions)
-    ]
+    return [d for bus in config.buses for d in bus.drives if isinstance(d.options, DriveOptions)]
 
 
 async def run_sim(
@@ -441,7 +437,7 @@ async def run_sim(
     rs485: Rs485 = Rs485.AUTO,
 ) -> None:
     """Serve ``line`` on ``port`` until ``stop`` is set."""
-    from .sim.port import SimPort
+    from adapters.profibus.sim.port import SimPort
 
     if port == "pty":
         sim, path = SimPort.on_pty(line)

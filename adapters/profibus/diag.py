@@ -12,11 +12,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Final, Self
 
+from adapters.profibus._pdu import bit, bits, fail, need
+from adapters.profibus.errors import DecodeFailure, require_length, whole_raw
+from adapters.profibus.fdl import MAX_DU
 from gateway.errors import FrameEncodeError, require_int
-
-from ._pdu import bit, bits, fail, need
-from .errors import DecodeFailure, require_length, whole_raw
-from .fdl import MAX_DU
 
 NO_MASTER: Final = 0xFF  # 1.8: Master_Add 0xFF = no master
 

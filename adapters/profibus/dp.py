@@ -21,13 +21,11 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import ClassVar, Final, Self
 
-from gateway.errors import FrameEncodeError, require_int
-
-from ._pdu import bit, bits, exact, fail, need
-from .cfg import Configuration
-from .diag import SlaveDiag
-from .errors import DecodeFailure, require_length
-from .fdl import (
+from adapters.profibus._pdu import bit, bits, exact, fail, need
+from adapters.profibus.chkcfg import Configuration
+from adapters.profibus.diag import SlaveDiag
+from adapters.profibus.errors import DecodeFailure, require_length
+from adapters.profibus.fdl import (
     BROADCAST,
     MAX_DU,
     DataTelegram,
@@ -36,6 +34,7 @@ from .fdl import (
     ResponseStatus,
     StationType,
 )
+from gateway.errors import FrameEncodeError, require_int
 
 
 class SlaveSap(IntEnum):

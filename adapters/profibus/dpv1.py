@@ -15,12 +15,11 @@ from enum import IntEnum
 from types import MappingProxyType
 from typing import Final, Self, TypeVar
 
+from adapters.profibus.diag import AlarmDiag, AlarmSpecifier, decode_specifier
+from adapters.profibus.dp import MasterSap, SlaveSap
+from adapters.profibus.errors import DecodeFailure, Dpv1DecodeError, require_length
+from adapters.profibus.fdl import DataTelegram, RequestFc, ResponseStatus, StationType
 from gateway.errors import FrameEncodeError, require_int
-
-from .diag import AlarmDiag, AlarmSpecifier, decode_specifier
-from .dp import MasterSap, SlaveSap
-from .errors import DecodeFailure, Dpv1DecodeError, require_length
-from .fdl import DataTelegram, RequestFc, ResponseStatus, StationType
 
 
 class Dpv1Function(IntEnum):

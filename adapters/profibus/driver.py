@@ -15,9 +15,15 @@ from typing import Any, Final
 
 from adapters.link.serial import SerialLink
 from adapters.link.stream import SPIN_LIMIT, ReplyEngine, StreamDriver, Transmission
-
-from .fdl import DataTelegram, Discarded, NeedMore, ShortAck, TelegramDecoder, TokenTelegram
-from .master import Event, LineNoise, Received, Receiving, Transmit, Written
+from adapters.profibus.fdl import (
+    DataTelegram,
+    Discarded,
+    NeedMore,
+    ShortAck,
+    TelegramDecoder,
+    TokenTelegram,
+)
+from adapters.profibus.master import Event, FrameIn, LineNoise, Receiving, Transmit, Written
 
 __all__ = ["SPIN_LIMIT", "FdlStream", "LineDriver"]
 
@@ -33,7 +39,7 @@ class FdlStream:
 
     def whole(self, data: bytes) -> Event | None:
         telegram = self.decoder.whole(data)
-        return None if telegram is None else Received(telegram)
+        return None if telegram is None else FrameIn(telegram)
 
     def feed(self, data: bytes) -> list[Event]:
         self.decoder.feed(data)
@@ -64,7 +70,7 @@ class FdlStream:
             if isinstance(item, Discarded):
                 out.append(LineNoise(item.error))
             elif isinstance(item, _TELEGRAMS):
-                out.append(Received(item))
+                out.append(FrameIn(item))
 
 
 class LineDriver(StreamDriver[Event]):

@@ -10,14 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+from adapters.profibus import dpv1
+from adapters.profibus.chkcfg import Configuration
+from adapters.profibus.diag import SlaveDiag
+from adapters.profibus.dp import Dpv1Status, SetPrm, watchdog_factors
+from adapters.profibus.errors import FdlDecodeError, ProfibusDecodeError
+from adapters.profibus.fdl import MAX_STATION, DataTelegram, ShortAck, TokenTelegram
 from gateway.errors import FrameEncodeError
-
-from . import dpv1
-from .cfg import Configuration
-from .diag import SlaveDiag
-from .dp import Dpv1Status, SetPrm, watchdog_factors
-from .errors import FdlDecodeError, ProfibusDecodeError
-from .fdl import MAX_STATION, DataTelegram, ShortAck, TokenTelegram
 
 
 class SlaveState(Enum):
@@ -83,7 +82,7 @@ class RecordFailure(Enum):
 
 
 @dataclass(frozen=True)
-class Received:
+class FrameIn:
     """A telegram decoded off the line."""
 
     telegram: DataTelegram | ShortAck | TokenTelegram
@@ -116,7 +115,7 @@ class Written:
     at: float
 
 
-Event = Received | LineNoise | Receiving | Written
+Event = FrameIn | LineNoise | Receiving | Written
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,8 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 from typing import Final
 
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError, require_length
 from gateway.errors import FrameEncodeError, require_int
-
-from .errors import DecodeFailure, FdlDecodeError, require_length
 
 # 1.2 start delimiters and end delimiter.
 SD1: Final = 0x10

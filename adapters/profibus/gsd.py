@@ -30,10 +30,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
+from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.errors import ProfibusDecodeError
 from gateway.errors import GatewayError
-
-from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
-from .errors import ProfibusDecodeError
 
 ENCODING: Final = "iso-8859-1"
 MAX_USER_PRM: Final = 237  # 1.6: 244 bytes of Set_Prm data minus the 7 standard bytes

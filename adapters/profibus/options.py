@@ -47,24 +47,23 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
+from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.gsd import Gsd, GsdError, GsdSetupError, build_setup
+from adapters.profibus.gsd import load as load_gsd
+from adapters.profibus.link import URL_SCHEMES, Rs485, is_url
+from adapters.profibus.profile import BUILTIN_TELEGRAM
+from adapters.profibus.timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
 from gateway.schema import Table
-
-from .cfg import decode_identifiers, total_input_bytes, total_output_bytes
-from .errors import ProfibusDecodeError
-from .gsd import Gsd, GsdError, GsdSetupError, build_setup
-from .gsd import load as load_gsd
-from .link import URL_SCHEMES, Rs485, is_url
-from .profile import BUILTIN_TELEGRAM
-from .timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 
 WATCHDOG_MIN: Final = 0.01  # 1.6: 10 ms base x 1 x 1
 WATCHDOG_MAX: Final = 650.25  # 1.6: 10 ms x 255 x 255
 
 
 @dataclass(frozen=True)
-class ProfibusOptions:
+class BusOptions:
     """A Profibus line's settings (defaults: see the module docstring)."""
 
     port: str | None = None
@@ -116,7 +115,7 @@ class SetupOverride:
 
 
 @dataclass(frozen=True)
-class ProfibusDriveOptions:
+class DriveOptions:
     """A drive's options: its profile's own, and the master's per-slave settings."""
 
     profile: Any = None
@@ -127,20 +126,20 @@ class ProfibusDriveOptions:
 def profile_config(drive: DriveConfig) -> tuple[DriveConfig, SetupOverride | None]:
     """``drive`` as its profile (and its simulator) sees it, with its profile's own options,
     and what its config sets up instead of the profile's built-in values."""
-    options = drive.options if isinstance(drive.options, ProfibusDriveOptions) else None
+    options = drive.options if isinstance(drive.options, DriveOptions) else None
     if options is None:
         return drive, None
     return replace(drive, options=options.profile), options.setup
 
 
-def parse_bus_options(t: Table) -> ProfibusOptions:
-    d = ProfibusOptions()
+def parse_bus_options(t: Table) -> BusOptions:
+    d = BusOptions()
     baudrate: int = t.integer(
         "baudrate", d.baudrate, allowed=BAUD_RATES, what="a Profibus DP baud rate"
     )
     defaults = defaults_for(baudrate)
     simulate: bool = t.boolean("simulate", d.simulate)
-    options = ProfibusOptions(
+    options = BusOptions(
         port=_port(t, simulate),
         simulate=simulate,
         baudrate=baudrate,
@@ -168,7 +167,7 @@ def parse_bus_options(t: Table) -> ProfibusOptions:
     return options
 
 
-def _check_gsd_bus(t: Table, options: ProfibusOptions) -> None:
+def _check_gsd_bus(t: Table, options: BusOptions) -> None:
     """Each drive's GSD must support the line's baud rate, and its MaxTsdr at that rate
     must fit the line's max_tsdr (the master waits that long for a reply)."""
     drives = t.data.get("drives", [])
@@ -251,7 +250,7 @@ def parse_drive_options(
     profile_options: Any,
     builtin: Any = None,
     telegram: str = BUILTIN_TELEGRAM,
-) -> ProfibusDriveOptions:
+) -> DriveOptions:
     """The master's per-drive keys; ``profile_options`` come from the profile's parser.
 
     ``builtin`` is the profile's own :class:`~adapters.profibus.profile.SlaveSetup` (its
@@ -262,7 +261,7 @@ def parse_drive_options(
     setup = _gsd_setup(t) if t.has("gsd") else _explicit_setup(t)
     if setup is not None and builtin is not None and setup.cfg is not None:
         _check_sizes(t, setup, builtin, telegram)
-    return ProfibusDriveOptions(
+    return DriveOptions(
         profile=profile_options, watchdog=_watchdog(t, "watchdog", None), setup=setup
     )
 

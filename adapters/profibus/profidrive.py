@@ -19,10 +19,9 @@ from enum import IntEnum
 from types import MappingProxyType
 from typing import Final, Self
 
+from adapters.profibus.dpv1 import MAX_DATA, ReadRequest, WriteRequest
+from adapters.profibus.errors import DecodeFailure, ProfidriveDecodeError, whole_raw
 from gateway.errors import FrameEncodeError, require_int
-
-from .dpv1 import MAX_DATA, ReadRequest, WriteRequest
-from .errors import DecodeFailure, ProfidriveDecodeError, whole_raw
 
 PARAMETER_INDEX: Final = 47  # 1.11 / WEG 4.2.4: index 47
 DEFAULT_SLOT: Final = 0  # WEG 4.2.3: slot 0 (Toshiba 0, ABB 1: check the device, 1.11)

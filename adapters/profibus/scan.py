@@ -13,11 +13,11 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .diag import SlaveDiag
-from .dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
-from .errors import ProfibusDecodeError
-from .events import Event, LineNoise, Received, Transmit, Written
-from .fdl import (
+from adapters.profibus.diag import SlaveDiag
+from adapters.profibus.dp import GetCfgRequest, SlaveDiagRequest, SlaveSap, build_request
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.events import Event, FrameIn, LineNoise, Transmit, Written
+from adapters.profibus.fdl import (
     DataTelegram,
     FcbState,
     RequestFc,
@@ -25,8 +25,8 @@ from .fdl import (
     ResponseFc,
     StationType,
 )
-from .linestats import LineStats
-from .timing import BusParams
+from adapters.profibus.figures import LineFigures
+from adapters.profibus.timing import BusParams
 
 
 def status_request(address: int, master: int) -> bytes:
@@ -89,7 +89,7 @@ class Scanner:
         self.identify = identify
         self.found: dict[int, StationType] = {}
         self.slaves: dict[int, SlaveInfo] = {}
-        self.stats = LineStats()
+        self.figures = LineFigures()
         self._probe: _Probe | None = None
         self._idle_since = now - bus.tsyn
 
@@ -118,24 +118,24 @@ class Scanner:
             self._idle_since = max(self._idle_since, now)
         if probe is not None and not probe.written:
             return out
-        if probe is not None and isinstance(event, Received):
+        if probe is not None and isinstance(event, FrameIn):
             t = event.telegram
             if isinstance(t, DataTelegram) and not t.is_request and t.sa == probe.address:
                 self._answered(probe, t)
                 self._probe = None
                 self._idle_since = now
         elif probe is not None and isinstance(event, LineNoise):
-            self.stats.framing_errors += 1
+            self.figures.framing_errors += 1
             probe.deadline = max(probe.deadline, now + self.bus.reply_wait)
         probe = self._probe
         if probe is not None and now >= probe.deadline:
             self._probe = None
             self._idle_since = now
             if probe.tries < 1 + self.bus.retries:
-                self.stats.retries += 1
+                self.figures.retries += 1
                 self._send(probe, now, out)
             else:
-                self.stats.timeouts += 1
+                self.figures.timeouts += 1
                 self._finished(probe)
         if self._probe is None and self._todo:
             self._send(self._todo.popleft(), now, out)
@@ -175,5 +175,5 @@ class Scanner:
         probe.tries += 1
         probe.written = False
         self._probe = probe
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         out.append(Transmit(probe.data, not_before, True))

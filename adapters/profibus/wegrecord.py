@@ -20,10 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Self
 
+from adapters.profibus.dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS, ReadRequest, WriteRequest
+from adapters.profibus.errors import DecodeFailure, WegRecordDecodeError
 from gateway.errors import require_int
-
-from .dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS, ReadRequest, WriteRequest
-from .errors import DecodeFailure, WegRecordDecodeError
 
 WEG_RECORD_INDEX: Final = 48
 WEG_SLOT: Final = 0

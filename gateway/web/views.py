@@ -46,7 +46,7 @@ BUS_FIGURES: tuple[Figure, ...] = (
     Figure("frames_tx", (("telegrams",), ("frames_tx",))),
     Figure("frames_rx", (("frames_rx",),)),
 )
-"""Line-level figures (Profibus master: adapters/profibus/linestats.py; DeviceNet scanner:
+"""Line-level figures (Profibus master: adapters/profibus/figures.py; DeviceNet scanner:
 adapters/devicenet/scanner/engine.py ``line_diagnostics``)."""
 
 BUS_ERRORS: tuple[str, ...] = (

@@ -12,7 +12,6 @@ from collections.abc import Callable
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.canerror import decode_error_frame
 from adapters.devicenet.cfw08 import INPUT_DECODERS, OUTPUT_DECODERS, decode_parameter
 from adapters.devicenet.cfw08.objects import Kind, decode_attribute
 from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value
@@ -31,6 +30,7 @@ from adapters.devicenet.ids import decode_can_id, match_predefined
 from adapters.devicenet.objects import AllocationInfo
 from adapters.devicenet.scanner import FrameIn, IoKind, NodeConfig
 from adapters.devicenet.sim.node import SimNodeConfig
+from adapters.link.canerror import decode_error_frame
 from gateway.errors import FrameDecodeError
 from tests.devicenet.harness import Line
 from tests.devicenet.strategies import frames

@@ -12,7 +12,6 @@ from types import SimpleNamespace
 import can
 import pytest
 
-from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import (
     CanLink,
@@ -32,6 +31,7 @@ from adapters.link.can import (
     error_number,
     open_problem,
 )
+from adapters.link.canerror import LineCondition
 from gateway.errors import AdapterError
 from tests.support.timing import scaled
 

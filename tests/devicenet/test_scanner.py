@@ -12,7 +12,6 @@ from dataclasses import replace
 
 import pytest
 
-from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.cfw08 import Out21
 from adapters.devicenet.cip import GeneralStatus
 from adapters.devicenet.datatypes import CipType, encode_value
@@ -58,6 +57,7 @@ from adapters.devicenet.scanner import (
     TxFailed,
 )
 from adapters.devicenet.sim.node import SimNodeConfig, SimPhase
+from adapters.link.canerror import LineCondition
 from gateway.errors import FrameEncodeError
 from tests.devicenet.harness import Line
 

@@ -20,8 +20,7 @@ from adapters.mcd600.simparams import (
 from adapters.mcd600.trips import MOTOR_OVERLOAD, NETWORK_FORCED_TRIP
 from adapters.profibus.dp import GlobalControl
 from gateway.model import DriveStatus
-
-from .loop import Loop
+from tests.mcd600.loop import Loop
 
 FAST: dict[int, int] = {START_RAMP_TIME: 2, STOP_TIME: 2, INITIAL_CURRENT: 100, CURRENT_LIMIT: 180}
 

@@ -11,8 +11,7 @@ from adapters.mcd600.sim import Mcd600Sim
 from adapters.profibus.profile import DpProfile, SimDevice
 from gateway.errors import FrameDecodeError
 from gateway.model import DesiredCommand, Device, DriveState
-
-from .loop import drive_config
+from tests.mcd600.loop import drive_config
 
 
 def test_classes_satisfy_the_contract() -> None:

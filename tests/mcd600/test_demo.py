@@ -7,7 +7,7 @@ from dataclasses import replace
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.options import Mcd600Options
 from adapters.mcd600.sim import Mcd600Sim
-from adapters.profibus.options import ProfibusDriveOptions
+from adapters.profibus.options import DriveOptions
 from adapters.profibus.sim.devices import make_device
 from gateway.config import DEFAULT_CONFIG, load
 from gateway.model import Device
@@ -21,7 +21,7 @@ def test_the_demo_has_an_extended_mode_starter_on_the_weg_line() -> None:
     assert bus.adapter == "profibus" and bus.options.simulate
     others = {d.device for d in bus.drives} - {Device.MCD600}
     assert {Device.CFW11, Device.CFW700, Device.CFW320} <= others  # one mixed line
-    assert isinstance(starter.options, ProfibusDriveOptions)
+    assert isinstance(starter.options, DriveOptions)
     options = starter.options.profile
     assert isinstance(options, Mcd600Options) and options.mode is Mode.EXTENDED
     # the simulated starter the demo line builds is the one the table describes

@@ -15,8 +15,7 @@ from adapters.profibus.profile import PROFILES, load_profile
 from gateway.errors import ConfigError, GatewayError
 from gateway.model import Device
 from gateway.schema import Table
-
-from .loop import drive_config
+from tests.mcd600.loop import drive_config
 
 
 def parse(data: dict[str, Any]) -> Mcd600Options:

@@ -19,8 +19,7 @@ from adapters.mcd600.simparams import (
 )
 from gateway.errors import DriveOffline, GatewayTimeout, ParameterError
 from gateway.model import DesiredCommand
-
-from .loop import Loop, running_bus
+from tests.mcd600.loop import Loop, running_bus
 
 
 class NoChannel:

@@ -20,8 +20,7 @@ from gateway.model import (
     DriveStatus,
     Source,
 )
-
-from .loop import drive_config
+from tests.mcd600.loop import drive_config
 
 
 def control(profile: Mcd600Profile, desired: DesiredCommand, now: float = 1.0) -> ControlWord:

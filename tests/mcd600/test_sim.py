@@ -28,8 +28,7 @@ from adapters.mcd600.trips import EXCESS_START_TIME as EXCESS_START_TRIP
 from adapters.mcd600.words import ControlWord, MotorSet, StatusWord
 from adapters.profibus.profile import RecordAccessError
 from gateway.errors import FrameDecodeError
-
-from .loop import drive_config
+from tests.mcd600.loop import drive_config
 
 START = ControlWord(start=True).encode()
 STOP = ControlWord().encode()

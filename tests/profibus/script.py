@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from adapters.profibus.fdl import DataTelegram, ShortAck, decode_telegram
-from adapters.profibus.master import Action, Master, Received, Transmit, Written
+from adapters.profibus.master import Action, FrameIn, Master, Transmit, Written
 
 h = bytes.fromhex
 
@@ -64,7 +64,7 @@ class Script:
             assert isinstance(decoded, DataTelegram | ShortAck)
             reply = decoded
         self.now += after
-        self.step(Received(reply))
+        self.step(FrameIn(reply))
 
     def silence(self) -> None:
         """No reply: time runs to the engine's deadline."""

@@ -19,8 +19,7 @@ from adapters.profibus.fdl import StationType
 from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.timing import BusParams
 from gateway.cli import main
-
-from .support import line_config
+from tests.profibus.support import line_config
 
 ROOT = Path(__file__).resolve().parents[2]
 BUS = BusParams.for_baudrate(500000, latency=0.003)

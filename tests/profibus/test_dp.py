@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus import cfg, diag, dp
-from adapters.profibus.cfg import CompactId, Configuration, IoDirection, IoLength, SpecialId
+from adapters.profibus import chkcfg, diag, dp
+from adapters.profibus.chkcfg import CompactId, Configuration, IoDirection, IoLength, SpecialId
 from adapters.profibus.diag import (
     AlarmDiag,
     AlarmSpecifier,
@@ -205,9 +205,11 @@ CFG_GOLDEN = [
 
 
 @pytest.mark.parametrize(("wire", "identifiers"), CFG_GOLDEN)
-def test_cfg_golden_both_directions(wire: str, identifiers: tuple[cfg.CfgIdentifier, ...]) -> None:
-    assert cfg.decode_identifiers(h(wire)) == identifiers
-    assert cfg.encode_identifiers(identifiers) == h(wire)
+def test_cfg_golden_both_directions(
+    wire: str, identifiers: tuple[chkcfg.CfgIdentifier, ...]
+) -> None:
+    assert chkcfg.decode_identifiers(h(wire)) == identifiers
+    assert chkcfg.encode_identifiers(identifiers) == h(wire)
 
 
 def test_cfg_lengths() -> None:
@@ -215,13 +217,13 @@ def test_cfg_lengths() -> None:
     assert (config.input_bytes, config.output_bytes) == (4, 4)
     config = Configuration.decode(h("C0 C1 C1 13 23 E1"))
     assert (config.input_bytes, config.output_bytes) == (8, 12)
-    assert cfg.total_input_bytes(config.identifiers) == 8
-    assert cfg.total_output_bytes(config.identifiers) == 12
+    assert chkcfg.total_input_bytes(config.identifiers) == 8
+    assert chkcfg.total_output_bytes(config.identifiers) == 12
 
 
 def test_cfg_errors() -> None:
     with pytest.raises(DpDecodeError) as info:
-        cfg.decode_identifiers(h("C2 C1 C1 01"))  # 2 manufacturer bytes, one present
+        chkcfg.decode_identifiers(h("C2 C1 C1 01"))  # 2 manufacturer bytes, one present
     assert info.value.reason is DecodeFailure.TRUNCATED
     with pytest.raises(DpDecodeError) as info:
         Configuration.decode(h("0F"), allow_skip_check=False)  # not in Get_Cfg
@@ -620,7 +622,7 @@ def test_set_prm_round_trip(pdu: SetPrm) -> None:
 
 @FAST
 @given(identifiers)
-def test_cfg_round_trip(ids: tuple[cfg.CfgIdentifier, ...]) -> None:
+def test_cfg_round_trip(ids: tuple[chkcfg.CfgIdentifier, ...]) -> None:
     assert Configuration.decode(Configuration(ids).encode()) == Configuration(ids)
 
 

@@ -18,9 +18,8 @@ import serial
 from adapters.profibus.driver import SPIN_LIMIT, LineDriver
 from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
-from adapters.profibus.master import Received, Transmit, Written
-
-from .support import until
+from adapters.profibus.master import FrameIn, Transmit, Written
+from tests.profibus.support import until
 
 
 @contextlib.contextmanager
@@ -309,7 +308,7 @@ class _Recorder(_Engine):
 
     def step(self, now: float, event: Any = None) -> list[Any]:
         self.events.append((now, event))
-        if isinstance(event, Received):
+        if isinstance(event, FrameIn):
             self.deadline = None
         return super().step(now, event)
 
@@ -357,7 +356,7 @@ async def test_bytes_arriving_during_a_short_wait_are_stepped_before_it_ends() -
             assert select.select([fd], [], [], 5.0)[0]  # arrived, not read yet
             engine.deadline = loop.time() + SPIN_LIMIT / 2
             driver.poke()  # no await: the loop's reader had no chance
-            assert any(isinstance(e, Received) for _, e in engine.events)
+            assert any(isinstance(e, FrameIn) for _, e in engine.events)
         finally:
             driver.stop()
             link.close()

@@ -9,7 +9,7 @@ import pytest
 from adapters.profibus.diag import SlaveDiag
 from adapters.profibus.dp import GlobalControl
 from adapters.profibus.fdl import SHORT_ACK, DataTelegram, ResponseFc, ResponseStatus
-from adapters.profibus.linestats import Samples
+from adapters.profibus.figures import Samples
 from adapters.profibus.master import (
     DiagnosisRead,
     FaultKind,
@@ -26,9 +26,8 @@ from adapters.profibus.master import (
 )
 from adapters.profibus.sim.slave import SlaveMode
 from gateway.errors import FrameEncodeError
-
-from .script import Script
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.script import Script
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 DE = SlaveState.DATA_EXCHANGE
 
@@ -141,7 +140,7 @@ def test_an_absent_slave_is_reported_and_does_not_stall_the_others() -> None:
     probes = [t for t, d in w.sent if d[4] & 0x7F == 9]
     # probed once per absent_retry (0.2 s), one try each: it costs little of the cycle
     assert 4 <= len(probes) <= 6
-    assert w.master.slave_stats(9).requests == len(probes) + 1
+    assert w.master.slave_figures(9).requests == len(probes) + 1
     assert w.master.live_list() == [5, 6]
 
 
@@ -155,7 +154,7 @@ def test_a_full_line_of_125_slaves_with_one_missing() -> None:
         Master(FAST_BUS, [echo_params(126)])
     assert w.run_until(lambda: all_in(w, *present) and all_in(w, 77, state=SlaveState.ABSENT), 5.0)
     w.clear()
-    w.master.stats.cycle = Samples()
+    w.master.figures.cycle = Samples()
     w.run(0.5)
     counts = {a: 0 for a in present}
     for a in w.of(InputsReceived):
@@ -163,7 +162,7 @@ def test_a_full_line_of_125_slaves_with_one_missing() -> None:
     assert min(counts.values()) >= 4  # every present slave keeps exchanging
     # Felser: (380 + 300 x 124 + 11 x 8 x 124) bit times at 500 kbit/s = 97 ms, and the
     # absent slave costs one slot time per absent_retry at most
-    assert w.master.stats.cycle.median < 0.1
+    assert w.master.figures.cycle.median < 0.1
     assert all_in(w, *present)
     assert w.master.live_list() == present
 
@@ -172,11 +171,11 @@ def test_the_cycle_is_bounded_by_the_slot_time_of_an_absent_slave() -> None:
     w = wire_for([5], configured=[5, 9])
     assert w.run_until(lambda: all_in(w, 5) and all_in(w, 9, state=SlaveState.ABSENT), 1.0)
     w.run(0.01)  # the start-up cycle ends
-    w.master.stats.cycle = Samples()
+    w.master.figures.cycle = Samples()
     w.run(1.0)
     wait = FAST_BUS.reply_wait + FAST_BUS.tx_time(11)  # one probe, one try
-    assert w.master.stats.cycle.max < wait + 0.002
-    assert w.master.stats.cycle.median < 0.001
+    assert w.master.figures.cycle.max < wait + 0.002
+    assert w.master.figures.cycle.median < 0.001
 
 
 # ---------------------------------------------------------------------------------------
@@ -192,7 +191,7 @@ def test_a_lost_reply_is_repeated_with_the_same_fcb() -> None:
     w.run(0.01)
     first, second = w.sent[0][1], w.sent[1][1]
     assert first == second  # 1.3: the retry keeps the FCB
-    assert w.master.slave_stats(5).retries == 1
+    assert w.master.slave_figures(5).retries == 1
     assert w.line[5].counters.repeats == 1  # the slave saw the repeat and answered again
     assert all_in(w, 5)
 
@@ -204,7 +203,7 @@ def test_no_reply_after_the_retries_takes_the_slave_out_of_data_exchange() -> No
     assert w.run_until(lambda: all_in(w, 5, state=SlaveState.ABSENT), 1.0)
     (down,) = w.of(SlaveDown)
     assert down.address == 5 and "no reply to Data_Exchange after 2 tries" in down.reason
-    assert w.master.slave_stats(5).timeouts >= 2
+    assert w.master.slave_figures(5).timeouts >= 2
     assert all_in(w, 6)
     w.line[5].faults.silent = False
     assert w.run_until(lambda: all_in(w, 5), 1.0)  # probed again, started again
@@ -234,7 +233,7 @@ def test_a_late_reply_is_not_taken_for_the_next_one() -> None:
     assert w.run_until(lambda: all_in(w, 5), 1.0)
     w.late_by = FAST_BUS.reply_wait * 1.5
     w.run(0.05)
-    assert w.master.stats.unexpected > 0
+    assert w.master.figures.unexpected > 0
     w.late_by = 0.0
     w.run(0.5)
     assert all_in(w, 5)
@@ -246,9 +245,9 @@ def test_line_noise_costs_retries_not_the_exchange() -> None:
     w.line.faults.bit_error_rate = 0.01
     w.clear()
     w.run(2.0)
-    stats = w.master.stats
-    assert stats.fcs_errors + stats.framing_errors > 0
-    assert stats.retries > 0
+    figures = w.master.figures
+    assert figures.fcs_errors + figures.framing_errors > 0
+    assert figures.retries > 0
     exchanges = [a.address for a in w.of(InputsReceived)]
     assert exchanges.count(5) > 100 and exchanges.count(6) > 100
 

@@ -24,8 +24,7 @@ from adapters.profibus.master import (
 )
 from adapters.profibus.scan import Scanner, SlaveInfo, status_request
 from adapters.profibus.timing import BusParams
-
-from .script import Script, h
+from tests.profibus.script import Script, h
 
 BUS = BusParams.for_baudrate(500000, latency=0.001)
 

@@ -31,11 +31,11 @@ from adapters.profibus.fdl import (
     decode_telegram,
 )
 from adapters.profibus.master import (
+    FrameIn,
     InputsReceived,
     LineMode,
     LineNoise,
     Master,
-    Received,
     Receiving,
     SlaveState,
     SlaveUp,
@@ -44,8 +44,7 @@ from adapters.profibus.master import (
 from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.sim.slave import DpSlave
 from gateway.sim import FaultInjector
-
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 FAST = settings(max_examples=15, deadline=None)
 ADDRESSES = st.lists(st.integers(3, 12), min_size=1, max_size=5, unique=True)
@@ -120,15 +119,15 @@ responses = st.builds(
     data=st.binary(max_size=40),
 )
 events = st.one_of(
-    responses.map(Received),
-    st.just(Received(ShortAck())),
+    responses.map(FrameIn),
+    st.just(FrameIn(ShortAck())),
     st.builds(
         lambda raw: LineNoise(FdlDecodeError(DecodeFailure.BAD_CHECKSUM, "noise", raw)),
         st.binary(min_size=1, max_size=8),
     ),
     st.just(Receiving()),
     st.builds(
-        lambda sa: Received(DataTelegram(5, 2, RequestFc(RequestFunction.SRD_HIGH), data=b"x")),
+        lambda sa: FrameIn(DataTelegram(5, 2, RequestFc(RequestFunction.SRD_HIGH), data=b"x")),
         st.just(0),
     ),
 )
@@ -148,7 +147,7 @@ def test_nothing_from_the_line_makes_the_engine_raise(script: list[tuple[float, 
         assert sum(1 for a in actions if isinstance(a, Transmit) and a.expect_reply) <= 1
         deadline = master.next_deadline()
         assert deadline is None or deadline > now  # never a busy loop
-    assert master.stats.telegrams >= 1
+    assert master.figures.telegrams >= 1
 
 
 requests = st.builds(

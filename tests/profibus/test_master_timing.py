@@ -23,9 +23,8 @@ from adapters.profibus.master import (
     Transmit,
 )
 from adapters.profibus.timing import BusParams
-
-from .script import Script
-from .test_master_golden import (
+from tests.profibus.script import Script
+from tests.profibus.test_master_golden import (
     CHK_CFG,
     DIAG_FRESH,
     DIAG_READY,
@@ -36,7 +35,7 @@ from .test_master_golden import (
     SET_PRM,
     slave,
 )
-from .wire import FAST_BUS, Wire, echo_line, echo_params
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
 SLOW = BusParams.for_baudrate(19200)  # the line: TSYN 1.72 ms, reply wait ~15 ms
 FAST = BusParams.for_baudrate(500000, latency=0.001)  # TSYN 66 us
@@ -84,7 +83,7 @@ def test_a_stray_reply_restarts_the_idle_time() -> None:
     stray = script.now
     script.sent()
     assert script.transmits[sent].not_before >= stray + FAST.tsyn - EPS
-    assert script.master.stats.unexpected == 1
+    assert script.master.figures.unexpected == 1
 
 
 def test_a_retry_waits_the_reply_time_after_the_late_first_try() -> None:
@@ -138,7 +137,7 @@ def test_a_late_write_everywhere_keeps_every_gap_and_every_slave() -> None:
         before = [e for e in ends if e <= start]
         if before:
             assert start - before[-1] >= FAST_BUS.tsyn - EPS
-    assert master.stats.retries == 0 and len(w.of(InputsReceived)) > 300
+    assert master.figures.retries == 0 and len(w.of(InputsReceived)) > 300
 
 
 def _dpv1_wire() -> Wire:
@@ -167,7 +166,7 @@ def test_an_unanswered_dpv1_request_keeps_data_exchange_and_backs_off() -> None:
     master.read_record(5, 0, 1, 4, w.now)
     w.run(4.0)
     assert not w.of(SlaveDown) and master.state_of(5) is SlaveState.DATA_EXCHANGE
-    assert master.slave_stats(5).restarts == 0
+    assert master.slave_figures(5).restarts == 0
     faults = w.of(SlaveFault)
     assert [f.kind for f in faults] == [FaultKind.DPV1_UNANSWERED]  # once
     assert "unanswered" in faults[0].text and "data exchange goes on" in faults[0].text

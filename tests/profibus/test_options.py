@@ -9,14 +9,13 @@ import pytest
 
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.link import Rs485
-from adapters.profibus.options import ProfibusDriveOptions, ProfibusOptions
+from adapters.profibus.options import BusOptions, DriveOptions
 from gateway.adapter import load_adapter
 from gateway.cli import main
 from gateway.config import parse
 from gateway.errors import ConfigErrors
 from gateway.model import Device
-
-from .support import ADAPTER
+from tests.profibus.support import ADAPTER
 
 FILE = "config/site.toml"
 
@@ -42,7 +41,7 @@ def test_the_registry_names_this_adapter() -> None:
 
 def test_defaults() -> None:
     options = bus(port="/dev/ttyUSB0").buses[0].options
-    assert options == ProfibusOptions(port="/dev/ttyUSB0")
+    assert options == BusOptions(port="/dev/ttyUSB0")
     params = options.bus_params()
     assert (params.tsl, params.min_tsdr, params.max_tsdr) == (200, 11, 100)  # 500k (1.1)
     assert options.watchdog == 0.5 and options.retries == 1
@@ -127,7 +126,7 @@ def test_drive_options_are_the_profiles_plus_a_watchdog() -> None:
     ]
     cfg = bus(adapter=ADAPTER, simulate=True, drives=drives)
     a, b = cfg.buses[0].drives
-    assert isinstance(a.options, ProfibusDriveOptions)
+    assert isinstance(a.options, DriveOptions)
     assert a.options.watchdog == 0.2 and a.options.profile.size == 8
     assert b.options.watchdog is None
 

@@ -25,8 +25,7 @@ from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.slave import DpSlave, SlaveMode
 from gateway.sim import FaultInjector
-
-from .script import h
+from tests.profibus.script import h
 
 MASTER = 2
 

@@ -24,9 +24,9 @@ from adapters.profibus.fdl import (
 )
 from adapters.profibus.master import (
     Action,
+    FrameIn,
     LineNoise,
     Master,
-    Received,
     SlaveParams,
     Transmit,
     Written,
@@ -113,8 +113,8 @@ class Wire:
                 self.line.tick(self.now)
                 self._queue.extend(self.master.step(self.now))
 
-    def _events(self) -> list[Received | LineNoise]:
-        out: list[Received | LineNoise] = []
+    def _events(self) -> list[FrameIn | LineNoise]:
+        out: list[FrameIn | LineNoise] = []
         while True:
             ev = self.decoder.next_frame()
             if isinstance(ev, NeedMore):
@@ -122,7 +122,7 @@ class Wire:
             if isinstance(ev, Discarded):
                 out.append(LineNoise(ev.error))
             elif isinstance(ev, DataTelegram | ShortAck | TokenTelegram):
-                out.append(Received(ev))
+                out.append(FrameIn(ev))
         self.decoder.mark_idle()  # a reply arrives whole, as on a quiet line
         tail = self.decoder.next_frame()
         if isinstance(tail, Discarded):

@@ -54,7 +54,7 @@ from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.explicit import GetAttributeSingle, SetAttributeSingle
 from adapters.devicenet.options import DriveOptions, parse_drive
 from adapters.devicenet.profile import DnProfile, DrivePort, NotConfigured, reply_data
-from adapters.devicenet.scanner.api import IoKind
+from adapters.devicenet.scanner.events import IoKind
 from gateway.adapter import (
     Capabilities,
     EventKind,

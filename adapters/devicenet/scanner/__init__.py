@@ -1,13 +1,14 @@
 """The DeviceNet scanner engine (sans-IO, stepped with an injected clock).
 
-``api`` holds the config, events and actions; ``engine`` the :class:`Scanner` (the line,
+``events`` holds the config, events and actions; ``engine`` the :class:`Scanner` (the line,
 events in, deadlines, public API) and its parts: ``machine`` the per-node state machine,
-``schedule`` the poll cycle and the explicit and bring-up windows, ``jobs`` the explicit
+``scheduler`` the poll cycle and the explicit and bring-up windows, ``jobs`` the explicit
 message job queue, ``context`` what they share; ``node`` the per-node state. It imports
 codecs only: no python-can, no asyncio (docs/architecture.md, "DeviceNet scanner").
 """
 
-from adapters.devicenet.scanner.api import (
+from adapters.devicenet.scanner.engine import LinePhase, Scanner
+from adapters.devicenet.scanner.events import (
     Action,
     BadFrame,
     BusErrorIn,
@@ -31,7 +32,6 @@ from adapters.devicenet.scanner.api import (
     Send,
     TxFailed,
 )
-from adapters.devicenet.scanner.engine import LinePhase, Scanner
 from adapters.devicenet.scanner.node import Phase
 
 __all__ = [

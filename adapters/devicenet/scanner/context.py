@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from adapters.devicenet.fragment import UNFRAGMENTED_MAX, fragment_io
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import PredefinedId, PredefinedMessage
-from adapters.devicenet.scanner.api import Action, Report, ReportKind, ScannerConfig, Send
+from adapters.devicenet.scanner.events import Action, Report, ReportKind, ScannerConfig, Send
 from adapters.devicenet.scanner.node import Node
 
 

@@ -18,7 +18,7 @@ leads to a send waits for the end of the send hold. Release on shutdown (:meth:`
 The :class:`Scanner` is the line: its own Duplicate MAC ID check, the events in, the
 deadlines and the public API. Its parts (docs/architecture.md, "DeviceNet scanner"):
 :class:`~adapters.devicenet.scanner.machine.NodeMachine` (per-node state machine),
-:class:`~adapters.devicenet.scanner.schedule.Scheduler` (poll cycle, explicit and
+:class:`~adapters.devicenet.scanner.scheduler.Scheduler` (poll cycle, explicit and
 bring-up windows), :class:`~adapters.devicenet.scanner.jobs.ExplicitJobs` (explicit
 message job queue), sharing a :class:`~adapters.devicenet.scanner.context.LineContext`.
 """
@@ -29,13 +29,13 @@ from collections.abc import Callable, Iterable
 from enum import Enum
 from typing import Any
 
-from adapters.devicenet.canerror import LineCondition, LineHealth, health_after
 from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanId
 from adapters.devicenet.explicit import Request
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import PredefinedId, PredefinedMessage, match_predefined
-from adapters.devicenet.scanner.api import (
+from adapters.devicenet.scanner.context import LineContext, ms
+from adapters.devicenet.scanner.events import (
     Action,
     BadFrame,
     BusErrorIn,
@@ -51,11 +51,11 @@ from adapters.devicenet.scanner.api import (
     ScannerConfig,
     TxFailed,
 )
-from adapters.devicenet.scanner.context import LineContext, ms
 from adapters.devicenet.scanner.jobs import ExplicitJobs
 from adapters.devicenet.scanner.machine import NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
-from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.devicenet.scanner.scheduler import Scheduler
+from adapters.link.canerror import LineCondition, LineHealth, health_after
 from gateway.errors import FrameEncodeError
 
 

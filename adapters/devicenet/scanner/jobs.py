@@ -30,10 +30,10 @@ from adapters.devicenet.fragment import (
     decode_explicit_frame,
 )
 from adapters.devicenet.ids import PredefinedMessage
-from adapters.devicenet.scanner.api import ExplicitResult
 from adapters.devicenet.scanner.context import LineContext
+from adapters.devicenet.scanner.events import ExplicitResult
 from adapters.devicenet.scanner.node import Node, Pending, Phase, Transaction
-from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.devicenet.scanner.scheduler import Scheduler
 from gateway.errors import FrameEncodeError
 
 MAC_MASK = 0x3F

@@ -50,7 +50,8 @@ from adapters.devicenet.objects import (
     ConnectionInstance,
     IdentityAttribute,
 )
-from adapters.devicenet.scanner.api import (
+from adapters.devicenet.scanner.context import LineContext
+from adapters.devicenet.scanner.events import (
     InputData,
     IoKind,
     NodeDown,
@@ -58,10 +59,9 @@ from adapters.devicenet.scanner.api import (
     NodeUp,
     ReportKind,
 )
-from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.jobs import EXPLICIT_PHASES, ExplicitJobs
 from adapters.devicenet.scanner.node import Node, Pending, Phase, Purpose, Unconnected
-from adapters.devicenet.scanner.schedule import Scheduler
+from adapters.devicenet.scanner.scheduler import Scheduler
 
 Check = Callable[[Node, bytes], str | None]
 

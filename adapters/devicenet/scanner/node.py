@@ -10,7 +10,7 @@ from typing import Any
 
 from adapters.devicenet.explicit import ExplicitMessage, Request, Response
 from adapters.devicenet.fragment import ExplicitReassembler, ExplicitSender, IoReassembler
-from adapters.devicenet.scanner.api import NodeConfig
+from adapters.devicenet.scanner.events import NodeConfig
 
 
 class Phase(Enum):
@@ -68,7 +68,7 @@ class Unconnected:
 
 
 @dataclass(slots=True)
-class Figures:
+class NodeFigures:
     """Diagnostics of one node."""
 
     allocations: int = 0
@@ -155,7 +155,7 @@ class Node:
     ack_deadline: float | None = None
     ack_retried: bool = False
     last_rx: float = 0.0
-    figures: Figures = field(default_factory=Figures)
+    figures: NodeFigures = field(default_factory=NodeFigures)
 
     @property
     def mac(self) -> int:

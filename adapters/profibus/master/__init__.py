@@ -22,16 +22,16 @@ of four parts, each stepped through it with the same clock:
 
 from __future__ import annotations
 
-from ..events import (
+from adapters.profibus.events import (
     Action,
     DiagnosisRead,
     Event,
     FaultKind,
+    FrameIn,
     InputsReceived,
     LineMode,
     LineNoise,
     Purpose,
-    Received,
     Receiving,
     RecordDone,
     RecordFailure,
@@ -46,11 +46,11 @@ from ..events import (
     check_slave,
     describe_cfg,
 )
-from .acyclic import DPV1_BACKOFF, MAX_ACYCLIC_PER_TURN
-from .common import MAX_TURN
-from .engine import Master
-from .scheduler import IDLE_GUARD
-from .station import FRAME_MEMO, MAX_PRM_ATTEMPTS, STATE_TIMEOUTS
+from adapters.profibus.master.acyclic import DPV1_BACKOFF, MAX_ACYCLIC_PER_TURN
+from adapters.profibus.master.common import MAX_TURN
+from adapters.profibus.master.engine import Master
+from adapters.profibus.master.scheduler import IDLE_GUARD
+from adapters.profibus.master.station import FRAME_MEMO, MAX_PRM_ATTEMPTS, STATE_TIMEOUTS
 
 __all__ = [
     "DPV1_BACKOFF",
@@ -64,12 +64,12 @@ __all__ = [
     "DiagnosisRead",
     "Event",
     "FaultKind",
+    "FrameIn",
     "InputsReceived",
     "LineMode",
     "LineNoise",
     "Master",
     "Purpose",
-    "Received",
     "Receiving",
     "RecordDone",
     "RecordFailure",

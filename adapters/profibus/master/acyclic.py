@@ -20,11 +20,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
 
-from gateway.errors import FrameEncodeError
-
-from .. import dpv1
-from ..errors import ProfibusDecodeError
-from ..events import (
+from adapters.profibus import dpv1
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.events import (
     Action,
     FaultKind,
     Purpose,
@@ -33,11 +31,12 @@ from ..events import (
     SlaveFault,
     SlaveState,
 )
-from ..fdl import DataTelegram, RequestFc, ResponseStatus
-from ..timing import BusParams
-from .common import DATA_OK, Job, Pending, Reply, status_of
-from .line import Line
-from .station import Station
+from adapters.profibus.fdl import DataTelegram, RequestFc, ResponseStatus
+from adapters.profibus.master.common import DATA_OK, Job, Pending, Reply, status_of
+from adapters.profibus.master.line import Line
+from adapters.profibus.master.station import Station
+from adapters.profibus.timing import BusParams
+from gateway.errors import FrameEncodeError
 
 MAX_ACYCLIC_PER_TURN: Final = 2  # DP-V1 request + first poll
 DPV1_BACKOFF: Final = (1.0, 60.0)  # s: DP-V1 held after an unanswered request, doubling
@@ -235,11 +234,11 @@ class JobQueue:
         try:
             answer = dpv1.decode_response(data)
         except ProfibusDecodeError as exc:
-            station.stats.invalid_replies += 1
+            station.figures.invalid_replies += 1
             self.finish(job, RecordFailure.BAD_REPLY, f"undecodable DP-V1 answer: {exc.message}")
             return
         if not _answers(job.request, answer):
-            station.stats.invalid_replies += 1  # a stale answer to an older request: poll on
+            station.figures.invalid_replies += 1  # a stale answer to an older request: poll on
             job.requested = True
             station.turn.acyclic_wait = True
             return

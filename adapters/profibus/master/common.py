@@ -10,9 +10,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Final
 
-from .. import dpv1
-from ..events import Purpose
-from ..fdl import DataTelegram, ResponseFc, ResponseStatus, ShortAck
+from adapters.profibus import dpv1
+from adapters.profibus.events import Purpose
+from adapters.profibus.fdl import DataTelegram, ResponseFc, ResponseStatus, ShortAck
 
 MAX_TURN: Final = 4  # telegrams of one slave in one cycle (retries not counted)
 

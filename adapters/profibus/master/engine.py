@@ -25,25 +25,23 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from gateway.errors import FrameEncodeError
-
-from .. import dpv1
-from ..dp import GlobalControl
-from ..errors import FdlDecodeError
-from ..events import (
+from adapters.profibus import dpv1
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.errors import FdlDecodeError
+from adapters.profibus.events import (
     Action,
     Event,
+    FrameIn,
     LineMode,
     LineNoise,
     Purpose,
-    Received,
     SlaveParams,
     SlaveState,
     Transmit,
     Written,
     check_slave,
 )
-from ..fdl import (
+from adapters.profibus.fdl import (
     DataTelegram,
     FcbState,
     ResponseFc,
@@ -51,13 +49,14 @@ from ..fdl import (
     ShortAck,
     TokenTelegram,
 )
-from ..linestats import LineStats, SlaveStats
-from ..timing import BusParams
-from .acyclic import JobQueue
-from .common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
-from .line import Line
-from .scheduler import Scheduler
-from .station import Station, StationContext
+from adapters.profibus.figures import LineFigures, SlaveFigures
+from adapters.profibus.master.acyclic import JobQueue
+from adapters.profibus.master.common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
+from adapters.profibus.master.line import Line
+from adapters.profibus.master.scheduler import Scheduler
+from adapters.profibus.master.station import Station, StationContext
+from adapters.profibus.timing import BusParams
+from gateway.errors import FrameEncodeError
 
 
 class Master:
@@ -66,12 +65,12 @@ class Master:
     def __init__(self, bus: BusParams, slaves: Iterable[SlaveParams], now: float = 0.0) -> None:
         self.bus = bus
         self.address = bus.master_address
-        self.stats = LineStats()
+        self.figures = LineFigures()
         self._out: list[Action] = []
-        self._line = Line(bus, self.stats, self._out, now)
+        self._line = Line(bus, self.figures, self._out, now)
         self._acyclic = JobQueue(bus, self._line, self._out)
         self._jobs = self._acyclic.jobs  # the unfinished DP-V1 jobs (looked at every step)
-        context = StationContext(bus, self._out, self.stats, self._acyclic.station_left)
+        context = StationContext(bus, self._out, self.figures, self._acyclic.station_left)
         self._timed = context.timed  # stations in a start-up state with a timeout
         self._slaves: dict[int, Station] = {}
         for params in sorted(slaves, key=lambda s: s.address):
@@ -101,8 +100,8 @@ class Master:
     def state_of(self, address: int) -> SlaveState:
         return self._slave(address).state
 
-    def slave_stats(self, address: int) -> SlaveStats:
-        return self._slave(address).stats
+    def slave_figures(self, address: int) -> SlaveFigures:
+        return self._slave(address).figures
 
     def fault_of(self, address: int) -> str | None:
         return self._slave(address).fault
@@ -119,7 +118,7 @@ class Master:
             "state": sl.state.value,
             "fault": sl.fault,
             "jobs_queued": self._acyclic.queued(address),
-            **sl.stats.to_json(),
+            **sl.figures.to_json(),
         }
 
     def line_diagnostics(self) -> dict[str, Any]:
@@ -127,7 +126,7 @@ class Master:
             "mode": self.mode.value,
             "baudrate": self.bus.baudrate,
             "master_address": self.address,
-            **self.stats.to_json(),
+            **self.figures.to_json(),
             "live_list": self.live_list(),
         }
 
@@ -191,7 +190,7 @@ class Master:
     def count_noise(self, error: FdlDecodeError, address: int | None = None) -> None:
         """Count undecodable bytes (line level, and for ``address`` if given)."""
         sl = self._slaves.get(address) if address is not None else None
-        self._line.count_noise(error, sl.stats if sl is not None else None)
+        self._line.count_noise(error, sl.figures if sl is not None else None)
 
     # ------------------------------------------------------------------ stepping
 
@@ -199,7 +198,7 @@ class Master:
         if self._stopped:
             return []
         if event is not None:
-            if type(event) is Received and self._steady_reply(event.telegram, now):
+            if type(event) is FrameIn and self._steady_reply(event.telegram, now):
                 return self._take()
             self._on_event(event, now)
         if self._jobs:
@@ -252,7 +251,7 @@ class Master:
             return
         # 1.1: any byte on the line restarts the idle time before the next request
         line.heard(now)
-        if isinstance(event, Received):
+        if isinstance(event, FrameIn):
             self._on_received(event.telegram, now)
         elif isinstance(event, LineNoise):
             pending = line.pending
@@ -266,15 +265,15 @@ class Master:
         if isinstance(telegram, DataTelegram) and telegram.is_request:
             return  # our own echo (half-duplex converters) or another station's request
         if pending is None or not pending.written or isinstance(telegram, TokenTelegram):
-            self.stats.unexpected += 1
+            self.figures.unexpected += 1
             return
         if isinstance(telegram, DataTelegram) and not _answers_request(
             pending, telegram, self.address
         ):
-            self.stats.unexpected += 1  # e.g. a late reply to an earlier request
+            self.figures.unexpected += 1  # e.g. a late reply to an earlier request
             return
         if isinstance(telegram, ShortAck) and not self._takes_short_ack(pending):
-            self.stats.unexpected += 1  # E5 has no address: a late answer to another request
+            self.figures.unexpected += 1  # E5 has no address: a late answer to another request
             return
         self._line.end_request(now)
         if pending.purpose is Purpose.STATUS:
@@ -344,7 +343,7 @@ class Master:
             self._scheduler.probed.pop(pending.address, None)
             return
         sl = self._slaves[pending.address]
-        counters: list[LineStats | SlaveStats] = [self.stats, sl.stats]
+        counters: list[LineFigures | SlaveFigures] = [self.figures, sl.figures]
         if pending.tries < pending.max_tries:
             for c in counters:
                 c.retries += 1

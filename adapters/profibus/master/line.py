@@ -14,21 +14,21 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from ..dp import GlobalControl, global_control_request
-from ..errors import DecodeFailure, FdlDecodeError
-from ..events import Action, Transmit
-from ..linestats import LineStats, SlaveStats
-from ..timing import MAX_TELEGRAM, BusParams
-from .common import Job, Pending
+from adapters.profibus.dp import GlobalControl, global_control_request
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError
+from adapters.profibus.events import Action, Transmit
+from adapters.profibus.figures import LineFigures, SlaveFigures
+from adapters.profibus.master.common import Job, Pending
+from adapters.profibus.timing import MAX_TELEGRAM, BusParams
 
 
 class Line:
     """The request on the line, the idle time before the next, and what is unconfirmed."""
 
-    def __init__(self, bus: BusParams, stats: LineStats, out: list[Action], now: float) -> None:
+    def __init__(self, bus: BusParams, figures: LineFigures, out: list[Action], now: float) -> None:
         self.bus = bus
         self.address = bus.master_address
-        self.stats = stats
+        self.figures = figures
         self.out = out
         self.tsyn = bus.tsyn  # BusParams computes these on every call; each message needs them
         self.reply_wait = bus.reply_wait
@@ -63,14 +63,14 @@ class Line:
         pending.written = False
         self.unwritten.append((len(pending.data), pending))
         self.pending = pending
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         self.out.append(Transmit(pending.data, not_before, True))
 
     def broadcast(self, control: GlobalControl, now: float) -> None:
         data = global_control_request(control, sa=self.address).encode()
         not_before = max(now, self.idle_since + self.tsyn)
         self.unwritten.append((len(data), None))  # busy until Written + line time + TSYN
-        self.stats.telegrams += 1
+        self.figures.telegrams += 1
         self.out.append(Transmit(data, not_before, False))
 
     def leave(self, now: float) -> list[Transmit]:
@@ -127,10 +127,10 @@ class Line:
             pending.garbled = True
             pending.deadline = max(pending.deadline, now + self.bus.reply_wait)
 
-    def count_noise(self, error: FdlDecodeError, slave: SlaveStats | None) -> None:
+    def count_noise(self, error: FdlDecodeError, slave: SlaveFigures | None) -> None:
         """Count undecodable bytes (line level, and for a slave if given)."""
-        self.stats.discarded_bytes += len(error.raw)
-        counters: list[LineStats | SlaveStats] = [self.stats]
+        self.figures.discarded_bytes += len(error.raw)
+        counters: list[LineFigures | SlaveFigures] = [self.figures]
         if slave is not None:
             counters.append(slave)
         for c in counters:

@@ -18,15 +18,21 @@ from collections import deque
 from collections.abc import Callable
 from typing import Final
 
-from ..dp import GlobalControl
-from ..events import LineMode, Purpose, SlaveState
-from ..fdl import MAX_STATION, DataTelegram, RequestFunction, ResponseFc, StationType
-from ..scan import status_request
-from ..timing import BusParams
-from .acyclic import JobQueue
-from .common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
-from .line import Line
-from .station import Station
+from adapters.profibus.dp import GlobalControl
+from adapters.profibus.events import LineMode, Purpose, SlaveState
+from adapters.profibus.fdl import (
+    MAX_STATION,
+    DataTelegram,
+    RequestFunction,
+    ResponseFc,
+    StationType,
+)
+from adapters.profibus.master.acyclic import JobQueue
+from adapters.profibus.master.common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
+from adapters.profibus.master.line import Line
+from adapters.profibus.master.station import Station
+from adapters.profibus.scan import status_request
+from adapters.profibus.timing import BusParams
 
 IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
 
@@ -110,9 +116,9 @@ class Scheduler:
         started = self.cycle_started if self.cycle_started is not None else now
         self.cycle_started = None
         if self._cycle_sent:
-            stats = self.line.stats
-            stats.cycles += 1
-            stats.cycle.add(now - started)
+            figures = self.line.figures
+            figures.cycles += 1
+            figures.cycle.add(now - started)
             self.next_cycle = max(now, started + self.bus.cycle_time)
         else:
             self.next_cycle = max(now + IDLE_GUARD, started + self.bus.cycle_time, self._due())
@@ -214,7 +220,7 @@ class Scheduler:
                 telegram = sl.request(purpose, fc)
             data, dsap = telegram.encode(), telegram.dsap
             tries = 1 if sl.state is SlaveState.ABSENT else 1 + self.bus.retries
-        sl.stats.requests += 1
+        sl.figures.requests += 1
         pending = Pending(sl.address, purpose, data, now, now, tries, True, job=job, dsap=dsap)
         self._cycle_sent += 1
         self.line.transmit(pending, now, fresh=True)

@@ -16,12 +16,17 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
-from gateway.errors import FrameEncodeError
-
-from ..diag import SlaveDiag, describe_blocks
-from ..dp import DataExchange, GetCfgRequest, MasterSap, SlaveDiagRequest, SlaveSap, build_request
-from ..errors import ProfibusDecodeError
-from ..events import (
+from adapters.profibus.diag import SlaveDiag, describe_blocks
+from adapters.profibus.dp import (
+    DataExchange,
+    GetCfgRequest,
+    MasterSap,
+    SlaveDiagRequest,
+    SlaveSap,
+    build_request,
+)
+from adapters.profibus.errors import ProfibusDecodeError
+from adapters.profibus.events import (
     Action,
     DiagnosisRead,
     FaultKind,
@@ -35,10 +40,20 @@ from ..events import (
     SlaveUp,
     describe_cfg,
 )
-from ..fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
-from ..linestats import LineStats, SlaveStats
-from ..timing import MAX_TELEGRAM, BusParams
-from .common import DATA_OK, MAX_TURN, REQUEST_NAMES, Pending, Reply, Turn, show, status_of
+from adapters.profibus.fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
+from adapters.profibus.figures import LineFigures, SlaveFigures
+from adapters.profibus.master.common import (
+    DATA_OK,
+    MAX_TURN,
+    REQUEST_NAMES,
+    Pending,
+    Reply,
+    Turn,
+    show,
+    status_of,
+)
+from adapters.profibus.timing import MAX_TELEGRAM, BusParams
+from gateway.errors import FrameEncodeError
 
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"
 FRAME_MEMO: Final = 4  # Data_Exchange telegrams kept encoded per slave (2 FCBs x outputs)
@@ -66,7 +81,7 @@ class StationContext:
 
     bus: BusParams
     out: list[Action]
-    stats: LineStats
+    figures: LineFigures
     left_exchange: Callable[[Station], None]
     timed: dict[int, Station] = field(default_factory=dict)
 
@@ -96,7 +111,7 @@ class Station:
         self.last_diag: SlaveDiag | None = None
         self.frames: dict[tuple[bool, bool, bytes], bytes] = {}
         self.turn = Turn()
-        self.stats = SlaveStats()
+        self.figures = SlaveFigures()
 
     # ------------------------------------------------------------------ outputs
 
@@ -149,7 +164,7 @@ class Station:
     # ------------------------------------------------------------------ replies
 
     def answered(self, pending: Pending, now: float) -> None:
-        self.stats.response.add(now - pending.sent_at)
+        self.figures.response.add(now - pending.sent_at)
         if pending.fcb_function:
             self.fcb = self.fcb.acknowledged()  # 1.3: toggle after each acknowledged SRD
 
@@ -214,19 +229,19 @@ class Station:
         self.took_inputs(data)
 
     def took_inputs(self, data: bytes) -> None:
-        self.stats.exchanges += 1
+        self.figures.exchanges += 1
         self._out.append(InputsReceived(self.address, data))
 
     def _invalid(self, text: str, now: float) -> None:
         """A reply that is no answer to the request: counted; the state decides what next."""
-        self.stats.invalid_replies += 1
-        self.context.stats.invalid_replies += 1
+        self.figures.invalid_replies += 1
+        self.context.figures.invalid_replies += 1
         if self.state is SlaveState.DATA_EXCHANGE:
             self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def _restart_bad(self, text: str, now: float) -> None:
-        self.stats.invalid_replies += 1
-        self.context.stats.invalid_replies += 1
+        self.figures.invalid_replies += 1
+        self.context.figures.invalid_replies += 1
         self.enter(SlaveState.WAIT_DIAG, now, text)
 
     def gave_up(self, pending: Pending, now: float) -> None:
@@ -346,7 +361,7 @@ class Station:
         else:
             context.timed.pop(self.address, None)
         if old is SlaveState.DATA_EXCHANGE:
-            self.stats.restarts += 1
+            self.figures.restarts += 1
             self.diag_pending = False
             self._out.append(SlaveDown(self.address, reason or new.value))
             context.left_exchange(self)

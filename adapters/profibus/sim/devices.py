@@ -35,7 +35,7 @@ def with_setup(sim: SimDevice, device: Device, override: Any) -> SimDevice:
     gsd = getattr(override, "gsd", None)
     if gsd is None:
         return sim
-    from .gsdsim import GsdSim
+    from adapters.profibus.sim.gsdsim import GsdSim
 
     modules = tuple(getattr(override, "modules", ()))
     wrapped: SimDevice = GsdSim(sim, gsd, modules=modules)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any, Final
 
-from adapters.profibus.cfg import CompactId, IoDirection, encode_identifiers
+from adapters.profibus.chkcfg import CompactId, IoDirection, encode_identifiers
 from adapters.profibus.dpv1 import error_code_1_text
 from adapters.profibus.profile import RecordAccessError, SimDeviceBase
 

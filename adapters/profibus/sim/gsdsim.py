@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from adapters.profibus.cfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 from adapters.profibus.gsd import (
     DPV1_STATUS_BYTES,
     Gsd,

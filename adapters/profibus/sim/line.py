@@ -22,9 +22,8 @@ from adapters.profibus.fdl import (
     NeedMore,
     TelegramDecoder,
 )
+from adapters.profibus.sim.slave import DpSlave
 from gateway.sim import FaultInjector
-
-from .slave import DpSlave
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,7 @@ import tty
 from typing import Any, Final
 
 from adapters.profibus.link import OPEN_ERRORS, Rs485, open_port
-
-from .line import SimLine
+from adapters.profibus.sim.line import SimLine
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ import logging
 from collections.abc import Callable, Mapping
 
 from adapters.profibus.link import SerialLink, SerialLinks, open_link
-from adapters.profibus.options import ProfibusOptions, profile_config
+from adapters.profibus.options import BusOptions, profile_config
 from adapters.profibus.sim.devices import SIM_DEVICES, make_device, with_setup
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.port import SimPort
@@ -33,7 +33,7 @@ class SimulatedLine(SerialLinks):
     """The bus's drives simulated on a pty pair (see the module docstring)."""
 
     def __init__(self, bus: BusConfig, sim_devices: Mapping[Device, str] = SIM_DEVICES) -> None:
-        options: ProfibusOptions = bus.options
+        options: BusOptions = bus.options
         self.name = bus.name
         self.options = options
         self.drives = [profile_config(d) for d in bus.drives]

@@ -27,7 +27,7 @@ from enum import Enum
 from typing import Final
 
 from adapters.profibus import dpv1
-from adapters.profibus.cfg import Configuration
+from adapters.profibus.chkcfg import Configuration
 from adapters.profibus.diag import NO_MASTER, SlaveDiag
 from adapters.profibus.dp import GlobalControl, SetPrm, SlaveSap
 from adapters.profibus.errors import ProfibusDecodeError

@@ -7,10 +7,9 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from adapters.profibus.weg.profile import WegProfile
+from adapters.profibus.weg.spec import CFW700, ModelSpec
 from gateway.model import Device
-
-from .profile import WegProfile
-from .spec import CFW700, ModelSpec
 
 
 class Cfw700Profile(WegProfile):

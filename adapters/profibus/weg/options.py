@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-from .spec import FRAME20_INPUTS, FRAME20_WORDS, DataProfile, ModelSpec
+from adapters.profibus.weg.spec import FRAME20_INPUTS, FRAME20_WORDS, DataProfile, ModelSpec
 
 if TYPE_CHECKING:
     from gateway.schema import Table

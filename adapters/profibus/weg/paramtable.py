@@ -20,10 +20,9 @@ from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Final
 
+from adapters.profibus.weg.spec import DECIMALS, SPECS
 from gateway.adapter import ParamInfo, ParamTable, param_table
 from gateway.model import Device
-
-from .spec import DECIMALS, SPECS
 
 WORD: Final = (0, 0xFFFF)  # "0000h a FFFFh" / "0 to FFFF (hexa)"
 SIGNED_WORD: Final = (-32768, 32767)

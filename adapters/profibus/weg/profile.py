@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
-from adapters.profibus.cfg import CompactId, IoDirection
+from adapters.profibus.chkcfg import CompactId, IoDirection
 from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
 from adapters.profibus.profile import (
     AddressRange,
@@ -31,15 +31,14 @@ from adapters.profibus.profile import (
     RecordChannel,
     SlaveSetup,
 )
+from adapters.profibus.weg import words as w
+from adapters.profibus.weg.options import WegOptions, parse_options
+from adapters.profibus.weg.paramtable import PARAM_TABLES
+from adapters.profibus.weg.records import RecordParams
+from adapters.profibus.weg.spec import SIGNED, DataProfile, ModelSpec, scaled
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, Readings, SpeedScale
-
-from . import words as w
-from .options import WegOptions, parse_options
-from .paramtable import PARAM_TABLES
-from .records import RecordParams
-from .spec import SIGNED, DataProfile, ModelSpec, scaled
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

@@ -28,18 +28,17 @@ from typing import TYPE_CHECKING, ClassVar, Final
 
 from adapters.profibus import profidrive as pd
 from adapters.profibus import wegrecord
-from adapters.profibus.cfg import CompactId, IoDirection
+from adapters.profibus.chkcfg import CompactId, IoDirection
 from adapters.profibus.dpv1 import WEG_ERROR_CODE_1_TEXTS
 from adapters.profibus.errors import ProfibusDecodeError
 from adapters.profibus.profile import RecordAccessError, SimDeviceBase
+from adapters.profibus.weg import simparams as sp
+from adapters.profibus.weg import spec as specs
+from adapters.profibus.weg import words as w
+from adapters.profibus.weg.options import WegOptions
+from adapters.profibus.weg.spec import DataProfile, ModelSpec
 from gateway.model import Device
 from gateway.sim import FaultInjector, Motor, MotorParams
-
-from . import simparams as sp
-from . import spec as specs
-from . import words as w
-from .options import WegOptions
-from .spec import DataProfile, ModelSpec
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig

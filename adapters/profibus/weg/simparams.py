@@ -16,9 +16,12 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Final
 
+from adapters.profibus.weg.spec import (
+    CFW11_CONTROL_TYPES,
+    CFW700_CONTROL_TYPES,
+    DEFAULT_CONTROL_TYPE,
+)
 from gateway.model import Device
-
-from .spec import CFW11_CONTROL_TYPES, CFW700_CONTROL_TYPES, DEFAULT_CONTROL_TYPE
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,9 @@ from enum import Enum
 from types import MappingProxyType
 from typing import Final
 
+from adapters.profibus.weg import words
+from adapters.profibus.weg.words import BitTable
 from gateway.model import Device
-
-from . import words
-from .words import BitTable
 
 
 class DataProfile(Enum):

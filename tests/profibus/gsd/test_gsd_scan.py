@@ -19,9 +19,8 @@ from adapters.profibus.sim.port import SimPort
 from adapters.profibus.timing import BusParams
 from gateway.cli import main
 from gateway.config import parse
+from tests.profibus.gsd.test_gsd_line import CONFIG, DRIVES, GSD_DIR
 from tests.support.timing import scaled
-
-from .test_gsd_line import CONFIG, DRIVES, GSD_DIR
 
 # The simulated slaves answer from a thread of this process: on a loaded machine a reply
 # came later than the slot time plus 10 ms and a station went unseen (3 of 4 answered).

@@ -14,8 +14,7 @@ from adapters.profibus.sim.slave import SlaveMode
 from gateway.adapter import EventKind
 from gateway.errors import DriveOffline, ParameterError
 from gateway.model import CommState, DriveCommand, DriveState, Source
-
-from ..support import line_config, running_line, until
+from tests.profibus.support import line_config, running_line, until
 
 pytestmark = pytest.mark.filterwarnings("error")
 
@@ -146,7 +145,7 @@ async def test_exchange_continues_through_line_noise() -> None:
         line.sim.faults.bit_error_rate = 1e-3  # per byte, both directions, seeded
         with line.hub.subscribe_events() as events:
             before = {a: line.sim[a].counters.exchanges for a in addresses}
-            await until(lambda: line.adapter.master.stats.fcs_errors > 0, limit=10.0)
+            await until(lambda: line.adapter.master.figures.fcs_errors > 0, limit=10.0)
             await until(
                 lambda: all(line.sim[a].counters.exchanges > before[a] + 200 for a in addresses),
                 limit=10.0,

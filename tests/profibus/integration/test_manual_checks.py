@@ -12,8 +12,7 @@ import pytest
 from adapters.profibus.weg.sim import WegSim
 from gateway.adapter import EventKind
 from gateway.model import CommState
-
-from ..support import line_config, running_line
+from tests.profibus.support import line_config, running_line
 
 pytestmark = pytest.mark.filterwarnings("error")
 

@@ -14,8 +14,7 @@ from adapters.profibus.sim.port import SimPort
 from adapters.profibus.sim.slave import DpSlave
 from gateway.adapter import EventKind
 from gateway.model import CommState
-
-from ..support import line_config, running_line, until
+from tests.profibus.support import line_config, running_line, until
 
 
 def echo_line(*addresses: int) -> SimLine:

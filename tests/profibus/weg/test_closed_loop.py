@@ -8,8 +8,7 @@ from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.sim import PdState
 from adapters.profibus.weg.spec import DataProfile
 from gateway.model import Device, Direction, DriveStatus
-
-from .helpers import Loop
+from tests.profibus.weg.helpers import Loop
 
 FAULTS = {
     Device.CFW11: (71, "motor overload"),  # CFW-11 Table 3.7 (F0071)

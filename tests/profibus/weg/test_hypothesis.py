@@ -14,8 +14,7 @@ from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.spec import CFW11, CFW320, CFW700, DataProfile, ModelSpec
 from gateway.errors import FrameDecodeError
 from gateway.model import DesiredCommand, Device, Direction
-
-from .helpers import SIMS, profile
+from tests.profibus.weg.helpers import SIMS, profile
 
 FAST = settings(max_examples=60, deadline=None)
 SPECS = st.sampled_from([CFW11, CFW700, CFW320])

@@ -9,8 +9,7 @@ from adapters.profibus.weg.profile import DriveProgrammingMismatch
 from adapters.profibus.weg.spec import DataProfile
 from gateway.errors import ParameterError
 from gateway.model import Device, DriveStatus
-
-from .helpers import SIMS, Events, Loop, SimChannel, profile
+from tests.profibus.weg.helpers import SIMS, Events, Loop, SimChannel, profile
 
 MODELS = [Device.CFW11, Device.CFW700, Device.CFW320]
 RECORDS = [47, 48]

@@ -9,8 +9,7 @@ from adapters.profibus.weg.paramtable import NOT_IN_SEEDS, PARAM_TABLES
 from adapters.profibus.weg.simparams import PARAMETERS
 from adapters.profibus.weg.spec import SPECS
 from gateway.model import Device
-
-from .helpers import profile
+from tests.profibus.weg.helpers import profile
 
 
 def test_the_manuals_examples() -> None:

@@ -23,8 +23,7 @@ from adapters.profibus.weg.spec import DataProfile
 from gateway.errors import ConfigError, FrameDecodeError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus
 from gateway.schema import Table
-
-from .helpers import Loop, drive, profile
+from tests.profibus.weg.helpers import Loop, drive, profile
 
 SYNC = WegOptions(sync_rpm=1800.0)
 

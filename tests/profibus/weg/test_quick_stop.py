@@ -19,8 +19,7 @@ from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.profile import WegProfile
 from adapters.profibus.weg.spec import CFW11, CFW320, CFW700, DataProfile
 from gateway.model import DesiredCommand, Device
-
-from .helpers import Loop, profile
+from tests.profibus.weg.helpers import Loop, profile
 
 SYNC = WegOptions(sync_rpm=1800.0, max_rpm=1800.0)
 PD = WegOptions(data_profile=DataProfile.PROFIDRIVE, max_rpm=1800.0)

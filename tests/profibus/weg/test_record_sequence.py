@@ -24,9 +24,8 @@ from adapters.profibus.weg.records import (
     WriteRecord,
 )
 from gateway.errors import GatewayTimeout, ParameterError
+from tests.profibus.weg.test_records import READ_P2_P3, READ_P2_P3_OK, WRITE_OK, WRITE_P100, b
 from tests.support.timing import scaled
-
-from .test_records import READ_P2_P3, READ_P2_P3_OK, WRITE_OK, WRITE_P100, b
 
 BUSY = RecordRefused(RecordAccessError("resource error", 0xC3))  # 4.2.3: not available yet
 READ_47 = ReadRecord(0, 47, 240)

@@ -16,8 +16,7 @@ from adapters.profibus.weg.records import RecordParams
 from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim
 from gateway.errors import GatewayTimeout, ParameterError
 from gateway.model import Device
-
-from .helpers import SimChannel, profile
+from tests.profibus.weg.helpers import SimChannel, profile
 
 
 def b(*values: int) -> bytes:

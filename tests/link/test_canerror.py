@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.canerror import LineCondition, LineHealth, decode_error_frame, health_after
+from adapters.link.canerror import LineCondition, LineHealth, decode_error_frame, health_after
 
 C = LineCondition
 

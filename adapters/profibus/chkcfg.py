@@ -13,11 +13,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Self
 
+from adapters.profibus._pdu import bit, bits, fail
+from adapters.profibus.errors import DecodeFailure, require_length
+from adapters.profibus.fdl import MAX_DU
 from gateway.errors import FrameEncodeError, require_int
-
-from ._pdu import bit, bits, fail
-from .errors import DecodeFailure, require_length
-from .fdl import MAX_DU
 
 
 class IoDirection(IntEnum):

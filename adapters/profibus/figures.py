@@ -70,7 +70,7 @@ class ErrorCounters:
 
 
 @dataclass
-class SlaveStats(ErrorCounters):
+class SlaveFigures(ErrorCounters):
     requests: int = 0
     exchanges: int = 0  # successful Data_Exchange cycles
     restarts: int = 0  # times the slave left data exchange
@@ -87,7 +87,7 @@ class SlaveStats(ErrorCounters):
 
 
 @dataclass
-class LineStats(ErrorCounters):
+class LineFigures(ErrorCounters):
     cycles: int = 0
     telegrams: int = 0  # requests and broadcasts sent
     discarded_bytes: int = 0

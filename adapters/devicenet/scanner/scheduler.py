@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from collections import deque
 
-from adapters.devicenet.scanner.api import IoKind
 from adapters.devicenet.scanner.context import LineContext
+from adapters.devicenet.scanner.events import IoKind
 from adapters.devicenet.scanner.node import Phase
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window

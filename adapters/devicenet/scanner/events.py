@@ -8,11 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 
-from adapters.devicenet.canerror import LineCondition
 from adapters.devicenet.explicit import Response
 from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.ids import MAX_MAC
 from adapters.devicenet.objects import AllocationChoice, ConnectionInstance
+from adapters.link.canerror import LineCondition
 from gateway.errors import GatewayError
 
 # ---------------------------------------------------------------- config
@@ -142,7 +142,7 @@ class BadFrame:
 
 @dataclass(frozen=True, slots=True)
 class BusErrorIn:
-    """A SocketCAN error frame, decoded by :mod:`adapters.devicenet.canerror`."""
+    """A SocketCAN error frame, decoded by :mod:`adapters.link.canerror`."""
 
     conditions: frozenset[LineCondition]
 
