@@ -13,7 +13,7 @@ device on an existing bus is its own package plus one member here (docs/architec
 
 from __future__ import annotations
 
-import sys
+import argparse
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -180,11 +180,9 @@ def with_registry_table(text: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     """``python -m gateway.devices FILE``: rewrite the registry table of FILE
     (docs/architecture.md) in place."""
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 1:
-        print("usage: python -m gateway.devices docs/architecture.md", file=sys.stderr)
-        return 2
-    path = Path(args[0])
+    parser = argparse.ArgumentParser(prog="python -m gateway.devices")
+    parser.add_argument("file", type=Path, help="the notes to rewrite: docs/architecture.md")
+    path: Path = parser.parse_args(argv).file  # a usage error exits 2 with the usage
     path.write_text(with_registry_table(path.read_text()))
     return 0
 

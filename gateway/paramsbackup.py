@@ -471,8 +471,7 @@ def compare(left: Iterable[ParamEntry], right: Iterable[ParamEntry]) -> list[Dif
     rows = []
     for key in sorted(a.keys() | b.keys()):
         one, other = a.get(key), b.get(key)
-        some = one or other
-        assert some is not None
+        some = a[key] if key in a else b[key]  # the key came from one side or the other
         if one is None or other is None:
             status = "only left" if other is None else "only right"
         elif one.error is not None or other.error is not None:

@@ -320,9 +320,7 @@ class NodeMachine:
         if isinstance(body, AllocateResponse):
             node.explicit_misses = 0
             node.figures.explicit_reallocations += 1
-            epr = ConnectionAttribute.EXPECTED_PACKET_RATE
-            ms = _epr_ms(self.ctx.config.explicit_epr)
-            set_epr = SetAttributeSingle(CipClass.CONNECTION, ConnectionInstance.EXPLICIT, epr, ms)
+            set_epr = self._set_explicit_epr()
             node.queue.appendleft(Pending(set_epr, on_done=_ignore, label="explicit EPR"))
         elif isinstance(body, ErrorResponse):
             rejection = allocation_rejection(body.general_status, body.additional_code)
@@ -412,13 +410,14 @@ class NodeMachine:
         yield _Step("produced size", GetAttributeSingle(conn, io, produced), _check_produced)
         yield _Step("consumed size", GetAttributeSingle(conn, io, consumed), _check_consumed)
         epr = ConnectionAttribute.EXPECTED_PACKET_RATE
-        explicit_ms = _epr_ms(self.ctx.config.explicit_epr)
-        yield _Step(
-            "explicit EPR",
-            SetAttributeSingle(conn, ConnectionInstance.EXPLICIT, epr, explicit_ms),
-            _accept,
-        )
+        yield _Step("explicit EPR", self._set_explicit_epr(), _accept)
         yield _Step("I/O EPR", SetAttributeSingle(conn, io, epr, _epr_ms(node.cfg.epr)), _set_epr)
+
+    def _set_explicit_epr(self) -> SetAttributeSingle:
+        """Set the explicit connection's EPR to ``explicit_epr`` (fact sheet 2.9)."""
+        epr = ConnectionAttribute.EXPECTED_PACKET_RATE
+        ms = _epr_ms(self.ctx.config.explicit_epr)
+        return SetAttributeSingle(CipClass.CONNECTION, ConnectionInstance.EXPLICIT, epr, ms)
 
     def _queue_setup(self, node: Node, steps: list[_Step]) -> None:
         if not steps:
