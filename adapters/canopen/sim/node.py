@@ -41,13 +41,14 @@ from typing import Any
 import can
 import canopen
 import canopen.network
-from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary import ODArray, ODVariable
 from canopen.pdo.base import PdoBase, PdoMap
 from canopen.sdo.exceptions import SdoAbortedError
 
 from adapters.canopen import cia402
 from adapters.canopen.codes import (
     ABORT_NO_OBJECT,
+    ABORT_NO_SUBINDEX,
     ABORT_NOT_MAPPABLE,
     ABORT_PDO_LENGTH,
     ABORT_RANGE,
@@ -491,7 +492,15 @@ class SimNode:
 
     # ------------------------------------------------------------ OD access
 
+    def _check_sub(self, index: int, subindex: int) -> None:
+        """The library makes up any sub-index of an ARRAY from its first member: only
+        the EDS's own sub-indexes exist here (0x06090011 for the others)."""
+        obj = self.od.get(index)
+        if isinstance(obj, ODArray) and subindex not in obj.subindices:
+            raise SdoAbortedError(ABORT_NO_SUBINDEX)
+
     def _on_read(self, *, index: int, subindex: int, od: ODVariable) -> int | None:
+        self._check_sub(index, subindex)
         d = self.drive
         live: dict[tuple[int, int], Callable[[], int]] = {
             (cia402.STATUSWORD, 0): lambda: d.statusword,
@@ -511,6 +520,7 @@ class SimNode:
     def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         """Checks a write before the library stores it (raising an SDO abort refuses it)
         and hands drive inputs to the drive model."""
+        self._check_sub(index, subindex)
         value = od.decode_raw(data)
         if isinstance(value, int) and not isinstance(value, bool):
             if od.min is not None and value < od.min:
