@@ -46,6 +46,30 @@ class CanFrame:
             raise FrameEncodeError(f"CAN data of {len(data)} bytes (at most 8)")
         object.__setattr__(self, "data", data)
 
+    @property
+    def arbitration_id(self) -> int:
+        """The COB-ID under the name the shared CAN link uses."""
+        return self.cob_id
+
+    @classmethod
+    def from_bus(
+        cls, arbitration_id: int, data: bytes | bytearray, *, is_extended_id: bool = False
+    ) -> CanFrame:
+        """A received frame; :class:`InvalidCobId` for one CANopen cannot carry (CiA 301
+        uses 11-bit identifiers and classic frames of at most 8 bytes)."""
+        raw = bytes(data)
+        if is_extended_id:
+            raise InvalidCobId("extended (29-bit) identifier", raw)
+        if (
+            isinstance(arbitration_id, bool)
+            or not isinstance(arbitration_id, int)
+            or not 0 <= arbitration_id <= MAX_COB_ID
+        ):
+            raise InvalidCobId(f"identifier {arbitration_id!r} is not 11-bit", raw)
+        if len(raw) > MAX_DATA_LENGTH:
+            raise InvalidCobId(f"{len(raw)} data bytes (at most 8)", raw)
+        return cls(arbitration_id, raw)
+
 
 # --- COB-IDs (CiA 301 §7.3.3, pre-defined connection set) ------------------------------
 

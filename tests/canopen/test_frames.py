@@ -351,3 +351,14 @@ def test_mapping_entry_golden() -> None:
     assert f.unpack_pdo(entries, h("37 02 DC 05")) == (h("37 02"), h("DC 05"))
     with pytest.raises(CanOpenDecodeError):
         f.unpack_pdo(entries, h("37 02"))
+
+
+def test_can_frame_from_bus() -> None:
+    frame = f.CanFrame.from_bus(0x185, bytearray(b"\x01\x02"))
+    assert frame == f.CanFrame(0x185, b"\x01\x02")
+    assert frame.arbitration_id == 0x185
+    for args in ((0x800, b""), (0x100, bytes(9))):
+        with pytest.raises(InvalidCobId):
+            f.CanFrame.from_bus(*args)
+    with pytest.raises(InvalidCobId):
+        f.CanFrame.from_bus(0x185, b"", is_extended_id=True)
