@@ -65,6 +65,7 @@ from adapters.canopen.frames import (
 )
 from adapters.canopen.sim.drive import Cia402Drive, CommLoss, DriveConfig, Emcy, Mode
 from gateway.config import shipped_file
+from gateway.errors import GatewayError
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +83,18 @@ SUPPORTED_VALUES: dict[int, frozenset[int]] = {
 }
 RPDO_TYPES = frozenset(range(241)) | {254, 255}  # CiA 301 §7.5.2.35
 TPDO_TYPES = frozenset(range(241)) | {254, 255}  # 252/253 (RTR only) not supported
+
+
+class EdsUnreadable(GatewayError, ValueError):
+    """A simulated node's EDS that the canopen library cannot read (names the file)."""
+
+
+def load_od(path: Path, node_id: int | None = None) -> canopen.ObjectDictionary:
+    """The object dictionary of an EDS, or :class:`EdsUnreadable` naming the file."""
+    try:
+        return canopen.import_od(str(path), node_id)
+    except Exception as exc:  # the library's parser raises what it meets (OSError, KeyError...)
+        raise EdsUnreadable(f"{path}: not a readable EDS ({exc})") from exc
 
 
 class BootState(Enum):
@@ -225,7 +238,7 @@ class SimNode:
         self.received = 0
         self.send_failures = 0
         self.periodic: dict[int, _Periodic] = {}
-        self.od = canopen.import_od(str(config.eds), config.node_id)
+        self.od = load_od(config.eds, config.node_id)
         self.local: canopen.LocalNode
         self.drive = self._new_drive()
         self._port = _Port(self, network)

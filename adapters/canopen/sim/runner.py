@@ -20,6 +20,8 @@ import can
 import canopen
 
 from adapters.canopen.sim.node import SimNode, SimNodeConfig
+from adapters.link.can import REFUSED_INTERFACES, CanConfig, open_problem
+from gateway.errors import AdapterError
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +58,9 @@ class SimRunner:
         powered: bool = True,
         tick: float = TICK,
     ) -> None:
+        reason = REFUSED_INTERFACES.get(interface)
+        if reason is not None:
+            raise AdapterError(reason)
         self.interface = interface
         self.channel = channel
         self.bitrate = bitrate
@@ -90,7 +95,10 @@ class SimRunner:
         kwargs: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
         if self.bitrate is not None and self.interface not in ("virtual", "socketcan"):
             kwargs["bitrate"] = self.bitrate
-        bus = can.Bus(**kwargs)
+        try:
+            bus = can.Bus(**kwargs)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise AdapterError(open_problem(CanConfig(self.interface, self.channel), exc)) from exc
         network = _SimNetwork(bus, self)
         try:
             for cfg in self.configs.values():
