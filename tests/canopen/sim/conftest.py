@@ -5,6 +5,7 @@ block, so they run on a one-thread pool the rig shuts down."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 import uuid
 from collections.abc import AsyncIterator, Callable
@@ -27,8 +28,12 @@ T = TypeVar("T")
 class Client:
     """The canopen library as a master on the rig's channel, with a frame recorder."""
 
-    def __init__(self, channel: str, runner: SimRunner) -> None:
+    def __init__(
+        self, channel: str, runner: SimRunner | None = None, interface: str = "virtual"
+    ) -> None:
         self.runner = runner
+        self.loop = asyncio.get_running_loop()
+        self.changed = asyncio.Event()
         self.network = canopen.Network()
         self.network.NOTIFIER_CYCLE = 0.05
         self.network.NOTIFIER_SHUTDOWN_TIMEOUT = 2.0
@@ -36,7 +41,7 @@ class Client:
         self.frames: list[tuple[int, bytes]] = []
         self._lock = threading.Lock()
         self.network.listeners.append(_Recorder(self))
-        self.network.connect(interface="virtual", channel=channel)
+        self.network.connect(interface=interface, channel=channel)
         self.nodes: dict[int, canopen.RemoteNode] = {}
 
     def remote(self, node_id: int) -> canopen.RemoteNode:
@@ -59,8 +64,15 @@ class Client:
             self.frames.clear()
 
     async def until(self, predicate: Callable[[], bool], seconds: float = 2.0) -> None:
+        """Wait until ``predicate()`` holds, checked on every frame in and, with a runner
+        in this process, after every pass of its loop."""
         async with asyncio.timeout(scaled(seconds)):
-            await self.runner.until(predicate)
+            if self.runner is not None:
+                await self.runner.until(predicate)
+                return
+            while not predicate():
+                self.changed.clear()
+                await self.changed.wait()
 
     def send(self, can_id: int, data: bytes) -> None:
         self.network.send_message(can_id, data)
@@ -78,6 +90,8 @@ class _Recorder(canopen.network.MessageListener):
     def on_message_received(self, msg: can.Message) -> None:
         with self.client._lock:
             self.client.frames.append((msg.arbitration_id, bytes(msg.data)))
+        with contextlib.suppress(RuntimeError):  # the loop may be closing
+            self.client.loop.call_soon_threadsafe(self.client.changed.set)
 
 
 class Rig:
