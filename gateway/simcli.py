@@ -13,6 +13,7 @@ from gateway.loader import NotLoadable, load_optional
 SIMULATORS: dict[str, str] = {
     "profibus": "adapters.profibus.cli:add_sim",
     "devicenet": "adapters.devicenet.cli:add_sim",
+    "canopen": "adapters.canopen.cli:add_sim",
 }
 
 

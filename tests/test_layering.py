@@ -219,13 +219,16 @@ CANOPEN_LIBRARY_USERS = ("adapters.canopen.od", "adapters.canopen.sim")
 
 def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
     """One link per medium: pyserial and python-can are imported by adapters.link, and by a
-    bus's own link module only for its settings (8E1, the CAN frame it carries)."""
+    bus's own link module only for its settings (8E1, the CAN frame it carries). The CANopen
+    simulator is the exception: a device built on the canopen library's LocalNode (issue 22)
+    with its own network, never the gateway's link."""
     own_links = [f"{pkg}.link" for pkg in CODEC_NAMES]
+    library_devices = ("adapters.canopen.sim",)
 
     def rule(mod: str, imp: str) -> str | None:
         if under(imp, "canopen") and under(mod, *CANOPEN_LIBRARY_USERS):
             return None
-        if under(imp, *FIELDBUS_LIBS) and not under(mod, SHARED_LINK, *own_links):
+        if under(imp, *FIELDBUS_LIBS) and not under(mod, SHARED_LINK, *own_links, *library_devices):
             return "a fieldbus library only in adapters.link (and a bus's link settings)"
         return None
 
