@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from adapters.canopen.cia402 import State
-from gateway.errors import CommandRejected, ParameterError, ParameterNotWritable
-from gateway.model import CommState, Direction, DriveCommand, DriveStatus, Source
-from tests.canopen.integration.conftest import drive, rig
+from adapters.canopen.frames import NmtState
+from adapters.canopen.sim.node import SimNodeConfig
+from gateway.errors import CommandRejected, DriveOffline, ParameterError, ParameterNotWritable
+from gateway.model import CommState, Direction, DriveCommand, DriveState, DriveStatus, Source
+from tests.canopen.integration.conftest import EDS, drive, rig
 
 
-def online(s) -> bool:  # type: ignore[no-untyped-def]
+def online(s: DriveState) -> bool:
     return s.comm is CommState.ONLINE
 
 
@@ -114,3 +118,34 @@ async def test_parameters_by_sdo_with_abort_texts() -> None:
         with pytest.raises(ParameterNotWritable):
             await r.hub.write_param("d5", 0x2000, 1, 3)  # only 0x2000:4 of 0x2000
         await r.hub.write_param("d5", 0x2000, 1800, 4)
+
+
+@pytest.fixture
+def drive_eds(tmp_path: Path) -> Path:
+    """The drive's own dictionary: 0x6078 is not mappable there."""
+    text = Path(EDS).read_text()
+    section = text.index("[6078]")
+    end = text.index("[", section + 1)
+    drive_eds = tmp_path / "drive.eds"
+    drive_eds.write_text(
+        text[:section] + text[section:end].replace("PDOMapping=1", "PDOMapping=0") + text[end:]
+    )
+    return drive_eds
+
+
+async def test_a_pdo_mapping_the_node_refuses(drive_eds: Path) -> None:
+    """The gateway's EDS says 0x6078 maps; the drive's own dictionary says it does not."""
+    sims = [SimNodeConfig(node_id=5, eds=drive_eds, ramp_time=0.2)]
+    async with rig([drive(5)], sims=sims) as r:
+        ev = await r.event(lambda e: e.text.startswith("not configured"))
+        assert ev.text == (
+            "not configured: node 5: TPDO1 mapping 0x1A00:3 = 0x6078: write of 0x1A00:3 = "
+            "0x60780010 refused: 0x06040041 object cannot be mapped to the PDO; the drive is "
+            "not started"
+        )
+        assert ev.data["abort_code"] == 0x06040041
+        assert r.hub.state("d5").comm is CommState.OFFLINE
+        assert r.sim.node(5).nmt_state is NmtState.PRE_OPERATIONAL  # never started
+        with pytest.raises(DriveOffline):
+            await r.hub.read_param("d5", 0x6041, 0)
+        assert r.adapter.diagnostics()["drives"]["d5"]["problem"] == ev.text
