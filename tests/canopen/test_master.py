@@ -1,0 +1,513 @@
+"""The CANopen master engine, stepped with an injected clock against a scripted node
+(CiA 301 SDO server and NMT slave, CiA 402 transitions from adapters.canopen.cia402)."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from adapters.canopen import cia402, codes
+from adapters.canopen import frames as f
+from adapters.canopen.cia402 import DeviceCommand, State
+from adapters.canopen.master import (
+    STOPPED,
+    Configured,
+    EmcyIn,
+    FaultInfo,
+    FrameIn,
+    Inputs,
+    Master,
+    MasterConfig,
+    NodeConfig,
+    NodeDown,
+    NodeProblem,
+    NodeSeen,
+    NodeUnavailable,
+    NodeUp,
+    PdoField,
+    Phase,
+    SdoDone,
+    SdoStep,
+    Send,
+    Want,
+    controlword,
+)
+from adapters.canopen.master.control import VL_OPERATION_BITS, target
+from adapters.canopen.master.engine import RESET_PULSE_CYCLES
+
+CYCLE = 0.01
+HB_MS = 100
+
+
+def config(**kw: object) -> MasterConfig:
+    base: dict[str, object] = {
+        "sync_period": CYCLE,
+        "sdo_timeout": 0.1,
+        "heartbeat_factor": 3.0,
+        "retry": 0.5,
+        "failed_retry": 5.0,
+    }
+    base.update(kw)
+    return MasterConfig(**base)  # type: ignore[arg-type]
+
+
+def node_config(**kw: object) -> NodeConfig:
+    base: dict[str, object] = {
+        "node_id": 5,
+        "heartbeat_ms": HB_MS,
+        "steps": (
+            SdoStep(0x1017, 0, HB_MS.to_bytes(2, "little"), "producer heartbeat time 0x1017"),
+            SdoStep(0x6060, 0, b"\x02", "modes of operation 0x6060"),
+        ),
+        "rpdo": (
+            PdoField(f.MappingEntry(0x6040, 0, 16)),
+            PdoField(f.MappingEntry(0x6042, 0, 16), signed=True),
+        ),
+        "tpdo": (
+            PdoField(f.MappingEntry(0x6041, 0, 16)),
+            PdoField(f.MappingEntry(0x6044, 0, 16), signed=True),
+        ),
+        "reports": ((0x605A, 0),),
+    }
+    base.update(kw)
+    return NodeConfig(**base)  # type: ignore[arg-type]
+
+
+class FakeNode:
+    """An NMT slave and SDO server with a CiA 402 state machine, answering at once."""
+
+    def __init__(self, node_id: int = 5) -> None:
+        self.id = node_id
+        self.od: dict[tuple[int, int], bytes] = {
+            (0x1000, 0): (0x00020192).to_bytes(4, "little"),
+            (0x1017, 0): bytes(2),
+            (0x6060, 0): b"\x00",
+            (0x605A, 0): (2).to_bytes(2, "little"),
+            (0x1001, 0): b"\x00",
+            (0x603F, 0): bytes(2),
+        }
+        self.nmt = f.NmtState.PRE_OPERATIONAL
+        self.state = State.SWITCH_ON_DISABLED
+        self.refuse: dict[tuple[int, int], int] = {}
+        self.silent = False
+        self.controlwords: list[int] = []
+        self.nmt_seen: list[f.NmtCommand] = []
+        self.sdo_requests: list[f.SdoRequest] = []
+
+    def statusword(self) -> int:
+        return cia402.statusword_bits(self.state) | cia402.SW_REMOTE
+
+    def receive(self, frame: f.CanFrame) -> list[f.CanFrame]:
+        if self.silent:
+            return []
+        if frame.cob_id == f.COB_NMT:
+            nmt = f.decode_nmt(frame.data)
+            if nmt.node_id not in (0, self.id):
+                return []
+            self.nmt_seen.append(nmt.command)
+            if nmt.command is f.NmtCommand.START:
+                self.nmt = f.NmtState.OPERATIONAL
+            elif nmt.command is f.NmtCommand.ENTER_PRE_OPERATIONAL:
+                self.nmt = f.NmtState.PRE_OPERATIONAL
+            elif nmt.command is f.NmtCommand.RESET_NODE:
+                self.nmt = f.NmtState.PRE_OPERATIONAL
+                return [f.encode_heartbeat(self.id, f.NmtState.BOOTUP)]
+            return []
+        if frame.cob_id == f.sdo_rx_id(self.id):
+            return [f.CanFrame(f.sdo_tx_id(self.id), self._sdo(frame.data))]
+        if frame.cob_id == f.rpdo_id(1, self.id) and self.nmt is f.NmtState.OPERATIONAL:
+            cw = int.from_bytes(frame.data[:2], "little")
+            previous = self.controlwords[-1] if self.controlwords else 0
+            self.controlwords.append(cw)
+            command = cia402.device_command(cw)
+            if command is DeviceCommand.FAULT_RESET and previous & 0x80:
+                command = None  # no edge
+            if command is not None:
+                after = cia402.next_state(self.state, command)
+                if after is not None:
+                    self.state = after
+            return []
+        return []
+
+    def _sdo(self, data: bytes) -> bytes:
+        request = f.decode_sdo_request(data)
+        self.sdo_requests.append(request)
+        assert isinstance(request, f.InitiateUpload | f.InitiateDownload)
+        key = (request.index, request.subindex)
+        if key in self.refuse:
+            return f.encode_sdo_response(f.Abort(*key, self.refuse[key]))
+        if isinstance(request, f.InitiateUpload):
+            if key not in self.od:
+                return f.encode_sdo_response(f.Abort(*key, codes.ABORT_NO_OBJECT))
+            return f.encode_sdo_response(f.InitiateUploadResponse(*key, self.od[key]))
+        self.od[key] = request.data
+        return f.encode_sdo_response(f.InitiateDownloadResponse(*key))
+
+    def heartbeat(self) -> f.CanFrame:
+        return f.encode_heartbeat(self.id, self.nmt)
+
+    def tpdo(self, velocity: int = 0) -> f.CanFrame:
+        return f.CanFrame(
+            f.tpdo_id(1, self.id),
+            self.statusword().to_bytes(2, "little") + velocity.to_bytes(2, "little", signed=True),
+        )
+
+
+class Line:
+    """The engine and fake nodes on an ideal bus, stepped on a fake clock."""
+
+    def __init__(self, master: Master, *nodes: FakeNode) -> None:
+        self.master = master
+        self.nodes = {n.id: n for n in nodes}
+        self.now = 0.0
+        self.actions: list[object] = []
+        self.sent: list[f.CanFrame] = []
+
+    def _deliver(self, actions: list[object]) -> None:
+        queue = list(actions)
+        while queue:
+            action = queue.pop(0)
+            if not isinstance(action, Send):
+                self.actions.append(action)
+                continue
+            self.sent.append(action.frame)
+            for node in self.nodes.values():
+                for reply in node.receive(action.frame):
+                    queue.extend(self.master.step(self.now, FrameIn(reply)))
+
+    def inject(self, frame: f.CanFrame) -> None:
+        self._deliver(list(self.master.step(self.now, FrameIn(frame))))
+
+    def run(self, seconds: float, *, heartbeats: bool = True, tpdo: bool = True) -> None:
+        end = self.now + seconds
+        next_hb = self.now
+        while self.now < end:
+            deadline = self.master.next_deadline()
+            step_at = min(end, deadline if deadline is not None else end, next_hb)
+            self.now = max(self.now, step_at)
+            self._deliver(list(self.master.step(self.now)))
+            if self.now >= next_hb:
+                next_hb = self.now + HB_MS / 1000
+                for node in self.nodes.values():
+                    if heartbeats and not node.silent:
+                        self.inject(node.heartbeat())
+                    if tpdo and node.nmt is f.NmtState.OPERATIONAL and not node.silent:
+                        self.inject(node.tpdo())
+            if self.now >= end:
+                break
+            self.now += 1e-4
+
+    def of(self, kind: type) -> list[object]:
+        return [a for a in self.actions if isinstance(a, kind)]
+
+
+def node_state(node: FakeNode) -> State:
+    return node.state
+
+
+def up(**kw: object) -> tuple[Line, FakeNode]:
+    node = FakeNode()
+    line = Line(Master(config(**kw), [node_config()]), node)
+    line.run(0.5)
+    return line, node
+
+
+# ---------------------------------------------------------------- the CiA 402 master side
+
+
+@pytest.mark.parametrize("start", list(State))
+def test_run_reaches_operation_enabled_from_every_state_but_fault(start: State) -> None:
+    """Stepping the drive with the controlword chosen for its state reaches OE (or stays
+    in FAULT / FAULT_REACTION_ACTIVE: only a reset edge leaves them)."""
+    state = start
+    wish = Want(run=True, target=100)
+    for _ in range(6):
+        after = cia402.next_state(state, cia402.device_command(controlword(state, wish)))  # type: ignore[arg-type]
+        state = after or state
+    if start in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+        assert state is start
+    elif start is State.NOT_READY_TO_SWITCH_ON:
+        assert state is start  # the drive's own transition 1 is not the master's
+    else:
+        assert state is State.OPERATION_ENABLED
+
+
+@pytest.mark.parametrize(
+    ("state", "wish", "command"),
+    [
+        (State.SWITCH_ON_DISABLED, Want(run=True), DeviceCommand.SHUTDOWN),  # 2
+        (State.READY_TO_SWITCH_ON, Want(run=True), DeviceCommand.SWITCH_ON),  # 3
+        (State.SWITCHED_ON, Want(run=True), DeviceCommand.ENABLE_OPERATION),  # 4
+        (State.OPERATION_ENABLED, STOPPED, DeviceCommand.SWITCH_ON),  # 5 disable operation
+        (State.SWITCHED_ON, STOPPED, DeviceCommand.SWITCH_ON),  # held, switched on
+        (State.OPERATION_ENABLED, Want(coast=True, run=True), DeviceCommand.DISABLE_VOLTAGE),  # 9
+        (State.OPERATION_ENABLED, Want(quick_stop=True), DeviceCommand.QUICK_STOP),  # 11
+        (State.QUICK_STOP_ACTIVE, Want(quick_stop=True), DeviceCommand.QUICK_STOP),  # held
+        (State.QUICK_STOP_ACTIVE, Want(run=True), DeviceCommand.DISABLE_VOLTAGE),  # 12, never 16
+        (State.SWITCHED_ON, Want(quick_stop=True), DeviceCommand.DISABLE_VOLTAGE),  # 10
+        (State.FAULT, Want(run=True), DeviceCommand.DISABLE_VOLTAGE),  # waits for the reset
+    ],
+)
+def test_controlword_for_state_and_wish(state: State, wish: Want, command: DeviceCommand) -> None:
+    assert cia402.device_command(controlword(state, wish)) is command
+
+
+def test_vl_operation_bits_and_target() -> None:
+    assert controlword(State.OPERATION_ENABLED, Want(run=True), mode_bits=VL_OPERATION_BITS) == 0x7F
+    assert controlword(None, Want(run=True)) == 0  # nothing known: never toward a start
+    assert target(State.OPERATION_ENABLED, Want(run=True, target=-300)) == -300
+    assert target(State.SWITCHED_ON, Want(run=True, target=-300)) == 0
+    assert target(State.OPERATION_ENABLED, Want(run=True, quick_stop=True, target=5)) == 0
+
+
+@given(st.sampled_from(list(State)), st.booleans(), st.booleans(), st.booleans())
+def test_no_wish_without_run_ever_enables_operation(
+    state: State, quick: bool, coast: bool, _: bool
+) -> None:
+    """Rule 1 at the controlword: without run, no word moves a drive into OPERATION_ENABLED."""
+    cw = controlword(state, Want(run=False, quick_stop=quick, coast=coast))
+    command = cia402.device_command(cw)
+    assert command is not None
+    assert cia402.next_state(state, command) is not State.OPERATION_ENABLED
+    assert not cw & 0x80  # the reset bit is never part of the steady word
+
+
+# ---------------------------------------------------------------- bring-up
+
+
+def test_bring_up_in_order_then_operational() -> None:
+    line, node = up()
+    seen = [type(a).__name__ for a in line.actions if isinstance(a, NodeSeen | Configured | NodeUp)]
+    assert seen == ["NodeSeen", "Configured", "NodeUp"]
+    configured = line.of(Configured)[0]
+    assert isinstance(configured, Configured)
+    assert configured.reports == {(0x605A, 0): (2).to_bytes(2, "little")}
+    requests = [
+        (type(r).__name__, r.index, r.subindex)
+        for r in node.sdo_requests
+        if isinstance(r, f.InitiateUpload | f.InitiateDownload)
+    ]
+    assert requests[:6] == [
+        ("InitiateUpload", 0x1000, 0),
+        ("InitiateDownload", 0x1017, 0),
+        ("InitiateUpload", 0x1017, 0),  # read back
+        ("InitiateDownload", 0x6060, 0),
+        ("InitiateUpload", 0x6060, 0),
+        ("InitiateUpload", 0x605A, 0),
+    ]
+    assert node.nmt_seen == [f.NmtCommand.ENTER_PRE_OPERATIONAL, f.NmtCommand.START]
+    assert node.od[(0x1017, 0)] == HB_MS.to_bytes(2, "little")
+    assert line.master.online(5)
+    # SYNC every cycle, RPDO1 after it
+    assert f.encode_sync() in line.sent
+    assert any(fr.cob_id == 0x205 for fr in line.sent)
+
+
+def test_the_drive_is_stepped_to_run_and_back() -> None:
+    line, node = up()
+    line.master.set_want(5, Want(run=True, target=1500))
+    line.run(0.5)
+    assert node.state is State.OPERATION_ENABLED
+    last = [fr for fr in line.sent if fr.cob_id == 0x205][-1]
+    assert int.from_bytes(last.data[2:], "little", signed=True) == 1500
+    line.master.set_want(5, STOPPED)
+    line.run(0.3)
+    assert node_state(node) is State.SWITCHED_ON
+
+
+def test_a_refused_write_is_a_problem_and_the_node_is_not_started() -> None:
+    node = FakeNode()
+    node.refuse[(0x6060, 0)] = 0x06090030
+    line = Line(Master(config(), [node_config()]), node)
+    line.run(0.5)
+    problem = line.of(NodeProblem)[0]
+    assert isinstance(problem, NodeProblem)
+    assert problem.text == (
+        "modes of operation 0x6060: write of 0x6060:0 = 0x02 refused: 0x06090030 value "
+        "range of parameter exceeded"
+    )
+    assert problem.abort_code == 0x06090030
+    assert f.NmtCommand.START not in node.nmt_seen
+    assert not line.master.online(5)
+    assert not line.of(NodeUp)
+    assert not any(fr.cob_id == 0x205 for fr in line.sent)  # no PDO to it
+    node.refuse.clear()
+    line.run(5.5)  # failed_retry: tried again, and now it goes
+    assert line.master.online(5)
+
+
+def test_a_read_back_that_differs_is_a_problem() -> None:
+    class Stubborn(FakeNode):
+        def _sdo(self, data: bytes) -> bytes:
+            reply = super()._sdo(data)
+            self.od[(0x1017, 0)] = (50).to_bytes(2, "little")
+            return reply
+
+    node = Stubborn()
+    line = Line(Master(config(), [node_config()]), node)
+    line.run(0.3)
+    problem = line.of(NodeProblem)[0]
+    assert isinstance(problem, NodeProblem)
+    assert (
+        problem.text
+        == "producer heartbeat time 0x1017: 0x1017:0 reads back 0x32 after writing 0x64"
+    )
+
+
+def test_a_node_of_another_profile_is_refused() -> None:
+    node = FakeNode()
+    node.od[(0x1000, 0)] = (0x00000191).to_bytes(4, "little")
+    line = Line(Master(config(), [node_config()]), node)
+    line.run(0.3)
+    problem = line.of(NodeProblem)[0]
+    assert isinstance(problem, NodeProblem)
+    assert "profile 401, not CiA 402" in problem.text
+
+
+def test_an_operational_node_is_reset_when_the_config_says_so() -> None:
+    node = FakeNode()
+    node.nmt = f.NmtState.OPERATIONAL
+    line = Line(Master(config(), [node_config(reset_if_operational=True)]), node)
+    line.inject(node.heartbeat())
+    line.run(0.5)
+    assert node.nmt_seen[:3] == [
+        f.NmtCommand.RESET_NODE,
+        f.NmtCommand.ENTER_PRE_OPERATIONAL,
+        f.NmtCommand.START,
+    ]
+    assert line.master.online(5)
+
+
+# ---------------------------------------------------------------- losing a node
+
+
+def test_a_missed_heartbeat_takes_the_node_offline_then_it_comes_back() -> None:
+    line, node = up()
+    line.master.set_want(5, Want(run=True, target=100))
+    line.run(0.2)
+    node.silent = True
+    line.run(HB_MS / 1000 * 3 + 0.05)
+    down = line.of(NodeDown)
+    assert len(down) == 1 and isinstance(down[0], NodeDown)
+    assert down[0].reason.startswith("no heartbeat for ")
+    assert not line.master.online(5)
+    assert line.master.nodes[5].want == STOPPED  # nothing of the old wish survives
+    node.silent = False
+    line.run(1.0)
+    assert line.master.online(5)
+    assert line.master.nodes[5].want == STOPPED
+
+
+def test_a_boot_up_while_online_is_a_lost_node_brought_up_at_once() -> None:
+    line, node = up()
+    node.nmt = f.NmtState.PRE_OPERATIONAL
+    line.inject(f.encode_heartbeat(5, f.NmtState.BOOTUP))
+    down = line.of(NodeDown)
+    assert isinstance(down[0], NodeDown) and "boot-up" in down[0].reason
+    line.run(0.3)
+    assert line.master.online(5)
+
+
+# ---------------------------------------------------------------- fault, EMCY, reset
+
+
+def test_fault_reads_and_one_reset_pulse() -> None:
+    line, node = up()
+    node.state = State.FAULT
+    node.od[(0x603F, 0)] = (0x2310).to_bytes(2, "little")
+    node.od[(0x1001, 0)] = b"\x03"
+    line.inject(f.encode_emcy(5, f.Emcy(0x2310, 0x03)))
+    line.run(0.2)
+    emcy = line.of(EmcyIn)[0]
+    assert isinstance(emcy, EmcyIn) and emcy.emcy.error_code == 0x2310
+    info = line.of(FaultInfo)[0]
+    assert isinstance(info, FaultInfo)
+    assert info.reads == {(0x1001, 0): b"\x03", (0x603F, 0): b"\x10\x23"}
+    assert line.master.fault_reset(5, line.now)
+    assert not line.master.fault_reset(5, line.now)  # one pulse at a time
+    before = len(node.controlwords)
+    line.run(1.0)
+    words = node.controlwords[before:]
+    with_bit = [w & 0x80 for w in words]
+    # one run of set bits, at least two RPDOs long, then never again
+    runs = [k for k, _ in itertools.groupby(with_bit)]
+    assert runs == [0x80, 0]
+    assert with_bit.count(0x80) >= 2
+    assert node.state is State.SWITCHED_ON  # reset, then stepped to switched on (no run)
+    assert RESET_PULSE_CYCLES >= 2
+
+
+def test_no_reset_for_a_node_not_online() -> None:
+    node = FakeNode()
+    line = Line(Master(config(), [node_config()]), node)
+    assert not line.master.fault_reset(5, 0.0)
+
+
+# ---------------------------------------------------------------- SDO jobs
+
+
+def test_sdo_jobs_one_at_a_time_with_abort_texts() -> None:
+    line, _node = up()
+    first = line.master.submit(5, 0x605A, 0, None)
+    second = line.master.submit(5, 0x6099, 0, None)
+    assert line.master.nodes[5].jobs and line.master.nodes[5].current is None
+    line.run(0.05)
+    done = {a.token: a for a in line.of(SdoDone) if isinstance(a, SdoDone)}
+    assert done[first].result == f.SdoResult((2).to_bytes(2, "little"))
+    result = done[second].result
+    assert result is not None and result.message == (
+        "0x06020000 object does not exist in the object dictionary"
+    )
+
+
+def test_sdo_timeout_aborts_and_reports() -> None:
+    line, node = up()
+    node.silent = True
+    token = line.master.submit(5, 0x605A, 0, None)
+    line.run(0.15, heartbeats=False, tpdo=False)
+    done = next(a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token)
+    assert done.result == f.SdoResult(abort_code=codes.ABORT_TIMEOUT)
+    abort = f.CanFrame(0x605, f.encode_sdo_request(f.Abort(0x605A, 0, codes.ABORT_TIMEOUT)))
+    assert abort in line.sent
+
+
+def test_jobs_only_for_online_nodes() -> None:
+    master = Master(config(), [node_config()])
+    with pytest.raises(NodeUnavailable):
+        master.submit(5, 0x6041, 0, None)
+    with pytest.raises(NodeUnavailable):
+        master.submit(9, 0x6041, 0, None)
+
+
+def test_a_lost_node_ends_its_jobs() -> None:
+    line, node = up()
+    node.silent = True
+    token = line.master.submit(5, 0x605A, 0, None)
+    line.run(0.5, heartbeats=False, tpdo=False)
+    done = [a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token]
+    assert len(done) == 1
+
+
+def test_inputs_and_the_state_behind_them() -> None:
+    line, node = up()
+    node.state = State.OPERATION_ENABLED
+    line.inject(node.tpdo(-1200))
+    inputs = [a for a in line.of(Inputs) if isinstance(a, Inputs)][-1]
+    assert inputs.values == (-1200,)
+    assert inputs.statusword == node.statusword()
+    assert line.master.node_diagnostics(5)["cia402_state"] == "operation_enabled"
+    line.inject(f.CanFrame(0x185, b"\x01"))  # short: counted, not taken
+    assert line.master.nodes[5].figures["bad_pdos"] == 1
+
+
+def test_leave_sends_the_last_rpdo_and_pre_operational() -> None:
+    line, _node = up()
+    actions = line.master.leave(line.now)
+    frames_ = [a.frame for a in actions if isinstance(a, Send)]
+    assert [fr.cob_id for fr in frames_] == [0x205, 0x000]
+    assert frames_[1].data == bytes((f.NmtCommand.ENTER_PRE_OPERATIONAL, 5))
+    assert line.master.step(line.now + 1) == []
+    assert Phase.ONLINE is line.master.nodes[5].phase
