@@ -31,7 +31,7 @@ from typing import Any, TextIO
 
 import zenoh
 
-from gateway.config import read_zenoh_config_file
+from gateway.config import parse_param_ref, read_zenoh_config_file
 from gateway.errors import ConfigError, GatewayError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -472,12 +472,12 @@ def add_param(sub: Any) -> None:
     p.add_argument("drive", help="the drive's id")
     ops = p.add_subparsers(dest="op", required=True, metavar="OP")
     r = ops.add_parser("read", help="read a parameter", description="Read a parameter.")
-    r.add_argument("number", type=param_number, help="the parameter: 100 or P0100")
+    r.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     r.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
     w = ops.add_parser(
         "write", help="write a parameter (raw value)", description="Write a parameter."
     )
-    w.add_argument("number", type=param_number, help="the parameter: 100 or P0100")
+    w.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     w.add_argument("value", type=float, help="the raw value (P0100 = 2.0 s is 20)")
     w.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
     p.set_defaults(handler=cmd_param)
@@ -504,10 +504,24 @@ def param_line(answer: dict[str, Any], number: int) -> str:
     return f"{code} {answer['name']} = {answer.get('scaled', answer.get('value'))}{unit}"
 
 
+def param_ref(text: str) -> tuple[int, int | None]:
+    """A parameter as the manuals write it ("P0100", "100") or a CANopen object ("0x6083",
+    "0x2000:1" with its subindex)."""
+    try:
+        return parse_param_ref(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def cmd_param(args: argparse.Namespace) -> int:
-    key = f"{args.prefix}/drives/{args.drive}/params/{args.number}"
-    if args.subindex:
-        key += f"/{args.subindex}"
+    number, subindex = args.number
+    if subindex is not None and args.subindex and args.subindex != subindex:
+        return fail(f"{number:#06x}:{subindex} and --subindex {args.subindex} disagree")
+    subindex = args.subindex if subindex is None else subindex
+    args.number = number
+    key = f"{args.prefix}/drives/{args.drive}/params/{number}"
+    if subindex:
+        key += f"/{subindex}"
     payload = None
     if args.op == "write":
         value: float | int = int(args.value) if args.value.is_integer() else args.value

@@ -440,7 +440,7 @@ class CanOpenAdapter:
         if done.result is None:
             raise DriveOffline(f"drive {d.id}: {done.error}")
         result = done.result
-        what = f"{'write' if write is not None else 'read'} {obj_name(index, subindex)}"
+        what = f"{'write' if write is not None else 'read'} {obj_name(index, subindex or None)}"
         if result.abort_code is not None:
             if not result.by_server and result.abort_code == 0x05040000:
                 raise GatewayTimeout(f"drive {d.id}: {what}: no SDO answer")
@@ -464,7 +464,7 @@ class CanOpenAdapter:
     ) -> None:
         d = self._drive(drive_id)
         eds = d.opts.eds
-        where = obj_name(number, subindex)
+        where = obj_name(number, subindex or None)
         if not eds.has(number, subindex):
             raise ParameterError(f"{eds.file}: the EDS has no object {where}; nothing written")
         var = eds.variable(number, subindex)

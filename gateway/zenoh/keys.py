@@ -84,7 +84,10 @@ KEYS: tuple[KeySpec, ...] = (
         'A query without payload reads the parameter; with `{"value": V}` it writes it '
         "(only the drive's `writable_params`). Device and gateway refusals come back as an "
         "error reply (`Reply.err`) carrying the device's own text and code, never as a "
-        "timeout. Subindex defaults to 0. The key must name one drive and one parameter. "
+        "timeout. Subindex defaults to 0. The key must name one drive and one parameter; "
+        "the number is decimal, or hexadecimal with 0x (a CANopen object and its subindex: "
+        "`params/0x6083`, `params/0x2000/4`; an SDO abort comes back as "
+        '`{"error": "0x06090030 value range of parameter exceeded (...)", "code": 101253168}`). '
         "`value` is the raw word; `scaled` is it in `unit` (P0100 = 20 is 2.0 s), with the "
         "parameter's `code` as the manual writes it and its `name` (docs/devices.md lists the "
         "tables). Without a number, `<prefix>/drives/<id>/params` answers the drive's whole "

@@ -165,9 +165,16 @@ class ParamRequest:
 
 
 def _index(text: str, what: str, maximum: int) -> int:
-    if not text.isascii() or not text.isdigit():
+    """A decimal number, or a hexadecimal one with 0x (a CANopen object: params/0x6083)."""
+    if text[:2].lower() == "0x":
+        digits = text[2:]
+        if not digits or not all(c in "0123456789abcdefABCDEF" for c in digits):
+            raise BadRequest(f"{what} must be 0x and hexadecimal digits, not {text!r}")
+        value = int(digits, 16)
+    elif not text.isascii() or not text.isdigit():
         raise BadRequest(f"{what} must be a decimal number, not {text!r}")
-    value = int(text)
+    else:
+        value = int(text)
     if value > maximum:
         raise BadRequest(f"{what} {value} is beyond {maximum}")
     return value

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_table_names_classes_as_strings() -> None:
-    assert set(ADAPTERS) == {"profibus", "devicenet"}
+    assert set(ADAPTERS) == {"profibus", "devicenet", "canopen"}
     for target in ADAPTERS.values():
         module, _, cls = target.partition(":")
         assert module.startswith("adapters.") and cls.isidentifier()
@@ -67,7 +67,7 @@ def test_an_installed_entry_point_loads_a_third_party_adapter() -> None:
 
 
 NOT_A_NAME = (
-    "is not an adapter name: a config names a registered adapter (devicenet, echo-profibus, fake, held, "
+    "is not an adapter name: a config names a registered adapter (canopen, devicenet, echo-profibus, fake, held, "
     "profibus), never a module; a third-party adapter is installed as an entry point "
     "in the group 'drive_gateway.adapters'"
 )
@@ -76,9 +76,9 @@ NOT_A_NAME = (
 @pytest.mark.parametrize(
     ("name", "message"),
     [
-        ("canbus", "unknown adapter 'canbus' (known: devicenet, echo-profibus, fake, held, profibus)"),
-        ("profibu", "unknown adapter 'profibu' (known: devicenet, echo-profibus, fake, held, profibus); did you mean 'profibus'?"),
-        ("", "unknown adapter '' (known: devicenet, echo-profibus, fake, held, profibus)"),
+        ("canbus", "unknown adapter 'canbus' (known: canopen, devicenet, echo-profibus, fake, held, profibus)"),
+        ("profibu", "unknown adapter 'profibu' (known: canopen, devicenet, echo-profibus, fake, held, profibus); did you mean 'profibus'?"),
+        ("", "unknown adapter '' (known: canopen, devicenet, echo-profibus, fake, held, profibus)"),
         (":x", f"':x' {NOT_A_NAME}"),
         (".x:y", f"'.x:y' {NOT_A_NAME}"),
         ("os:getcwd", f"'os:getcwd' {NOT_A_NAME}"),

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from typing import TypeVar
 
+from adapters.canopen.adapter import CanOpenAdapter
+from adapters.canopen.sim.runner import SimRunner as CanOpenRunner
+from adapters.canopen.sim.simulated import SimulatedBus as CanOpenSimulatedBus
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.sim.runner import SimRunner
 from adapters.devicenet.sim.simulated import SimulatedBus
@@ -39,4 +42,12 @@ def sim_runner(adapter: object) -> SimRunner | None:
     assert isinstance(adapter, DeviceNetAdapter)
     links = adapter.links
     assert isinstance(links, SimulatedBus), "not a simulated line"
+    return links.runner
+
+
+def canopen_runner(adapter: object) -> CanOpenRunner | None:
+    """The simulated CiA 402 nodes of a CANopen adapter (None until its line started)."""
+    assert isinstance(adapter, CanOpenAdapter)
+    links = adapter.links
+    assert isinstance(links, CanOpenSimulatedBus), "not a simulated line"
     return links.runner

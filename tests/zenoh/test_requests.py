@@ -114,6 +114,9 @@ def test_any_json_object_is_a_command_or_a_refusal(obj: dict[str, object]) -> No
         (("101",), b'{"value": 7}', ParamRequest(101, 0, 7)),
         (("101", "0"), b'{"value": 1.5}', ParamRequest(101, 0, 1.5)),
         (("65535", "65535"), None, ParamRequest(65535, 65535)),
+        (("0x6083",), None, ParamRequest(0x6083)),  # a CANopen object (issue 22)
+        (("0x2000", "4"), b'{"value": 1500}', ParamRequest(0x2000, 4, 1500)),
+        (("0X605a", "0x0"), None, ParamRequest(0x605A, 0)),
     ],
 )
 def test_parameter_requests(
@@ -132,6 +135,9 @@ def test_parameter_requests(
         (("-1",), None, "parameter number must be a decimal number, not '-1'"),
         (("\u0661",), None, "parameter number must be a decimal number, not '\u0661'"),
         (("65536",), None, "parameter number 65536 is beyond 65535"),
+        (("0x10000",), None, "parameter number 65536 is beyond 65535"),
+        (("0x",), None, "parameter number must be 0x and hexadecimal digits, not '0x'"),
+        (("0x6g",), None, "parameter number must be 0x and hexadecimal digits, not '0x6g'"),
         (("1", "s"), None, "subindex must be a decimal number, not 's'"),
         (
             ("1",),
