@@ -2,8 +2,9 @@
 
 The buses and drives are read from the demo file itself, so the fault and safety tests
 run the very devices ``make run`` shows: the CFW-11, CFW700, CFW320 and MCD 600 on the
-Profibus line and the CFW-08 on the DeviceNet line. Only timings change (faster retries,
-short ramps), the DeviceNet channel (one per test) and what a test overrides per drive.
+Profibus line, the CFW-08 on the DeviceNet line and the two CiA 402 drives on the CANopen
+line. Only timings change (faster retries, short ramps), the CAN channels (one per test
+and bus) and what a test overrides per drive.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from collections.abc import AsyncIterator, Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from adapters.canopen.adapter import CanOpenAdapter
+from adapters.canopen.sim.runner import SimRunner as CanOpenRunner
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.sim import SimRunner
 from adapters.profibus.adapter import ProfibusAdapter
@@ -33,8 +36,10 @@ DEMO: dict[str, Any] = tomllib.loads(DEMO_FILE.read_text())
 
 PROFIBUS = "profibus"
 DEVICENET = "devicenet"
+CANOPEN = "canopen"
 WEG = ("cfw11", "cfw700", "cfw320")  # the inverters of the demo's Profibus line
-DRIVES = (*WEG, "mcd600", "cfw08")
+CIA402 = ("cia402a", "cia402b")  # the CiA 402 drives of the demo's CANopen line
+DRIVES = (*WEG, "mcd600", "cfw08", *CIA402)
 UNITS: dict[str, int] = {
     d["id"]: d["modbus_unit"] for bus in DEMO["buses"].values() for d in bus["drives"]
 }
@@ -58,6 +63,11 @@ DEVICENET_TIMINGS: dict[str, Any] = {
     "retry_max": 0.3,
     "status_interval": 0.2,
 }
+CANOPEN_TIMINGS: dict[str, Any] = {
+    "sync_period": 0.02,
+    "sdo_timeout": 0.3,
+    "retry": 0.2,
+}
 # The WEG drives programmed at connect as a site would program them: the command sources
 # on the network (P0105, P0220-P0228; docs/devices.md) and 0.3 s ramps (P0100/P0101).
 WEG_STARTUP: dict[str, int] = {
@@ -74,6 +84,8 @@ DRIVE_TIMINGS: dict[str, dict[str, Any]] = {
     **{d: {"startup_params": WEG_STARTUP} for d in WEG},
     "cfw08": {"sim_ramp_time": 0.3},
     "mcd600": {"sim_time_scale": 20.0},
+    "cia402a": {"sim_ramp_time": 0.3},
+    "cia402b": {"sim_ramp_time": 0.3, "startup_sdo": {"0x6083": 6000, "0x6084": 6000}},
 }
 
 
@@ -118,6 +130,8 @@ def demo_buses(
         bus = {k: v for k, v in table.items() if k != "drives"}
         if name == PROFIBUS:
             bus.update(PROFIBUS_TIMINGS, **(profibus or {}))
+        elif name == CANOPEN:  # a channel of its own: DeviceNet and CANopen share no line
+            bus.update(CANOPEN_TIMINGS, channel=f"{channel}-co")
         else:
             bus.update(DEVICENET_TIMINGS, channel=channel, **(devicenet or {}))
         bus["drives"] = [_drive(d, (drives or {}).get(d["id"], {})) for d in table["drives"]]
@@ -179,6 +193,14 @@ def devicenet_adapter(gw: Gateway) -> DeviceNetAdapter:
     adapter = gw.adapter(DEVICENET)
     assert isinstance(adapter, DeviceNetAdapter)
     return adapter
+
+
+def canopen_sim(gw: Gateway) -> CanOpenRunner:
+    adapter = gw.adapter(CANOPEN)
+    assert isinstance(adapter, CanOpenAdapter)
+    runner = simulated.canopen_runner(adapter)
+    assert runner is not None, "the CANopen line is not simulated"
+    return runner
 
 
 def can_sim(gw: Gateway) -> SimRunner:

@@ -21,12 +21,14 @@ from gateway.model import Source
 from tests.e2e.harness import COAST_STOP, PREFIX, RESET, RUN, TIMEOUT, Gateway
 from tests.reliability.demo import (
     ADDRESSES,
+    CIA402,
     DRIVES,
     UNITS,
     WEG,
     Events,
     at_speed,
     can_sim,
+    canopen_sim,
     demo_gateway,
     devicenet_adapter,
     now,
@@ -57,6 +59,8 @@ def turning(gw: Gateway, drive: str) -> float:
     """The motor speed of the simulated drive (rpm; the soft starter: 100 while active)."""
     if drive == "cfw08":
         return float(can_sim(gw).node(ADDRESSES[drive]).drive.motor.speed)
+    if drive in CIA402:
+        return float(canopen_sim(gw).node(ADDRESSES[drive]).drive.motor.speed)
     if drive == "mcd600":
         return 100.0 if mcd(gw).starter.active else 0.0
     return float(weg(gw, drive).motor.speed)
