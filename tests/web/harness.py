@@ -32,7 +32,7 @@ from tests.zenoh.client import Client
 
 TIMEOUT = scaled(30.0)
 PREFIX = "demo"
-DEMO_DRIVES = ("cfw11", "cfw700", "cfw320", "mcd600", "cfw08")
+DEMO_DRIVES = ("cfw11", "cfw700", "cfw320", "mcd600", "cfw08", "cia402a", "cia402b")
 TOKEN = "correct horse battery staple"
 TOKEN_SHA256 = hashlib.sha256(TOKEN.encode()).hexdigest()
 ROOT = Path(__file__).resolve().parents[2]

@@ -101,8 +101,8 @@ async def test_the_json_api_for_scripts() -> None:
         async with demo.http.get(f"{demo.url}api/health") as r:
             assert r.status == 200 and r.content_type == "application/json"
             health = await r.json()
-        assert health["name"] == "demo" and health["drives"] == 5 and health["online"] == 5
-        assert set(health["buses"]) == {"profibus", "devicenet"}
+        assert health["name"] == "demo" and health["drives"] == 7 and health["online"] == 7
+        assert set(health["buses"]) == {"profibus", "devicenet", "canopen"}
         assert health["buses"]["profibus"]["live"] == ["cfw11", "cfw700", "cfw320", "mcd600"]
         async with demo.http.get(f"{demo.url}api/drives") as r:
             drives = (await r.json())["drives"]
