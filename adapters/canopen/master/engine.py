@@ -28,6 +28,7 @@ SYNC), started by :meth:`Master.fault_reset` and never repeated.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 
 from adapters.canopen import frames
@@ -80,6 +81,8 @@ class Master:
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
         self.figures = {"syncs_tx": 0, "bad_frames": 0, "bus_errors": 0, "tx_failures": 0}
         self._left = False
+        self._kick = False  # a job was queued for an idle SDO channel
+        self._due: float | None = 0.0  # a lower bound of the next deadline
 
     # ------------------------------------------------------------ the adapter's side
 
@@ -105,6 +108,7 @@ class Master:
             raise NodeUnavailable(f"node {node_id} is {node.phase.value}, not online")
         token = next(self._tokens)
         node.jobs.append(Job(Purpose.USER, index, subindex, write, token=token))
+        self._kick = node.current is None
         return token
 
     def online(self, node_id: int) -> bool:
@@ -127,29 +131,50 @@ class Master:
     # ------------------------------------------------------------ the engine protocol
 
     def next_deadline(self) -> float | None:
-        times: list[float] = []
-        if self._next_cycle is not None:
-            times.append(self._next_cycle)
-        if self._next_heartbeat is not None:
-            times.append(self._next_heartbeat)
+        if self._kick:
+            return -math.inf  # a job waits for its node's free SDO channel: step now
+        return self._due
+
+    def _node_due(self, node: Node) -> float | None:
+        times = [
+            t for t in (node.probe_at, node.phase_deadline, node.sdo_deadline) if t is not None
+        ]
+        if node.watch_heartbeat and node.heard_at is not None:
+            times.append(node.heard_at + self._hb_timeout(node))
+        return min(times) if times else None
+
+    def _compute_due(self) -> float | None:
+        times = [t for t in (self._next_cycle, self._next_heartbeat) if t is not None]
         for node in self.nodes.values():
-            for t in (node.probe_at, node.phase_deadline, node.sdo_deadline):
-                if t is not None:
-                    times.append(t)
-            if node.watch_heartbeat and node.heard_at is not None:
-                times.append(node.heard_at + self._hb_timeout(node))
+            t = self._node_due(node)
+            if t is not None:
+                times.append(t)
         return min(times) if times else None
 
     def step(self, now: float, event: Event | None = None) -> list[Action]:
+        """A frame touches its node only: the timers of every node run when one is due
+        (``_due``, a lower bound of the next deadline, is kept so that a busy line costs
+        O(1) per frame, not a pass over every node)."""
         out: list[Action] = []
+        self._kick = False
         if self._left:
             return out
+        touched: Node | None = None
         if event is not None:
-            self._on_event(now, event, out)
-        self._timers(now, out)
-        for node in self.nodes.values():
-            if node.current is None and node.jobs:
-                self._start_job(node, now, out)
+            touched = self._on_event(now, event, out)
+        due = self._due
+        if event is None or touched is None or (due is not None and now >= due):
+            self._timers(now, out)
+            for node in self.nodes.values():
+                if node.current is None and node.jobs:
+                    self._start_job(node, now, out)
+            self._due = self._compute_due()
+            return out
+        if touched.current is None and touched.jobs:
+            self._start_job(touched, now, out)
+        mine = self._node_due(touched)
+        if mine is not None and (due is None or mine < due):
+            self._due = mine
         return out
 
     # ------------------------------------------------------------ time
@@ -435,10 +460,11 @@ class Master:
 
     # ------------------------------------------------------------ frames in
 
-    def _on_event(self, now: float, event: Event, out: list[Action]) -> None:
+    def _on_event(self, now: float, event: Event, out: list[Action]) -> Node | None:
+        """The node the event concerned (None: the line, or no node of ours)."""
         if isinstance(event, FrameIn):
-            self._on_frame(now, event.frame, out)
-        elif isinstance(event, BadFrame):
+            return self._on_frame(now, event.frame, out)
+        if isinstance(event, BadFrame):
             self.figures["bad_frames"] += 1
         elif isinstance(event, BusErrorIn):
             self.figures["bus_errors"] += 1
@@ -450,16 +476,17 @@ class Master:
                     self._lose(node, now, f"CAN link down: {event.reason}", out)
         elif isinstance(event, TxFailed):
             self.figures["tx_failures"] += 1
+        return None
 
-    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> None:
+    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
         try:
             cob = frames.classify(frame.cob_id)
         except CanOpenDecodeError:
             self.figures["bad_frames"] += 1
-            return
+            return None
         node = self.nodes.get(cob.node_id)
         if node is None:
-            return  # another node, or a broadcast (SYNC, NMT of another master)
+            return None  # another node, or a broadcast (SYNC, NMT of another master)
         kind = cob.kind
         if kind is Kind.TPDO:
             if cob.pdo == 1 and node.phase is Phase.ONLINE:
@@ -474,9 +501,10 @@ class Master:
             except CanOpenDecodeError as exc:
                 self.figures["bad_frames"] += 1
                 out.append(Report(node.id, f"bad EMCY: {exc}"))
-                return
+                return node
             node.figures["emcy_rx"] += 1
             out.append(EmcyIn(node.id, emcy))
+        return node
 
     def _on_heartbeat(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
         try:
