@@ -39,6 +39,7 @@ ParamValue = int | float
 ADAPTERS: dict[str, str] = {
     "profibus": "adapters.profibus.adapter:ProfibusAdapter",
     "devicenet": "adapters.devicenet.adapter:DeviceNetAdapter",
+    "canopen": "adapters.canopen.adapter:CanOpenAdapter",
 }
 """Adapter name (the ``adapter`` key of a bus table) -> "module:Class"."""
 

@@ -51,6 +51,7 @@ FRONT_ENDS: dict[str, str] = {
 SIMULATORS: dict[str, str] = {
     "profibus": "adapters.profibus.sim.simulated:SimulatedLine",
     "devicenet": "adapters.devicenet.sim.simulated:SimulatedBus",
+    "canopen": "adapters.canopen.sim.simulated:SimulatedBus",
 }
 """Adapter name -> "module:Class" of its simulated line, made from the bus's config for a
 bus with ``simulate = true`` and given to the adapter as its link factory; the adapters

@@ -107,6 +107,13 @@ class Device(Enum):
         soft_starter=True,
         gsd_names=("mcd 600", "mcd600", "mcd6"),
     )
+    CIA402 = DeviceSpec(
+        "CiA 402",
+        code=6,
+        bus="canopen",
+        package="adapters.canopen",
+        doc="a drive of the CiA 402 profile on CANopen (docs/devices.md, CiA 402 drives (CANopen))",
+    )
     TEST = DeviceSpec(
         "test",
         code=255,

@@ -41,6 +41,7 @@ CODEC_NAMES = {
         "_validate",
         "eds",
     ),
+    "adapters.canopen": ("frames", "cia402", "codes", "errors"),
 }
 # The device packages inside a bus package (from the registry): not codecs either.
 DEVICE_PARTS = tuple(
@@ -54,7 +55,7 @@ DEVICE_PARTS = tuple(
 )
 # Parts of an adapter package that are not codecs: a codec may not import them.
 NON_CODEC_NAMES = ("master", "link", "scanner", "adapter", "sim", "cli", "engine", *DEVICE_PARTS)
-ENGINE_NAMES = ("adapters.profibus.master", "adapters.devicenet.scanner")
+ENGINE_NAMES = ("adapters.profibus.master", "adapters.devicenet.scanner", "adapters.canopen.master")
 # The link layer every bus adapter shares (one link per medium, one driver loop per medium).
 SHARED_LINK = "adapters.link"
 SHARED_LINK_MAY_IMPORT = (*FIELDBUS_LIBS, "gateway.errors")
@@ -210,15 +211,23 @@ def test_the_shared_link_layer_imports_no_bus_adapter() -> None:
     assert violations(rule) == []
 
 
+# The canopen library reads a drive's object dictionary (EDS/DCF) and encodes its values
+# (adapters.canopen.od); the simulator is built on its LocalNode. Neither opens a network:
+# the master's frames go through the shared link (docs/decisions.md).
+CANOPEN_LIBRARY_USERS = ("adapters.canopen.od", "adapters.canopen.sim")
+
+
 def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
     """One link per medium: pyserial and python-can are imported by adapters.link, and by a
     bus's own link module only for its settings (8E1, the CAN frame it carries). The CANopen
     simulator is the exception: a device built on the canopen library's LocalNode (issue 22)
-    with its own network, never the gateway's link."""
+    on a python-can bus of its own, never the gateway's link."""
     own_links = [f"{pkg}.link" for pkg in CODEC_NAMES]
     library_devices = ("adapters.canopen.sim",)
 
     def rule(mod: str, imp: str) -> str | None:
+        if under(imp, "canopen") and under(mod, *CANOPEN_LIBRARY_USERS):
+            return None
         if under(imp, *FIELDBUS_LIBS) and not under(mod, SHARED_LINK, *own_links, *library_devices):
             return "a fieldbus library only in adapters.link (and a bus's link settings)"
         return None
@@ -231,6 +240,7 @@ def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
     [
         ("adapters.profibus.adapter", f"{SHARED_LINK}.stream"),
         ("adapters.devicenet.adapter", f"{SHARED_LINK}.candriver"),
+        ("adapters.canopen.adapter", f"{SHARED_LINK}.candriver"),
     ],
 )
 def test_each_bus_adapter_runs_on_its_mediums_driver_loop(adapter: str, loop: str) -> None:

@@ -1,0 +1,570 @@
+"""The CANopen adapter: python-can link + master engine + CiA 402 profile, as a DriveAdapter.
+
+The engine (:mod:`adapters.canopen.master`) runs on the shared CAN driver loop
+(:mod:`adapters.link.candriver`) in the event loop's thread: no canopen library network,
+no notifier thread of its own, no blocking SDO call (docs/decisions.md, "CANopen: the
+project's own engine"). The canopen library reads each drive's EDS and encodes and
+decodes object values (:mod:`adapters.canopen.od`).
+
+Per drive: ``connecting`` once the node answers SDO; the bring-up writes (each read back)
+then NMT start; ``online`` with its first TPDO. Until then the drive gets no PDO. A lost
+heartbeat, a boot-up or a node leaving operational makes it ``offline``; it is brought
+up again, and the hub clears any run command when it comes back online (safety rule 1):
+it comes back stopped. A fault reset is one edge of controlword bit 7 (rule 2).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from adapters.canopen import cia402
+from adapters.canopen.codes import abort_message, emcy_text, error_register_texts
+from adapters.canopen.frames import CanFrame
+from adapters.canopen.link import CanOpenBus, Link, LinkConfig, LinkEvent
+from adapters.canopen.master import (
+    Action,
+    BadFrame,
+    BusErrorIn,
+    Configured,
+    EmcyIn,
+    Event,
+    FaultInfo,
+    FrameIn,
+    Inputs,
+    LinkDown,
+    Master,
+    MasterConfig,
+    NodeDown,
+    NodeProblem,
+    NodeSeen,
+    NodeUnavailable,
+    NodeUp,
+    Report,
+    SdoDone,
+    Send,
+    TxFailed,
+)
+from adapters.canopen.od import obj_name
+from adapters.canopen.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.canopen.plan import node_config
+from adapters.canopen.profile import readings, want
+from adapters.link.can import CanLinks, RxBad, RxError, RxFailed, RxFrame, SendResult
+from adapters.link.candriver import CanDriver, CanProtocol
+from adapters.link.config import missing_options, unsimulated
+from gateway.adapter import (
+    Capabilities,
+    EventKind,
+    HubPort,
+    ParamInfo,
+    ParamTable,
+    ParamValue,
+    param_table,
+)
+from gateway.config import BusConfig, DriveConfig
+from gateway.devices import devices_of
+from gateway.errors import AdapterError, DriveOffline, GatewayTimeout, ParameterError
+from gateway.model import CommState, DesiredCommand, Device, SpeedScale
+from gateway.schema import Table
+
+log = logging.getLogger(__name__)
+
+LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
+
+
+@dataclass(slots=True)
+class _Drive:
+    cfg: DriveConfig
+    opts: DriveOptions
+    up: bool = False  # NMT operational (NodeUp) since it was last lost
+    online: bool = False  # reported online to the hub (first TPDO)
+    reset_seen: int = 0
+    fault_code: int | None = None
+    emcy_code: int | None = None
+    problem: str | None = None
+    quick_stop_option: int | None = None
+    input_key: object = None
+
+    @property
+    def id(self) -> str:
+        return self.cfg.id
+
+    @property
+    def node(self) -> int:
+        return self.cfg.address
+
+
+def eds_param_table(opts: DriveOptions) -> ParamTable:
+    """The EDS objects by index (the parameter number of a CANopen drive is the object
+    index, its subindex the subindex): name and unit for the front ends."""
+    eds = opts.eds
+    out: list[ParamInfo] = []
+    for index in eds.indexes():
+        subs = eds.subindexes(index)
+        sub = 0 if subs == (0,) else None
+        entry = eds.od[index]
+        out.append(
+            ParamInfo(
+                number=index,
+                name=str(entry.name),
+                unit=eds.variable(index).unit if sub == 0 else "",
+                code=f"0x{index:04X}",
+            )
+        )
+    return param_table(out)
+
+
+class CanOpenAdapter:
+    """One CANopen line mastered by the gateway, with its CiA 402 drives."""
+
+    devices: ClassVar[frozenset[Device]] = devices_of("canopen")
+    address_range: ClassVar[tuple[int, int]] = (1, 127)
+
+    @classmethod
+    def parse_bus_options(cls, table: Table) -> BusOptions:
+        return parse_bus(table)
+
+    @classmethod
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+        return parse_drive(table, drive)
+
+    def __init__(
+        self,
+        bus: BusConfig,
+        *,
+        links: CanLinks[CanFrame] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.bus = bus
+        self.name = bus.name
+        if not isinstance(bus.options, BusOptions):
+            raise missing_options(bus.name)
+        self.options: BusOptions = bus.options
+        o = self.options
+        self.links: CanLinks[CanFrame] | None = links
+        if links is None and not o.simulate:
+            self.links = CanOpenBus(LinkConfig(o.interface, o.channel, o.bitrate))
+        self.clock = clock
+        self.drives: dict[int, _Drive] = {}
+        self._by_id: dict[str, _Drive] = {}
+        for d in bus.drives:
+            if o.heartbeat > 0 and d.address == o.node_id:
+                raise AdapterError(
+                    f"drive {d.id} has the gateway's own node id {d.address} (bus key 'node_id')"
+                )
+            drive = _Drive(d, d.options)
+            self.drives[d.address] = drive
+            self._by_id[d.id] = drive
+        self.node_configs = [node_config(d.node, d.opts, o) for d in self.drives.values()]
+        self.engine: Master | None = None
+        self.link: Link | None = None
+        self._driver: CanDriver[CanFrame, Event, Action] | None = None
+        self._hub: HubPort | None = None
+        self._pending: dict[int, asyncio.Future[SdoDone]] = {}
+        self._next_refresh = 0.0
+        self._handlers: dict[type, Callable[[float, Any], None]] = {
+            NodeSeen: self._on_seen,
+            Configured: self._on_configured,
+            NodeUp: self._on_up,
+            NodeDown: self._on_down,
+            NodeProblem: self._on_problem,
+            Inputs: self._on_inputs,
+            EmcyIn: self._on_emcy,
+            FaultInfo: self._on_fault_info,
+            SdoDone: self._on_sdo_done,
+            Report: self._on_report,
+        }
+
+    def master_config(self) -> MasterConfig:
+        o = self.options
+        return MasterConfig(
+            nmt_master=o.nmt_master,
+            sync_period=o.sync_period,
+            pdo_period=o.pdo_period,
+            sdo_timeout=o.sdo_timeout,
+            heartbeat_factor=o.heartbeat_factor,
+            boot_timeout=o.boot_timeout,
+            retry=o.retry,
+            own_node_id=o.node_id,
+            own_heartbeat=o.heartbeat / 1000.0,
+        )
+
+    # ------------------------------------------------------------ run
+
+    async def run(self, hub: HubPort) -> None:
+        links = self.links
+        if links is None:
+            raise unsimulated(self.name)
+        self._hub = hub
+        for d in self.drives.values():
+            hub.update(d.id, comm=CommState.OFFLINE)
+            hub.set_capabilities(d.id, self._capabilities(d))
+        link = links.link()
+        engine = Master(self.master_config(), self.node_configs)
+        async with link:
+            self.link, self.engine = link, engine
+            driver = self._driver = CanDriver(engine, link, _Line(self), self.clock)
+            try:
+                await links.start()
+                await driver.run()
+            finally:
+                try:
+                    await self._leave(link, engine, driver)
+                    self._stop_pending()
+                finally:
+                    await links.stop()
+                for d in self.drives.values():
+                    d.up = d.online = False
+                    hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
+                self.link = self.engine = self._driver = None
+
+    async def _leave(
+        self, link: Link, engine: Master, driver: CanDriver[CanFrame, Event, Action]
+    ) -> None:
+        if not link.is_open:
+            return
+        now = self.clock()
+        self._refresh(now)  # the wish as the shutdown stop left it
+        driver.discard()
+        with contextlib.suppress(AdapterError):
+            driver.act(now, engine.leave(now))
+        driver.flush(now)
+        await asyncio.sleep(LEAVE_WAIT)
+
+    def _stop_pending(self) -> None:
+        for fut in self._pending.values():
+            fut.cancel()
+        self._pending.clear()
+
+    def _hub_port(self) -> HubPort:
+        if self._hub is None:
+            raise AdapterError("the adapter is not running")
+        return self._hub
+
+    def _capabilities(self, d: _Drive) -> Capabilities:
+        return Capabilities(
+            speed_scale=SpeedScale(d.opts.max_rpm, 100.0, "max_rpm"),
+            unsupported={"jog": "CiA 402 velocity modes have no jog"},
+            params=eds_param_table(d.opts),
+        )
+
+    # ------------------------------------------------------------ outputs
+
+    def _before_step(self, now: float) -> None:
+        if now >= self._next_refresh:
+            self._refresh(now)
+            self._next_refresh = now + self.options.cycle
+
+    def _wake_at(self) -> float:
+        return self._next_refresh
+
+    def _refresh(self, now: float) -> None:
+        """The hub's desired commands into the engine's wishes, once per cycle. A drive
+        not reported online is wished stopped whatever the hub holds (it goes online
+        first, which clears a run: rule 1); a new reset request is one edge."""
+        engine, hub = self.engine, self._hub
+        if engine is None or hub is None:
+            return
+        for d in self.drives.values():
+            if not d.online:
+                engine.set_want(d.node, want(_STOPPED_DESIRED, d.opts))
+                continue
+            desired = hub.desired(d.id)
+            engine.set_want(d.node, want(desired, d.opts))
+            if desired.fault_reset_seq != d.reset_seen:
+                d.reset_seen = desired.fault_reset_seq
+                if engine.fault_reset(d.node, now):
+                    hub.event(d.id, EventKind.FAULT, "fault reset sent (controlword bit 7 edge)")
+
+    # ------------------------------------------------------------ actions
+
+    def _handle(self, now: float, action: Action) -> None:
+        self._handlers[type(action)](now, action)
+
+    def _on_seen(self, now: float, action: NodeSeen) -> None:
+        d = self.drives[action.node]
+        self._hub_port().update(d.id, comm=CommState.CONNECTING)
+
+    def _on_configured(self, now: float, action: Configured) -> None:
+        d = self.drives[action.node]
+        d.problem = None
+        o = d.opts
+        text = f"configured: node {d.node}, mode {o.mode.value}, heartbeat {o.heartbeat_ms} ms"
+        raw = action.reports.get((cia402.QUICK_STOP_OPTION, 0))
+        if raw:
+            d.quick_stop_option = int.from_bytes(raw, "little", signed=True)
+            option = d.quick_stop_option
+            text += (
+                f"; quick stop option 0x605A = {option} ({cia402.quick_stop_option_text(option)})"
+            )
+        if d.opts.comm_loss_option is not None:
+            option = d.opts.comm_loss_option
+            text += (
+                f"; abort connection option 0x6007 = {option} "
+                f"({cia402.abort_connection_option_text(option)})"
+            )
+        self._hub_port().event(d.id, EventKind.CONFIG, text, quick_stop_option=d.quick_stop_option)
+
+    def _on_up(self, now: float, action: NodeUp) -> None:
+        d = self.drives[action.node]
+        d.up = True
+        d.input_key = None
+        d.reset_seen = self._hub_port().desired(d.id).fault_reset_seq
+
+    def _on_down(self, now: float, action: NodeDown) -> None:
+        d = self.drives[action.node]
+        d.up = d.online = False
+        d.input_key = None
+        hub = self._hub_port()
+        hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
+        hub.event(d.id, EventKind.COMM, f"drive offline: {action.reason}", node=d.node)
+
+    def _on_problem(self, now: float, action: NodeProblem) -> None:
+        d = self.drives[action.node]
+        text = f"not configured: node {d.node}: {action.text}; the drive is not started"
+        if text != d.problem:
+            log.warning("CANopen %s: drive %s %s", self.name, d.id, text)
+            data: dict[str, Any] = {"node": d.node}
+            if action.abort_code is not None:
+                data["abort_code"] = action.abort_code
+            self._hub_port().event(d.id, EventKind.CONFIG, text, **data)
+        d.problem = text
+        d.up = d.online = False
+        self._hub_port().update(d.id, comm=CommState.OFFLINE, running=False)
+
+    def _on_inputs(self, now: float, action: Inputs) -> None:
+        d = self.drives[action.node]
+        if not d.up:
+            return
+        hub = self._hub_port()
+        desired = hub.desired(d.id)
+        key = (action.statusword, action.values, desired, d.fault_code)
+        if key == d.input_key and d.online:
+            return
+        d.input_key = key
+        changes = readings(action.statusword, action.values, desired, d.opts, d.fault_code)
+        if not d.online:
+            d.online = True
+            hub.update(d.id, comm=CommState.ONLINE, **changes)  # clears a run (rule 1)
+            return
+        hub.update(d.id, **changes)
+
+    def _on_emcy(self, now: float, action: EmcyIn) -> None:
+        d = self.drives[action.node]
+        emcy = action.emcy
+        hub = self._hub_port()
+        if emcy.error_code == 0:
+            d.emcy_code = None
+            hub.event(d.id, EventKind.FAULT, "EMCY error reset (no error)", node=d.node)
+            return
+        d.emcy_code = d.fault_code = emcy.error_code
+        d.input_key = None
+        register = ", ".join(error_register_texts(emcy.error_register)) or "none"
+        hub.event(
+            d.id,
+            EventKind.FAULT,
+            f"EMCY 0x{emcy.error_code:04X} {emcy_text(emcy.error_code)} "
+            f"(error register 0x{emcy.error_register:02X}: {register})",
+            code=emcy.error_code,
+            error_register=emcy.error_register,
+            node=d.node,
+        )
+
+    def _on_fault_info(self, now: float, action: FaultInfo) -> None:
+        d = self.drives[action.node]
+        raw = action.reads.get((cia402.ERROR_CODE, 0))
+        register = action.reads.get((0x1001, 0))
+        code = int.from_bytes(raw, "little") if raw else None
+        if code:
+            d.fault_code = code
+            d.input_key = None
+        parts = []
+        if code is not None:
+            parts.append(f"0x603F = 0x{code:04X} {emcy_text(code)}")
+        if register:
+            value = register[0]
+            names = ", ".join(error_register_texts(value)) or "none"
+            parts.append(f"0x1001 = 0x{value:02X} ({names})")
+        if parts:
+            self._hub_port().event(
+                d.id, EventKind.FAULT, "fault read: " + "; ".join(parts), code=code, node=d.node
+            )
+
+    def _on_sdo_done(self, now: float, action: SdoDone) -> None:
+        fut = self._pending.pop(action.token, None)
+        if fut is not None and not fut.done():
+            fut.set_result(action)
+
+    def _on_report(self, now: float, action: Report) -> None:
+        log.info("CANopen %s: %s", self.name, action.text)
+        targets = [self.drives[action.node]] if action.node in self.drives else []
+        for d in targets:
+            self._hub_port().event(d.id, EventKind.BUS, action.text)
+
+    # ------------------------------------------------------------ parameters
+
+    def _drive(self, drive_id: str) -> _Drive:
+        d = self._by_id.get(drive_id)
+        if d is None:
+            raise DriveOffline(f"drive {drive_id} is not on bus {self.name}")
+        return d
+
+    async def sdo(self, drive_id: str, index: int, subindex: int, write: bytes | None) -> bytes:
+        """One SDO transfer with a drive; the bytes read (empty for a write). An abort is
+        a ParameterError with the CiA 301 code and text."""
+        d = self._drive(drive_id)
+        engine, link = self.engine, self.link
+        if engine is None or link is None:
+            raise DriveOffline(f"drive {d.id}: bus {self.name} is not running")
+        try:
+            token = engine.submit(d.node, index, subindex, write)
+        except NodeUnavailable as exc:
+            raise DriveOffline(f"drive {d.id} is not online ({exc})") from None
+        fut: asyncio.Future[SdoDone] = asyncio.get_running_loop().create_future()
+        self._pending[token] = fut
+        link.wake()
+        bound = 4 * self.options.sdo_timeout + 1.0
+        try:
+            async with asyncio.timeout(bound):
+                done = await fut
+        except TimeoutError:
+            raise GatewayTimeout(f"drive {d.id}: no SDO answer within {bound:g} s") from None
+        finally:
+            self._pending.pop(token, None)
+        if done.result is None:
+            raise DriveOffline(f"drive {d.id}: {done.error}")
+        result = done.result
+        what = f"{'write' if write is not None else 'read'} {obj_name(index, subindex)}"
+        if result.abort_code is not None:
+            if not result.by_server and result.abort_code == 0x05040000:
+                raise GatewayTimeout(f"drive {d.id}: {what}: no SDO answer")
+            raise ParameterError(f"{abort_message(result.abort_code)} ({what})", result.abort_code)
+        return result.data
+
+    async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
+        d = self._drive(drive_id)
+        eds = d.opts.eds
+        data = await self.sdo(drive_id, number, subindex, None)
+        if not eds.has(number, subindex):
+            return int.from_bytes(data, "little")
+        var = eds.variable(number, subindex)
+        try:
+            return var.decode(data)
+        except (ValueError, TypeError) as exc:
+            raise ParameterError(f"{obj_name(number, subindex)}: {exc}") from None
+
+    async def write_param(
+        self, drive_id: str, number: int, subindex: int, value: ParamValue
+    ) -> None:
+        d = self._drive(drive_id)
+        eds = d.opts.eds
+        where = obj_name(number, subindex)
+        if not eds.has(number, subindex):
+            raise ParameterError(f"{eds.file}: the EDS has no object {where}; nothing written")
+        var = eds.variable(number, subindex)
+        if not var.writable:
+            raise ParameterError(f"{where} ({var.name}) is read-only in {eds.file}")
+        if var.integer and (not math.isfinite(value) or value != int(value)):
+            raise ParameterError(f"{where} ({var.name}) takes an integer, not {value!r}")
+        if (var.minimum is not None and value < var.minimum) or (
+            var.maximum is not None and value > var.maximum
+        ):
+            raise ParameterError(
+                f"{value} is outside {var.minimum}..{var.maximum} for {where} ({var.name}, "
+                f"{eds.file}); nothing written"
+            )
+        try:
+            data = var.encode(value)
+        except (ValueError, OverflowError, TypeError) as exc:
+            raise ParameterError(f"{value} does not fit {where} ({var.name}): {exc}") from None
+        await self.sdo(drive_id, number, subindex, data)
+
+    def param_info(self, drive_id: str, number: int, raw: ParamValue) -> dict[str, Any]:
+        eds = self._drive(drive_id).opts.eds
+        if not eds.has(number):
+            return {}
+        var = eds.variable(number)
+        return {"name": var.name, "unit": var.unit}
+
+    # ------------------------------------------------------------ diagnostics
+
+    def diagnostics(self) -> dict[str, Any]:
+        o = self.options
+        line: dict[str, Any] = {
+            "interface": o.interface,
+            "channel": o.channel,
+            "bitrate_expected": o.bitrate,
+            "node_id": o.node_id,
+            "nmt_master": o.nmt_master,
+            "sync_period": o.sync_period,
+            "simulated": o.simulate,
+            "running": self.engine is not None,
+        }
+        engine, link = self.engine, self.link
+        if engine is not None:
+            line.update(engine.figures)
+        if link is not None:
+            line.update(link.diagnostics())
+        drives: dict[str, Any] = {}
+        for d in self.drives.values():
+            entry: dict[str, Any] = {
+                "node": d.node,
+                "eds": d.opts.eds.file,
+                "mode": d.opts.mode.value,
+                "online": d.online,
+                "problem": d.problem,
+                "quick_stop_option": d.quick_stop_option,
+            }
+            if engine is not None:
+                entry.update(engine.node_diagnostics(d.node))
+            drives[d.id] = entry
+        line["drives"] = drives
+        return line
+
+
+_STOPPED_DESIRED = DesiredCommand()
+
+
+class _Line(CanProtocol[CanFrame, Event, Action]):
+    """The master's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`)."""
+
+    def __init__(self, adapter: CanOpenAdapter) -> None:
+        self.adapter = adapter
+
+    def event(self, received: LinkEvent) -> Event:
+        return _event(received)
+
+    def frame(self, action: Action) -> CanFrame | None:
+        return action.frame if isinstance(action, Send) else None
+
+    def handle(self, now: float, action: Action) -> None:
+        self.adapter._handle(now, action)
+
+    def send_failed(self, result: SendResult) -> list[Event]:
+        error = result.error or ""
+        failed: list[Event] = [LinkDown(error)] if result.link_down else []
+        return [*failed, TxFailed(error, result.dropped)]
+
+    def before_step(self, now: float) -> None:
+        self.adapter._before_step(now)
+
+    def wake_at(self) -> float | None:
+        return self.adapter._wake_at()
+
+
+def _event(event: LinkEvent) -> Event:
+    if isinstance(event, RxFrame):
+        return FrameIn(event.frame)
+    if isinstance(event, RxError):
+        return BusErrorIn(event.conditions)
+    if isinstance(event, RxBad):
+        return BadFrame(event.reason)
+    if isinstance(event, RxFailed):
+        return LinkDown(event.reason) if event.link_down else BadFrame(event.reason)
+    raise TypeError(event)

@@ -1,0 +1,563 @@
+"""The CANopen master engine: NMT master, SDO client, PDO producer and consumer,
+heartbeat consumer and producer, SYNC producer, CiA 402 master side; sans-IO, stepped
+with an injected clock (``step(now, event) -> actions``, ``next_deadline()``).
+
+Per node (CiA 301 §7.3.2, CiA 402-2 §6.2):
+
+1. PROBE: SDO upload of 0x1000 (device type; the low word is the profile, 402) until
+   the node answers; a node heard operational is reset (NMT reset node, then its
+   boot-up awaited) when its config says so, else put in pre-operational.
+2. CONFIGURE: the bring-up SDO writes (0x1017 heartbeat, RPDO1/TPDO1 communication
+   and mapping, 0x1016 consumer, 0x6007, 0x605A, 0x6060, startup SDOs), each read back
+   and compared; then the report reads (0x605A as the drive has it). A refusal or a
+   different read-back stops the bring-up: the node is not started (NodeProblem).
+3. START: NMT start node; ONLINE on its first operational heartbeat.
+4. ONLINE: RPDO1 (controlword, target) every cycle, after the SYNC when the gateway
+   produces it; TPDO1 in (statusword and actual values); EMCY in; on entering FAULT
+   0x1001 and 0x603F read. A node is lost when no heartbeat came within
+   ``heartbeat_factor`` times its producer time, on a boot-up, or on a heartbeat that
+   is not operational; it is then brought up again from PROBE.
+
+SDO: one transfer in flight per node; the adapter's jobs wait behind the bring-up.
+The controlword is :func:`~adapters.canopen.master.control.controlword` of the last
+statusword and the node's :class:`~adapters.canopen.master.control.Want`; a fault reset
+is one pulse of bit 7 (at least two cycles long so a synchronous RPDO carries it to a
+SYNC), started by :meth:`Master.fault_reset` and never repeated.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+
+from adapters.canopen import frames
+from adapters.canopen.cia402 import Cw, State, decode_state
+from adapters.canopen.errors import CanOpenDecodeError
+from adapters.canopen.frames import CanFrame, Kind, NmtCommand, NmtState, SdoClientTransfer
+from adapters.canopen.master.control import STOPPED, Want, controlword, target
+from adapters.canopen.master.events import (
+    Action,
+    BadFrame,
+    BusErrorIn,
+    Configured,
+    EmcyIn,
+    Event,
+    FaultInfo,
+    FrameIn,
+    Inputs,
+    LinkDown,
+    MasterConfig,
+    NodeConfig,
+    NodeDown,
+    NodeProblem,
+    NodeSeen,
+    NodeUnavailable,
+    NodeUp,
+    PdoField,
+    Report,
+    SdoDone,
+    Send,
+    TxFailed,
+)
+from adapters.canopen.master.node import Job, Node, Phase, Purpose
+
+RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
+FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
+
+
+class Master:
+    """The engine (see the module docstring)."""
+
+    def __init__(self, config: MasterConfig, nodes: Sequence[NodeConfig]) -> None:
+        self.config = config
+        self.nodes: dict[int, Node] = {}
+        for n in nodes:
+            if n.node_id in self.nodes:
+                raise ValueError(f"node {n.node_id} configured twice")
+            self.nodes[n.node_id] = Node(n)
+        self._tokens = itertools.count(1)
+        self._next_cycle: float | None = 0.0
+        self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
+        self.figures = {"syncs_tx": 0, "bad_frames": 0, "bus_errors": 0, "tx_failures": 0}
+        self._left = False
+
+    # ------------------------------------------------------------ the adapter's side
+
+    def set_want(self, node_id: int, want: Want) -> None:
+        self.nodes[node_id].want = want
+
+    def fault_reset(self, node_id: int, now: float) -> bool:
+        """Start one fault reset pulse (bit 7 of the controlword); False when the node is
+        not online (nothing is sent, nothing is kept for later) or a pulse is under way."""
+        node = self.nodes[node_id]
+        if node.phase is not Phase.ONLINE or now < node.reset_until:
+            return False
+        node.reset_until = now + RESET_PULSE_CYCLES * self.config.cycle
+        return True
+
+    def submit(self, node_id: int, index: int, subindex: int, write: bytes | None) -> int:
+        """Queue an SDO read (``write`` None) or write for an online node; the token its
+        :class:`SdoDone` will carry."""
+        node = self.nodes.get(node_id)
+        if node is None:
+            raise NodeUnavailable(f"node {node_id} is not configured on this line")
+        if node.phase is not Phase.ONLINE:
+            raise NodeUnavailable(f"node {node_id} is {node.phase.value}, not online")
+        token = next(self._tokens)
+        node.jobs.append(Job(Purpose.USER, index, subindex, write, token=token))
+        return token
+
+    def online(self, node_id: int) -> bool:
+        return self.nodes[node_id].phase is Phase.ONLINE
+
+    def leave(self, now: float) -> list[Action]:
+        """Leaving the line (shutdown): each online node gets its last RPDO (the wish as
+        it is, stopped after the gateway's shutdown stop) and, from an NMT master, NMT
+        enter pre-operational (no PDO is obeyed after it; the drive's 0x6007 reaction
+        follows when the gateway's heartbeat stops)."""
+        out: list[Action] = []
+        for node in self.nodes.values():
+            if node.phase is Phase.ONLINE:
+                out.append(Send(self._rpdo(node, now)))
+                if self.config.nmt_master:
+                    out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
+        self._left = True
+        return out
+
+    # ------------------------------------------------------------ the engine protocol
+
+    def next_deadline(self) -> float | None:
+        times: list[float] = []
+        if self._next_cycle is not None:
+            times.append(self._next_cycle)
+        if self._next_heartbeat is not None:
+            times.append(self._next_heartbeat)
+        for node in self.nodes.values():
+            for t in (node.probe_at, node.phase_deadline, node.sdo_deadline):
+                if t is not None:
+                    times.append(t)
+            if node.watch_heartbeat and node.heard_at is not None:
+                times.append(node.heard_at + self._hb_timeout(node))
+        return min(times) if times else None
+
+    def step(self, now: float, event: Event | None = None) -> list[Action]:
+        out: list[Action] = []
+        if self._left:
+            return out
+        if event is not None:
+            self._on_event(now, event, out)
+        self._timers(now, out)
+        for node in self.nodes.values():
+            if node.current is None and node.jobs:
+                self._start_job(node, now, out)
+        return out
+
+    # ------------------------------------------------------------ time
+
+    def _hb_timeout(self, node: Node) -> float:
+        return self.config.heartbeat_factor * node.heartbeat_timeout
+
+    def _timers(self, now: float, out: list[Action]) -> None:
+        cfg = self.config
+        if self._next_heartbeat is not None and now >= self._next_heartbeat:
+            out.append(Send(frames.encode_heartbeat(cfg.own_node_id, NmtState.OPERATIONAL)))
+            self._next_heartbeat = max(self._next_heartbeat + cfg.own_heartbeat, now)
+        for node in self.nodes.values():
+            if node.sdo_deadline is not None and now >= node.sdo_deadline:
+                self._sdo_timeout(node, now, out)
+            if (
+                node.watch_heartbeat
+                and node.heard_at is not None
+                and now >= node.heard_at + self._hb_timeout(node)
+            ):
+                waited = round((now - node.heard_at) * 1000)
+                self._lose(node, now, f"no heartbeat for {waited} ms", out)
+            if node.phase_deadline is not None and now >= node.phase_deadline:
+                node.phase_deadline = None
+                self._phase_timeout(node, now, out)
+            if node.probe_at is not None and now >= node.probe_at:
+                node.probe_at = None
+                node.jobs.appendleft(Job(Purpose.PROBE, 0x1000, 0))
+        if self._next_cycle is not None and now >= self._next_cycle:
+            self._cycle(now, out)
+            cycle = cfg.cycle
+            self._next_cycle += cycle
+            if self._next_cycle <= now:  # late (a loaded machine): no burst to catch up
+                self._next_cycle = now + cycle
+
+    def _cycle(self, now: float, out: list[Action]) -> None:
+        if self.config.sync_period > 0:
+            out.append(Send(frames.encode_sync()))
+            self.figures["syncs_tx"] += 1
+        for node in self.nodes.values():
+            if node.phase is Phase.ONLINE:
+                out.append(Send(self._rpdo(node, now)))
+                node.figures["rpdo_tx"] += 1
+
+    def _rpdo(self, node: Node, now: float) -> CanFrame:
+        want = node.want
+        cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
+        if now < node.reset_until:
+            cw = int(Cw.FAULT_RESET_BIT)  # transition 15 on the drive's 0 -> 1 edge
+        values = (cw, target(node.state, want))
+        data = bytearray()
+        for field_, value in zip(node.config.rpdo, values, strict=False):
+            data += _pack(field_, value)
+        return CanFrame(frames.rpdo_id(1, node.id), bytes(data))
+
+    def _phase_timeout(self, node: Node, now: float, out: list[Action]) -> None:
+        if node.phase is Phase.RESET:
+            self._to_probe(node, now, now)  # no boot-up: ask again
+        elif node.phase is Phase.START:
+            self._lose(node, now, "did not become operational after NMT start", out)
+        elif node.phase is Phase.FAILED:
+            self._to_probe(node, now, now)
+
+    # ------------------------------------------------------------ phases
+
+    def _to_probe(self, node: Node, now: float, at: float) -> None:
+        self._drop_jobs(node, "node lost", None)
+        node.phase = Phase.PROBE
+        node.phase_deadline = None
+        node.probe_at = at
+        node.watch_heartbeat = False
+        node.state = node.statusword = None
+        node.want = STOPPED
+        node.reset_until = 0.0
+
+    def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
+        was_seen = node.seen
+        self._drop_jobs(node, f"node lost: {reason}", out)
+        self._to_probe(node, now, now + self.config.retry)
+        node.seen = False
+        node.figures["lost"] += 1
+        if was_seen:
+            out.append(NodeDown(node.id, reason))
+
+    def _fail(self, node: Node, now: float, text: str, code: int | None, out: list[Action]) -> None:
+        self._drop_jobs(node, f"bring-up failed: {text}", out)
+        node.phase = Phase.FAILED
+        node.probe_at = None
+        node.phase_deadline = now + self.config.failed_retry
+        node.last_problem = text
+        out.append(NodeProblem(node.id, text, code))
+
+    def _drop_jobs(self, node: Node, why: str, out: list[Action] | None) -> None:
+        jobs = list(node.jobs)
+        if node.current is not None:
+            jobs.insert(0, node.current)
+        node.jobs.clear()
+        node.current = node.transfer = None
+        node.sdo_deadline = None
+        for job in jobs:
+            if job.purpose is Purpose.USER and out is not None:
+                out.append(SdoDone(job.token, node.id, error=why))
+
+    def _configure(self, node: Node, now: float, out: list[Action]) -> None:
+        if self.config.nmt_master:
+            out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
+        node.phase = Phase.CONFIGURE
+        node.step = 0
+        node.reports = {}
+        self._next_step(node, now, out)
+
+    def _next_step(self, node: Node, now: float, out: list[Action]) -> None:
+        steps = node.config.steps
+        if node.step < len(steps):
+            s = steps[node.step]
+            node.jobs.appendleft(Job(Purpose.WRITE, s.index, s.subindex, s.data, step=node.step))
+            return
+        pending = [k for k in node.config.reports if k not in node.reports]
+        if pending:
+            node.jobs.appendleft(Job(Purpose.REPORT, *pending[0]))
+            return
+        out.append(Configured(node.id, dict(node.reports)))
+        node.phase = Phase.START
+        node.watch_heartbeat = True
+        if node.heard_at is None:
+            node.heard_at = now
+        if self.config.nmt_master:
+            out.append(Send(frames.encode_nmt(NmtCommand.START, node.id)))
+            node.phase_deadline = now + max(self._hb_timeout(node), self.config.boot_timeout)
+        if node.heard is NmtState.OPERATIONAL and not self.config.nmt_master:
+            self._online(node, out)
+
+    def _online(self, node: Node, out: list[Action]) -> None:
+        node.phase = Phase.ONLINE
+        node.phase_deadline = None
+        node.last_problem = None
+        out.append(NodeUp(node.id))
+
+    # ------------------------------------------------------------ SDO channel
+
+    def _start_job(self, node: Node, now: float, out: list[Action]) -> None:
+        job = node.jobs.popleft()
+        transfer = SdoClientTransfer(job.index, job.subindex, job.write)
+        node.current, node.transfer = job, transfer
+        node.sdo_deadline = now + self.config.sdo_timeout
+        out.append(Send(CanFrame(frames.sdo_rx_id(node.id), transfer.first())))
+
+    def _sdo_timeout(self, node: Node, now: float, out: list[Action]) -> None:
+        transfer = node.transfer
+        if transfer is None:
+            node.sdo_deadline = None
+            return
+        out.append(Send(CanFrame(frames.sdo_rx_id(node.id), transfer.timeout())))
+        node.figures["sdo_timeouts"] += 1
+        self._sdo_end(node, now, out)
+
+    def _on_sdo(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
+        transfer = node.transfer
+        if transfer is None:
+            return  # late answer to a transfer that timed out
+        reply = transfer.on_response(data)
+        if reply is not None:
+            out.append(Send(CanFrame(frames.sdo_rx_id(node.id), reply)))
+        if transfer.result is None:
+            node.sdo_deadline = now + self.config.sdo_timeout
+            return
+        self._sdo_end(node, now, out)
+
+    def _sdo_end(self, node: Node, now: float, out: list[Action]) -> None:
+        job, transfer = node.current, node.transfer
+        node.current = node.transfer = None
+        node.sdo_deadline = None
+        if job is None or transfer is None or transfer.result is None:
+            return
+        result = transfer.result
+        node.figures["sdo_transfers"] += 1
+        if result.abort_code is not None:
+            node.figures["sdo_aborts"] += 1
+        handler = {
+            Purpose.PROBE: self._probed,
+            Purpose.WRITE: self._written,
+            Purpose.VERIFY: self._verified,
+            Purpose.REPORT: self._reported,
+            Purpose.FAULT: self._fault_read,
+        }.get(job.purpose)
+        if handler is None:
+            out.append(SdoDone(job.token, node.id, result))
+            return
+        handler(node, now, job, result, out)
+
+    def _probed(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        if node.phase is not Phase.PROBE:
+            return
+        if not result.ok:
+            if result.by_server:  # it answers, but not 0x1000: no CANopen device we know
+                self._fail(node, now, f"device type 0x1000: {result.message}", None, out)
+            else:
+                node.probe_at = now + self.config.retry
+            return
+        if not node.seen:
+            node.seen = True
+            out.append(NodeSeen(node.id))
+        profile = node.config.device_profile
+        device_type = int.from_bytes(result.data, "little")
+        if profile is not None and device_type & 0xFFFF != profile:
+            text = (
+                f"device type 0x1000 is 0x{device_type:08X}: profile {device_type & 0xFFFF}, "
+                f"not CiA {profile}"
+            )
+            self._fail(node, now, text, None, out)
+            return
+        if (
+            self.config.nmt_master
+            and node.config.reset_if_operational
+            and node.heard is NmtState.OPERATIONAL
+            and not node.reset_done
+        ):
+            node.reset_done = True
+            node.phase = Phase.RESET
+            node.phase_deadline = now + self.config.boot_timeout
+            out.append(Send(frames.encode_nmt(NmtCommand.RESET_NODE, node.id)))
+            out.append(Report(node.id, "node was operational: NMT reset node sent"))
+            return
+        self._configure(node, now, out)
+
+    def _written(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        s = node.config.steps[job.step]
+        if not result.ok:
+            who = "refused" if result.by_server else "failed"
+            text = (
+                f"{s.what}: write of 0x{s.index:04X}:{s.subindex} = 0x{s.data[::-1].hex()} "
+                f"{who}: {result.message}"
+            )
+            self._fail(node, now, text, result.abort_code, out)
+            return
+        if s.index == 0x1017 and s.subindex == 0:
+            node.watch_heartbeat = True  # the producer runs from now on
+            node.heard_at = now
+        if s.read_back:
+            node.jobs.appendleft(Job(Purpose.VERIFY, s.index, s.subindex, step=job.step))
+            return
+        node.step += 1
+        self._next_step(node, now, out)
+
+    def _verified(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        s = node.config.steps[job.step]
+        if not result.ok:
+            text = f"{s.what}: read-back of 0x{s.index:04X}:{s.subindex} failed: {result.message}"
+            self._fail(node, now, text, result.abort_code, out)
+            return
+        wrote = int.from_bytes(s.data, "little") & s.mask
+        read = int.from_bytes(result.data, "little") & s.mask
+        if wrote != read:
+            text = (
+                f"{s.what}: 0x{s.index:04X}:{s.subindex} reads back 0x{read:X} after "
+                f"writing 0x{wrote:X}"
+            )
+            self._fail(node, now, text, None, out)
+            return
+        node.step += 1
+        self._next_step(node, now, out)
+
+    def _reported(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        node.reports[(job.index, job.subindex)] = result.data if result.ok else b""
+        self._next_step(node, now, out)
+
+    def _fault_read(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        if result.ok:
+            node.fault_reads[(job.index, job.subindex)] = result.data
+        node.fault_pending -= 1
+        if node.fault_pending <= 0:
+            out.append(FaultInfo(node.id, dict(node.fault_reads)))
+
+    # ------------------------------------------------------------ frames in
+
+    def _on_event(self, now: float, event: Event, out: list[Action]) -> None:
+        if isinstance(event, FrameIn):
+            self._on_frame(now, event.frame, out)
+        elif isinstance(event, BadFrame):
+            self.figures["bad_frames"] += 1
+        elif isinstance(event, BusErrorIn):
+            self.figures["bus_errors"] += 1
+            names = ", ".join(sorted(c.value for c in event.conditions))
+            out.append(Report(None, f"CAN bus: {names}"))
+        elif isinstance(event, LinkDown):
+            for node in self.nodes.values():
+                if node.phase is not Phase.PROBE or node.seen:
+                    self._lose(node, now, f"CAN link down: {event.reason}", out)
+        elif isinstance(event, TxFailed):
+            self.figures["tx_failures"] += 1
+
+    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> None:
+        try:
+            cob = frames.classify(frame.cob_id)
+        except CanOpenDecodeError:
+            self.figures["bad_frames"] += 1
+            return
+        node = self.nodes.get(cob.node_id)
+        if node is None:
+            return  # another node, or a broadcast (SYNC, NMT of another master)
+        kind = cob.kind
+        if kind is Kind.TPDO:
+            if cob.pdo == 1 and node.phase is Phase.ONLINE:
+                self._on_tpdo(node, now, frame.data, out)
+        elif kind is Kind.SDO_TX:
+            self._on_sdo(node, now, frame.data, out)
+        elif kind is Kind.HEARTBEAT:
+            self._on_heartbeat(node, now, frame.data, out)
+        elif kind is Kind.EMCY:
+            try:
+                emcy = frames.decode_emcy(frame.data, cob_id=frame.cob_id)
+            except CanOpenDecodeError as exc:
+                self.figures["bad_frames"] += 1
+                out.append(Report(node.id, f"bad EMCY: {exc}"))
+                return
+            node.figures["emcy_rx"] += 1
+            out.append(EmcyIn(node.id, emcy))
+
+    def _on_heartbeat(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
+        try:
+            state = frames.decode_heartbeat(data)
+        except CanOpenDecodeError:
+            self.figures["bad_frames"] += 1
+            return
+        node.figures["heartbeats_rx"] += 1
+        node.heard, node.heard_at = state, now
+        phase = node.phase
+        if state is NmtState.BOOTUP:
+            if phase is Phase.RESET:
+                self._to_probe(node, now, now)
+            elif phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
+                self._lose(node, now, "the node restarted (boot-up message)", out)
+                node.probe_at = now  # it is there: bring it up at once
+            return
+        if phase is Phase.START and state is NmtState.OPERATIONAL:
+            self._online(node, out)
+        elif phase is Phase.ONLINE and state is not NmtState.OPERATIONAL:
+            self._lose(node, now, f"the node left operational ({state.name.lower()})", out)
+
+    def _on_tpdo(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
+        fields_ = node.config.tpdo
+        try:
+            values = _unpack(fields_, data)
+        except CanOpenDecodeError:
+            node.figures["bad_pdos"] += 1
+            return
+        node.figures["tpdo_rx"] += 1
+        statusword = values[0]
+        if statusword != node.statusword:
+            try:
+                state: State | None = decode_state(statusword)
+            except CanOpenDecodeError:
+                state = None
+            previous = node.state
+            node.statusword, node.state = statusword, state
+            if state in FAULT_STATES and previous not in FAULT_STATES:
+                self._read_fault(node)
+        out.append(Inputs(node.id, statusword, values[1:]))
+
+    def _read_fault(self, node: Node) -> None:
+        node.fault_reads = {}
+        reads = node.config.fault_reads
+        node.fault_pending = len(reads)
+        for index, subindex in reads:
+            node.jobs.append(Job(Purpose.FAULT, index, subindex))
+
+    # ------------------------------------------------------------ diagnostics
+
+    def node_diagnostics(self, node_id: int) -> dict[str, object]:
+        node = self.nodes[node_id]
+        return {
+            "phase": node.phase.value,
+            "nmt_state": None if node.heard is None else node.heard.name.lower(),
+            "statusword": None if node.statusword is None else f"0x{node.statusword:04X}",
+            "cia402_state": None if node.state is None else node.state.value,
+            "problem": node.last_problem,
+            "sdo_queue": len(node.jobs) + (node.current is not None),
+            **node.figures,
+        }
+
+
+def _pack(field_: PdoField, value: int) -> bytes:
+    size = field_.size
+    bits = size * 8
+    if field_.signed:
+        low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    else:
+        low, high = 0, (1 << bits) - 1
+    return max(low, min(high, value)).to_bytes(size, "little", signed=field_.signed)
+
+
+def _unpack(fields_: Sequence[PdoField], data: bytes) -> tuple[int, ...]:
+    out: list[int] = []
+    offset = 0
+    for f in fields_:
+        size = f.size
+        if offset + size > len(data):
+            raise CanOpenDecodeError(f"TPDO of {len(data)} bytes, mapping needs more", data)
+        out.append(int.from_bytes(data[offset : offset + size], "little", signed=f.signed))
+        offset += size
+    return tuple(out)

@@ -1,0 +1,93 @@
+"""One node's state on the master: its bring-up phase, its SDO channel (one transfer in
+flight, CiA 301 §7.2.4: a server serves one client transfer at a time), its heartbeat
+watch and the last statusword."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from enum import Enum
+
+from adapters.canopen.cia402 import State
+from adapters.canopen.frames import NmtState, SdoClientTransfer
+from adapters.canopen.master.control import STOPPED, Want
+from adapters.canopen.master.events import NodeConfig
+
+
+class Phase(Enum):
+    """Where a node is in the bring-up (CiA 301 §7.3.2 boot-up, NMT start)."""
+
+    PROBE = "probe"  # asking 0x1000 by SDO until the node answers
+    RESET = "reset"  # NMT reset node sent: waiting for the boot-up message
+    CONFIGURE = "configure"  # SDO writes and read-backs of the bring-up
+    START = "start"  # NMT start sent: waiting for an operational heartbeat
+    ONLINE = "online"  # operational, PDOs exchanged
+    FAILED = "failed"  # the node refused the bring-up: retried after a long pause
+
+
+class Purpose(Enum):
+    """Why an SDO transfer runs."""
+
+    PROBE = "probe"
+    WRITE = "write"
+    VERIFY = "verify"
+    REPORT = "report"
+    FAULT = "fault"
+    USER = "user"  # a job of the adapter (parameter read or write)
+
+
+@dataclass(slots=True)
+class Job:
+    purpose: Purpose
+    index: int
+    subindex: int
+    write: bytes | None = None
+    token: int = 0
+    step: int = 0  # the bring-up step (WRITE, VERIFY)
+
+
+@dataclass(slots=True)
+class Node:
+    config: NodeConfig
+    phase: Phase = Phase.PROBE
+    seen: bool = False  # answered since it was last lost (NodeSeen sent)
+    phase_deadline: float | None = None
+    probe_at: float | None = 0.0
+    reset_done: bool = False
+    heard: NmtState | None = None  # the last NMT state its heartbeat or boot-up said
+    heard_at: float | None = None
+    watch_heartbeat: bool = False
+    jobs: deque[Job] = field(default_factory=deque)
+    current: Job | None = None
+    transfer: SdoClientTransfer | None = None
+    sdo_deadline: float | None = None
+    step: int = 0
+    reports: dict[tuple[int, int], bytes] = field(default_factory=dict)
+    fault_reads: dict[tuple[int, int], bytes] = field(default_factory=dict)
+    fault_pending: int = 0
+    statusword: int | None = None
+    state: State | None = None
+    want: Want = STOPPED
+    reset_until: float = 0.0
+    figures: dict[str, int] = field(
+        default_factory=lambda: {
+            "tpdo_rx": 0,
+            "rpdo_tx": 0,
+            "emcy_rx": 0,
+            "heartbeats_rx": 0,
+            "sdo_transfers": 0,
+            "sdo_aborts": 0,
+            "sdo_timeouts": 0,
+            "bad_pdos": 0,
+            "lost": 0,
+        }
+    )
+    last_problem: str | None = None
+
+    @property
+    def id(self) -> int:
+        return self.config.node_id
+
+    @property
+    def heartbeat_timeout(self) -> float:
+        return self.config.heartbeat_ms / 1000.0

@@ -1,0 +1,154 @@
+"""A drive's bring-up plan: the SDO writes the engine makes at every connect, built from
+the drive's config and its object dictionary (sizes from the EDS).
+
+CiA 301 §7.5.2.35-38 (PDO parameters) gives the order of a PDO re-mapping: disable the
+PDO (COB-ID bit 31), set the number of entries to 0, write the entries, set the number,
+then the transmission type, then enable the PDO. Each write is read back (a COB-ID on
+its valid bit and 11-bit id only). Then the heartbeats (0x1017 producer; 0x1016:1
+consumer of the gateway's heartbeat), the drive's reaction to a lost connection (0x6007),
+the quick stop option (0x605A), the mode (0x6060) and the ``startup_sdo`` writes.
+"""
+
+from __future__ import annotations
+
+import math
+
+from adapters.canopen import cia402, frames
+from adapters.canopen.frames import MappingEntry
+from adapters.canopen.master.control import VL_OPERATION_BITS
+from adapters.canopen.master.events import NodeConfig, PdoField, SdoStep
+from adapters.canopen.od import Dictionary, Variable, obj_name
+from adapters.canopen.options import BusOptions, DriveOptions, Mode
+
+COB_MASK = 0x800007FF  # valid bit and the 11-bit id (bits 29-30 are the node's)
+TRANSMISSION_SYNC = 1  # synchronous: every SYNC (CiA 301 table 70)
+TRANSMISSION_EVENT = 255  # event-driven (device profile), with the event timer
+
+
+def _field(var: Variable) -> PdoField:
+    return PdoField(MappingEntry(var.index, var.subindex, var.bits), var.signed)
+
+
+def _write(
+    eds: Dictionary, index: int, sub: int, value: int, what: str, *, mask: int = -1
+) -> SdoStep:
+    var = eds.variable(index, sub, why=what)
+    full = (1 << var.bits) - 1 if var.bits < 64 else (1 << 64) - 1
+    return SdoStep(index, sub, var.encode(value), what, mask & full)
+
+
+def _pdo_steps(
+    eds: Dictionary,
+    comm: int,
+    *,
+    mapping: int,
+    cob_id: int,
+    fields: tuple[PdoField, ...],
+    transmission: int,
+    event_timer_ms: int | None,
+) -> list[SdoStep]:
+    name = ("RPDO" if comm < 0x1800 else "TPDO") + str((comm & 0x1FF) + 1)
+    steps = [
+        _write(
+            eds,
+            comm,
+            1,
+            frames.PDO_COB_INVALID | cob_id,
+            f"{name} disabled for mapping",
+            mask=COB_MASK,
+        ),
+        _write(eds, mapping, 0, 0, f"{name} mapping cleared"),
+    ]
+    for i, f in enumerate(fields, start=1):
+        e = f.entry
+        what = f"{name} mapping {obj_name(mapping, i)} = {obj_name(e.index, e.subindex)}"
+        steps.append(_write(eds, mapping, i, e.encode(), what))
+    steps.append(_write(eds, mapping, 0, len(fields), f"{name} mapping of {len(fields)} objects"))
+    steps.append(_write(eds, comm, 2, transmission, f"{name} transmission type"))
+    if event_timer_ms is not None and eds.has(comm, 5):
+        steps.append(_write(eds, comm, 5, event_timer_ms, f"{name} event timer"))
+    steps.append(_write(eds, comm, 1, cob_id, f"{name} enabled", mask=COB_MASK))
+    return steps
+
+
+def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig:
+    """The engine's view of one drive (see the module docstring)."""
+    eds = opts.eds
+    sync = bus.sync_period > 0
+    steps = [_write(eds, 0x1017, 0, opts.heartbeat_ms, "producer heartbeat time 0x1017")]
+    if bus.heartbeat > 0 and opts.has_consumer_heartbeat:
+        consumer_ms = min(0xFFFF, math.ceil(bus.heartbeat * bus.heartbeat_factor))
+        steps.append(
+            _write(
+                eds,
+                0x1016,
+                1,
+                (bus.node_id << 16) | consumer_ms,
+                f"consumer heartbeat time 0x1016:1 (node {bus.node_id}, {consumer_ms} ms)",
+            )
+        )
+    rpdo = (_field(opts.controlword), _field(opts.target))
+    tpdo = (_field(opts.statusword), _field(opts.actual), *(_field(v) for v in opts.extras))
+    steps += _pdo_steps(
+        eds,
+        0x1400,
+        mapping=0x1600,
+        cob_id=frames.rpdo_id(1, node_id),
+        fields=rpdo,
+        transmission=TRANSMISSION_SYNC if sync else TRANSMISSION_EVENT,
+        event_timer_ms=None,
+    )
+    timer = None if sync else max(1, round(bus.pdo_period * 1000))
+    steps += _pdo_steps(
+        eds,
+        0x1800,
+        mapping=0x1A00,
+        cob_id=frames.tpdo_id(1, node_id),
+        fields=tpdo,
+        transmission=TRANSMISSION_SYNC if sync else TRANSMISSION_EVENT,
+        event_timer_ms=timer,
+    )
+    if opts.comm_loss_option is not None:
+        value = opts.comm_loss_option
+        text = cia402.abort_connection_option_text(value)
+        steps.append(
+            _write(
+                eds,
+                cia402.ABORT_CONNECTION_OPTION,
+                0,
+                value,
+                f"abort connection option 0x6007 ({text})",
+            )
+        )
+    if opts.quick_stop_option is not None:
+        value = opts.quick_stop_option
+        text = cia402.quick_stop_option_text(value)
+        steps.append(
+            _write(eds, cia402.QUICK_STOP_OPTION, 0, value, f"quick stop option 0x605A ({text})")
+        )
+    code = opts.mode.code
+    mode_text = f"modes of operation 0x6060 = {code} ({cia402.MODES_OF_OPERATION_TEXT[code]})"
+    steps.append(_write(eds, cia402.MODES_OF_OPERATION, 0, code, mode_text))
+    for w in opts.startup_sdo:
+        v = w.variable
+        steps.append(
+            SdoStep(
+                v.index,
+                v.subindex,
+                w.data,
+                f"startup_sdo {obj_name(v.index, v.subindex)} = {w.value}",
+            )
+        )
+    reports = ((cia402.QUICK_STOP_OPTION, 0),) if opts.has_quick_stop_option else ()
+    fault_reads = ((0x1001, 0),) + (((cia402.ERROR_CODE, 0),) if opts.has_error_code else ())
+    return NodeConfig(
+        node_id=node_id,
+        heartbeat_ms=opts.heartbeat_ms,
+        steps=tuple(steps),
+        rpdo=rpdo,
+        tpdo=tpdo,
+        reports=reports,
+        fault_reads=fault_reads,
+        reset_if_operational=opts.reset_if_operational,
+        mode_bits=VL_OPERATION_BITS if opts.mode is Mode.VELOCITY else 0,
+    )
