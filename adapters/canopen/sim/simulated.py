@@ -1,0 +1,87 @@
+"""A simulated CANopen line: the link factory the composition root gives the CANopen
+adapter for ``simulate = true`` (the production adapter never imports a simulator).
+
+The adapter opens its link on the configured in-process channel (``interface =
+"virtual"``); once it is open, :meth:`SimulatedBus.start` runs the bus's drives as
+simulated CiA 402 nodes (:class:`~adapters.canopen.sim.runner.SimRunner`) on the same
+channel, and :meth:`SimulatedBus.stop` ends them after the adapter has left the line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import Final
+
+from adapters.canopen.frames import CanFrame
+from adapters.canopen.link import CanLink, LinkConfig
+from adapters.canopen.options import BusOptions, DriveOptions
+from adapters.canopen.sim.node import BootState, SimNodeConfig
+from adapters.canopen.sim.runner import SimRunner
+from adapters.link.can import CanLinks
+from gateway.config import BusConfig
+
+SIM_START_BOUND: Final = 2.0  # s
+SIM_STOP_BOUND: Final = 5.0  # s
+
+
+def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
+    """The simulated node of each configured drive: its EDS, its ``sim_*`` keys, else what
+    the drive's config says it is."""
+    out = []
+    for d in bus.drives:
+        o: DriveOptions = d.options
+        s = o.sim
+        out.append(
+            SimNodeConfig(
+                node_id=d.address,
+                eds=o.eds_path,
+                max_rpm=s.max_rpm or o.max_rpm,
+                ramp_time=s.ramp_time,
+                boot_state=BootState.OPERATIONAL
+                if s.boot_operational
+                else BootState.PRE_OPERATIONAL,
+                rated_current=o.rated_current or 10.0,
+            )
+        )
+    return out
+
+
+class SimulatedBus(CanLinks[CanFrame]):
+    """The bus's drives simulated on its in-process channel (see the module docstring)."""
+
+    def __init__(self, bus: BusConfig) -> None:
+        options: BusOptions = bus.options
+        self.name = bus.name
+        self.config = LinkConfig(options.interface, options.channel, options.bitrate)
+        self.nodes = sim_configs(bus)
+        self.runner: SimRunner | None = None
+        """The simulated nodes while the line runs (tests inject faults through it)."""
+        self._task: asyncio.Task[None] | None = None
+
+    def link(self) -> CanLink:
+        return CanLink(self.config)
+
+    async def start(self) -> None:
+        runner = SimRunner("virtual", self.config.channel, self.nodes)
+        self.runner = runner
+        task = self._task = asyncio.create_task(runner.run(), name=f"canopen-sim-{self.name}")
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(SIM_START_BOUND):
+                await runner.started.wait()
+        if task.done():
+            task.result()  # raises what broke the simulator
+
+    async def stop(self) -> None:
+        task, self._task = self._task, None
+        if task is None:
+            return
+        if self.runner is not None:
+            self.runner.stop()
+        try:
+            async with asyncio.timeout(SIM_STOP_BOUND):
+                await asyncio.shield(task)
+        except TimeoutError:
+            task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task
