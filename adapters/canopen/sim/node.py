@@ -249,6 +249,9 @@ class SimNode:
         self._hb_node = 0
         self._sdo_queue: list[_Delayed] = []
         self._pdo_dirty = False
+        self.on_routes_changed: Callable[[], None] = _nothing
+        """Called when the COB-IDs the node listens to may have changed (the runner's
+        routing table)."""
         self._new_local()
 
     # ------------------------------------------------------------ construction
@@ -422,6 +425,15 @@ class SimNode:
             if self._pdo_dirty:
                 self._reload_pdos()
 
+    def wants(self, can_id: int) -> bool:
+        """Whether a frame with this COB-ID is for this node: NMT, SYNC, heartbeats (a
+        consumer watches them), and what the LocalNode subscribed (SDO, its PDOs)."""
+        return (
+            can_id in (COB_NMT, COB_SYNC)
+            or can_id & ~0x7F == HEARTBEAT_BASE
+            or can_id in self._port.subscribers
+        )
+
     def _dispatch(self, now: float, can_id: int, data: bytes) -> None:
         state = self.nmt_state
         if can_id == COB_NMT:
@@ -593,6 +605,7 @@ class SimNode:
     def _reload_pdos(self) -> None:
         """The PDO maps as 0x1400-0x1BFF now say (after a write or a boot)."""
         self._pdo_dirty = False
+        self.on_routes_changed()
         local = self.local
         for maps, rx in ((_maps(local.rpdo), True), (_maps(local.tpdo), False)):
             for number, pdo_map in maps.items():
@@ -693,6 +706,10 @@ class SimNode:
             if self.nmt_state is NmtState.STOPPED:
                 continue  # CiA 301 §7.2.7: no EMCY in stopped
             self.local.emcy.send(e.code, e.register)
+
+
+def _nothing() -> None:
+    return
 
 
 def _maps(pdo: PdoBase) -> Mapping[int, PdoMap]:
