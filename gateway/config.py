@@ -31,7 +31,7 @@ import stat
 import sys
 import tomllib
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any, TypeVar
@@ -123,6 +123,8 @@ class DriveConfig:
     on_command_timeout: StopAction = StopAction.RAMP_STOP
     on_shutdown: StopAction = StopAction.RAMP_STOP
     writable_params: frozenset[int] = frozenset()
+    writable_entries: frozenset[tuple[int, int]] = frozenset()
+    """``"0x2000:1"`` entries of writable_params: that subindex of the object only."""
     options: Any = None
 
 
@@ -317,11 +319,61 @@ def _drive(t: Table, bus: str, cls: Any) -> DriveConfig:
         command_timeout=command_timeout or None,
         on_command_timeout=t.enum("on_command_timeout", StopAction, StopAction.RAMP_STOP),
         on_shutdown=t.enum("on_shutdown", StopAction, StopAction.RAMP_STOP),
-        writable_params=frozenset(t.int_list("writable_params", (), minimum=0, maximum=65535)),
     )
-    from dataclasses import replace
-
+    numbers, entries = writable_params(t)
+    drive = replace(drive, writable_params=numbers, writable_entries=entries)
     return replace(drive, options=cls.parse_drive_options(t, drive))
+
+
+def parse_param_ref(text: str) -> tuple[int, int | None]:
+    """A parameter as a config or a command line gives it: ``100``, ``P0100``, ``0x6083``
+    (a CANopen object index, every subindex) or ``0x2000:1`` (that subindex only).
+    ValueError naming what is wrong."""
+    head, sep, tail = text.strip().partition(":")
+    digits = head[1:] if head[:1] in ("P", "p") else head
+    try:
+        number = int(head, 16) if head.lower().startswith("0x") else int(digits, 10)
+        subindex = int(tail, 0) if sep else None
+    except ValueError:
+        raise ValueError(f"{text!r} is not a parameter: 100, P0100, 0x6083 or 0x2000:1") from None
+    if not 0 <= number <= 65535:
+        raise ValueError(f"{text!r}: parameter number beyond 0..65535")
+    if subindex is not None and not 0 <= subindex <= 255:
+        raise ValueError(f"{text!r}: subindex beyond 0..255")
+    return number, subindex
+
+
+def writable_params(t: Table) -> tuple[frozenset[int], frozenset[tuple[int, int]]]:
+    """``writable_params``: numbers (ints, or strings ``"P0100"``, ``"0x6083"``: every
+    subindex) and entries (``"0x2000:1"``: that subindex only)."""
+    value = t.data.get("writable_params", [])
+    if "writable_params" not in t.data:
+        return frozenset(), frozenset()
+    t._read.add("writable_params")
+    if not isinstance(value, list):
+        raise t.error("writable_params", "must be an array of parameter numbers")
+    numbers: set[int] = set()
+    entries: set[tuple[int, int]] = set()
+    for i, item in enumerate(value):
+        key = f"writable_params[{i}]"
+        if isinstance(item, bool) or not isinstance(item, int | str):
+            raise t.error(
+                key, f"must be a parameter number or a string such as '0x2000:1', not {item!r}"
+            )
+        if isinstance(item, int):
+            if not 0 <= item <= 65535:
+                raise t.error(key, f"{item} is outside 0..65535")
+            numbers.add(item)
+            continue
+        try:
+            number, subindex = parse_param_ref(item)
+        except ValueError as exc:
+            raise t.error(key, str(exc)) from None
+        if subindex is None:
+            numbers.add(number)
+        else:
+            entries.add((number, subindex))
+    return frozenset(numbers), frozenset(entries)
 
 
 def _valid_id(value: Any) -> bool:

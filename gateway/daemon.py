@@ -162,6 +162,7 @@ def build_hub(config: Config, hub: Hub | None = None) -> Hub:
                 on_command_timeout=d.on_command_timeout,
                 on_shutdown=d.on_shutdown,
                 writable_params=d.writable_params,
+                writable_entries=d.writable_entries,
                 modbus_unit=d.modbus_unit,
             )
             hub.add_drive(state, policy)

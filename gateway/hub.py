@@ -76,7 +76,13 @@ class DrivePolicy:
     on_command_timeout: StopAction = StopAction.RAMP_STOP
     on_shutdown: StopAction = StopAction.RAMP_STOP
     writable_params: frozenset[int] = frozenset()
+    writable_entries: frozenset[tuple[int, int]] = frozenset()
+    """(number, subindex) pairs writable on their own (``"0x2000:1"``)."""
     modbus_unit: int | None = None
+
+    def writable(self, number: int, subindex: int = 0) -> bool:
+        """Rule 5: the config allows writes to this parameter (and subindex)."""
+        return number in self.writable_params or (number, subindex) in self.writable_entries
 
 
 _TRANSITION_FIELDS = frozenset({"comm", "status", "alarm", "alarm_code", "fault_code"})
@@ -625,10 +631,11 @@ class Hub:
         self, drive_id: str, number: int, value: ParamValue, subindex: int = 0
     ) -> None:
         drv = self._drive(drive_id)
-        if number not in drv.policy.writable_params:
+        if not drv.policy.writable(number, subindex):
             # Rule 5: writes only to the parameters the drive's config allows.
+            where = f"{number}.{subindex}" if subindex else f"{number}"
             raise ParameterNotWritable(
-                f"parameter {number} is not in writable_params of drive {drive_id}"
+                f"parameter {where} is not in writable_params of drive {drive_id}"
             )
         await self._param_service(drive_id).write_param(drive_id, number, subindex, value)
         self.event(drive_id, EventKind.PARAMETER, f"parameter {number}.{subindex} written: {value}")

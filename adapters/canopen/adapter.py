@@ -513,7 +513,8 @@ class CanOpenAdapter:
             line.update(link.diagnostics())
         drives: dict[str, Any] = {}
         for d in self.drives.values():
-            entry: dict[str, Any] = {
+            entry: dict[str, Any] = {} if engine is None else engine.node_diagnostics(d.node)
+            entry |= {
                 "node": d.node,
                 "eds": d.opts.eds.file,
                 "mode": d.opts.mode.value,
@@ -521,8 +522,6 @@ class CanOpenAdapter:
                 "problem": d.problem,
                 "quick_stop_option": d.quick_stop_option,
             }
-            if engine is not None:
-                entry.update(engine.node_diagnostics(d.node))
             drives[d.id] = entry
         line["drives"] = drives
         return line

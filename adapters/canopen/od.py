@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import configparser
 import logging
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -165,7 +166,9 @@ def load(path: Path, node_id: int) -> ObjectDictionary:
     if cached is not None:
         return cached
     try:
-        od = canopen.import_od(str(path), node_id)
+        with warnings.catch_warnings():  # the library's own logger.warn deprecation
+            warnings.simplefilter("ignore", DeprecationWarning)
+            od = canopen.import_od(str(path), node_id)
     except (configparser.Error, ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise EdsError(str(path), "", f"does not parse as an EDS/DCF: {reason}") from None

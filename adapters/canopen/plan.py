@@ -61,7 +61,7 @@ def _pdo_steps(
     ]
     for i, f in enumerate(fields, start=1):
         e = f.entry
-        what = f"{name} mapping {obj_name(mapping, i)} = {obj_name(e.index, e.subindex)}"
+        what = f"{name} mapping {obj_name(mapping, i)} = {obj_name(e.index, e.subindex or None)}"
         steps.append(_write(eds, mapping, i, e.encode(), what))
     steps.append(_write(eds, mapping, 0, len(fields), f"{name} mapping of {len(fields)} objects"))
     steps.append(_write(eds, comm, 2, transmission, f"{name} transmission type"))

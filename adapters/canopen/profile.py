@@ -21,7 +21,8 @@ MOVING_RPM = 1.0  # |speed| above which a drive that is not enabled is still sto
 
 
 def speed_ref_rpm(desired: DesiredCommand, opts: DriveOptions) -> float:
-    """The signed speed reference the command asks for, in rpm, within +-max_rpm."""
+    """The signed speed reference the command asks for, in rpm, within +-max_rpm: reverse
+    when the direction is reverse or the speed negative, not both (as on every bus)."""
     if desired.speed_rpm is not None:
         rpm = abs(desired.speed_rpm)
     elif desired.speed_pct is not None:
@@ -29,7 +30,8 @@ def speed_ref_rpm(desired: DesiredCommand, opts: DriveOptions) -> float:
     else:
         rpm = 0.0
     rpm = min(rpm, opts.max_rpm)
-    return -rpm if desired.direction is Direction.REVERSE else rpm
+    negative = (desired.speed_rpm or 0.0) < 0 or (desired.speed_pct or 0.0) < 0
+    return -rpm if (desired.direction is Direction.REVERSE) != negative else rpm
 
 
 def want(desired: DesiredCommand, opts: DriveOptions) -> Want:
@@ -77,7 +79,7 @@ def readings(
     elif speed_rpm < -MOVING_RPM:
         direction = Direction.REVERSE
     else:
-        direction = desired.direction
+        direction = Direction.REVERSE if ref < 0 else Direction.FORWARD
     faulted = state in (State.FAULT, State.FAULT_REACTION_ACTIVE)
     out: Readings = {
         "status": status_of(state, speed_rpm),

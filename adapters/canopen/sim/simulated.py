@@ -4,7 +4,8 @@ adapter for ``simulate = true`` (the production adapter never imports a simulato
 The adapter opens its link on the configured in-process channel (``interface =
 "virtual"``); once it is open, :meth:`SimulatedBus.start` runs the bus's drives as
 simulated CiA 402 nodes (:class:`~adapters.canopen.sim.runner.SimRunner`) on the same
-channel, and :meth:`SimulatedBus.stop` ends them after the adapter has left the line.
+channel, each with the drive's own EDS, and :meth:`SimulatedBus.stop` ends them after the
+adapter has left the line.
 """
 
 from __future__ import annotations
@@ -22,12 +23,11 @@ from adapters.link.can import CanLinks
 from gateway.config import BusConfig
 
 SIM_START_BOUND: Final = 2.0  # s
-SIM_STOP_BOUND: Final = 5.0  # s
 
 
 def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
-    """The simulated node of each configured drive: its EDS, its ``sim_*`` keys, else what
-    the drive's config says it is."""
+    """The simulated node of each configured drive (its ``sim_*`` keys, else what the
+    drive's config says it is)."""
     out = []
     for d in bus.drives:
         o: DriveOptions = d.options
@@ -41,7 +41,7 @@ def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
                 boot_state=BootState.OPERATIONAL
                 if s.boot_operational
                 else BootState.PRE_OPERATIONAL,
-                rated_current=o.rated_current or 10.0,
+                rated_current=o.rated_current or SimNodeConfig.rated_current,
             )
         )
     return out
@@ -50,11 +50,11 @@ def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
 class SimulatedBus(CanLinks[CanFrame]):
     """The bus's drives simulated on its in-process channel (see the module docstring)."""
 
-    def __init__(self, bus: BusConfig) -> None:
+    def __init__(self, bus: BusConfig, nodes: list[SimNodeConfig] | None = None) -> None:
         options: BusOptions = bus.options
         self.name = bus.name
         self.config = LinkConfig(options.interface, options.channel, options.bitrate)
-        self.nodes = sim_configs(bus)
+        self.nodes = sim_configs(bus) if nodes is None else nodes
         self.runner: SimRunner | None = None
         """The simulated nodes while the line runs (tests inject faults through it)."""
         self._task: asyncio.Task[None] | None = None
@@ -78,10 +78,10 @@ class SimulatedBus(CanLinks[CanFrame]):
             return
         if self.runner is not None:
             self.runner.stop()
-        try:
-            async with asyncio.timeout(SIM_STOP_BOUND):
+        with contextlib.suppress(TimeoutError, asyncio.CancelledError, Exception):
+            async with asyncio.timeout(SIM_START_BOUND):
                 await asyncio.shield(task)
-        except TimeoutError:
+        if not task.done():
             task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await task
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task

@@ -1,0 +1,151 @@
+"""The CANopen adapter against simulated CiA 402 drives on python-can ``virtual``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from adapters.canopen.cia402 import State
+from adapters.canopen.frames import NmtState
+from adapters.canopen.sim.node import SimNodeConfig
+from gateway.errors import CommandRejected, DriveOffline, ParameterError, ParameterNotWritable
+from gateway.model import CommState, Direction, DriveCommand, DriveState, DriveStatus, Source
+from tests.canopen.integration.conftest import EDS, drive, rig
+
+
+def online(s: DriveState) -> bool:
+    return s.comm is CommState.ONLINE
+
+
+async def test_two_drives_come_online_and_run() -> None:
+    async with rig([drive(5), drive(6, mode="profile_velocity")]) as r:
+        for d in ("d5", "d6"):
+            state = await r.wait(d, online)
+            assert state.status is DriveStatus.READY
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=900.0))
+        state = await r.wait(
+            "d5", lambda s: s.running and s.speed_rpm is not None and s.speed_rpm > 890
+        )
+        assert state.status is DriveStatus.RUNNING
+        assert state.direction is Direction.FORWARD
+        assert r.sim.node(5).drive.motor.speed > 0
+        r.hub.submit("d6", Source.MODBUS, DriveCommand(run=True, speed_rpm=-600.0))
+        state = await r.wait("d6", lambda s: s.speed_rpm is not None and s.speed_rpm < -590)
+        assert state.direction is Direction.REVERSE
+
+
+async def test_quick_stop_is_honoured_and_released_without_a_restart() -> None:
+    async with rig([drive(5, quick_stop_option=6)]) as r:
+        ev = await r.event(lambda e: e.kind.value == "config" and "0x605A = 6" in e.text)
+        assert "stay in quick stop active" in ev.text
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=900.0))
+        await r.wait("d5", lambda s: s.speed_rpm is not None and s.speed_rpm > 890)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(quick_stop=True))
+        await r.until(lambda: r.sim.node(5).drive.state is State.QUICK_STOP_ACTIVE)
+        state = await r.wait("d5", lambda s: s.speed_rpm == 0.0)
+        assert state.status is DriveStatus.STOPPING  # held in quick stop active (option 6)
+        assert not r.hub.desired("d5").run
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(quick_stop=False))
+        # released through Disable voltage (transition 12), never straight back to operation
+        state = await r.wait("d5", lambda s: s.status is DriveStatus.READY)
+        assert r.sim.node(5).drive.state is not State.OPERATION_ENABLED
+
+
+async def test_fault_reads_code_and_reset_is_one_edge() -> None:
+    async with rig([drive(5)]) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+        await r.wait("d5", lambda s: s.running)
+        r.sim.node(5).inject_fault(0x2310)
+        state = await r.wait("d5", lambda s: s.status is DriveStatus.FAULTED)
+        ev = await r.event(lambda e: e.text.startswith("EMCY 0x2310"))
+        assert "continuous over current" in ev.text
+        await r.event(lambda e: e.text.startswith("fault read: 0x603F = 0x2310"))
+        state = await r.wait("d5", lambda s: s.fault_code == 0x2310)
+        assert state.fault_text == "continuous over current"
+        assert not r.hub.desired("d5").run
+        with pytest.raises(CommandRejected):
+            r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True))
+        resets = r.sim.node(5).drive
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(fault_reset=True))
+        await r.event(lambda e: e.text.startswith("fault reset sent"))
+        state = await r.wait("d5", lambda s: s.status is DriveStatus.READY)
+        assert state.fault_code is None and not state.running
+        assert resets.state is not State.FAULT
+        # the reset bit went back to 0 and stays there: no second edge on its own
+        await r.until(lambda: not r.sim.node(5).drive.controlword & 0x80)
+        r.sim.node(5).inject_fault(0x4310)
+        await r.wait("d5", lambda s: s.status is DriveStatus.FAULTED and s.fault_code == 0x4310)
+        for _ in range(10):
+            await r.sim.until(lambda: True)
+        assert r.sim.node(5).drive.state is State.FAULT
+
+
+async def test_heartbeat_loss_takes_the_drive_offline_and_it_returns_stopped() -> None:
+    async with rig([drive(5, comm_loss_option=3)]) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+        await r.wait("d5", lambda s: s.running and s.speed_rpm is not None and s.speed_rpm > 590)
+        r.sim.node(5).silence(True)
+        state = await r.wait("d5", lambda s: s.comm is CommState.OFFLINE)
+        ev = await r.event(lambda e: e.text.startswith("drive offline: no heartbeat"))
+        assert ev.kind.value == "comm"
+        r.sim.node(5).silence(False)
+        state = await r.wait("d5", online, within=10)
+        assert not r.hub.desired("d5").run  # the hub cleared the run: rule 1
+        await r.event(lambda e: "run command cleared" in e.text)
+        state = await r.wait("d5", lambda s: s.status is DriveStatus.READY and s.speed_rpm == 0)
+        assert not state.running
+        assert r.sim.node(5).drive.state is not State.OPERATION_ENABLED
+
+
+async def test_parameters_by_sdo_with_abort_texts() -> None:
+    async with rig([drive(5, writable_params=["0x605A", "0x2000:4"])]) as r:
+        await r.wait("d5", online)
+        assert await r.hub.read_param("d5", 0x6046, 2) == 1800
+        await r.hub.write_param("d5", 0x605A, 1, 0)
+        assert await r.hub.read_param("d5", 0x605A, 0) == 1
+        with pytest.raises(ParameterError) as info:
+            await r.hub.write_param("d5", 0x605A, 3, 0)  # the simulator implements 0, 1, 2, 5, 6
+        assert str(info.value.text).startswith("0x06090030 value range of parameter exceeded")
+        assert info.value.code == 0x06090030
+        assert await r.hub.read_param("d5", 0x605A, 0) == 1  # nothing changed
+        with pytest.raises(ParameterError) as info:
+            await r.hub.read_param("d5", 0x6099, 0)
+        assert "0x06020000 object does not exist" in str(info.value)
+        with pytest.raises(ParameterNotWritable):
+            await r.hub.write_param("d5", 0x2000, 1, 3)  # only 0x2000:4 of 0x2000
+        await r.hub.write_param("d5", 0x2000, 1800, 4)
+
+
+@pytest.fixture
+def drive_eds(tmp_path: Path) -> Path:
+    """The drive's own dictionary: 0x6078 is not mappable there."""
+    text = Path(EDS).read_text()
+    section = text.index("[6078]")
+    end = text.index("[", section + 1)
+    drive_eds = tmp_path / "drive.eds"
+    drive_eds.write_text(
+        text[:section] + text[section:end].replace("PDOMapping=1", "PDOMapping=0") + text[end:]
+    )
+    return drive_eds
+
+
+async def test_a_pdo_mapping_the_node_refuses(drive_eds: Path) -> None:
+    """The gateway's EDS says 0x6078 maps; the drive's own dictionary says it does not."""
+    sims = [SimNodeConfig(node_id=5, eds=drive_eds, ramp_time=0.2)]
+    async with rig([drive(5)], sims=sims) as r:
+        ev = await r.event(lambda e: e.text.startswith("not configured"))
+        assert ev.text == (
+            "not configured: node 5: TPDO1 mapping 0x1A00:3 = 0x6078: write of 0x1A00:3 = "
+            "0x60780010 refused: 0x06040041 object cannot be mapped to the PDO; the drive is "
+            "not started"
+        )
+        assert ev.data["abort_code"] == 0x06040041
+        assert r.hub.state("d5").comm is CommState.OFFLINE
+        assert r.sim.node(5).nmt_state is NmtState.PRE_OPERATIONAL  # never started
+        with pytest.raises(DriveOffline):
+            await r.hub.read_param("d5", 0x6041, 0)
+        assert r.adapter.diagnostics()["drives"]["d5"]["problem"] == ev.text
