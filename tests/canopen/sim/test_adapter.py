@@ -1,6 +1,6 @@
-"""The gateway's CANopen adapter against the simulator: in-process on ``virtual`` (the
-daemon's ``simulate = true`` line, :class:`SimulatedBus`) and, under the ``vcan`` marker,
-against ``drive-gateway sim canopen`` in a process of its own on vcan0."""
+"""The gateway's CANopen adapter against the simulator in-process on ``virtual`` (the
+daemon's ``simulate = true`` line, :class:`SimulatedBus`); the same against
+``drive-gateway sim canopen`` in a process of its own is in test_vcan.py."""
 
 from __future__ import annotations
 
@@ -11,8 +11,6 @@ from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Any
 
-import pytest
-
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.cia402 import State
 from adapters.canopen.sim.simulated import SimulatedBus
@@ -20,7 +18,6 @@ from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState, Direction, DriveCommand, DriveState, Source
-from tests.canopen.sim.test_vcan import SIM_STOP_BOUND, VCAN, sim_process, vcan_problem
 from tests.support.timing import scaled
 
 Z = Source.ZENOH
@@ -53,7 +50,11 @@ class Rig:
 
 @contextlib.asynccontextmanager
 async def rig(
-    drives: list[dict[str, Any]], *, interface: str = "virtual", channel: str | None = None
+    drives: list[dict[str, Any]],
+    *,
+    interface: str = "virtual",
+    channel: str | None = None,
+    bus: dict[str, Any] | None = None,
 ) -> AsyncIterator[Rig]:
     simulate = interface == "virtual"
     table = {
@@ -61,6 +62,7 @@ async def rig(
         "interface": interface,
         "channel": channel or f"co-{uuid.uuid4().hex[:8]}",
         "simulate": simulate,
+        **(bus or {}),
         "drives": drives,
     }
     config = parse(
@@ -125,23 +127,3 @@ async def test_a_pulled_cable_takes_the_drive_offline_and_it_comes_back_stopped(
         sim.silence(False)
         back = await r.wait("d5", lambda s: online(s) and not s.running, within=10.0)
         assert back.speed_rpm == 0.0
-
-
-@pytest.mark.vcan
-async def test_the_adapter_and_a_simulator_process_share_vcan0() -> None:
-    problem = vcan_problem()
-    if problem is not None:
-        pytest.skip(problem)
-    args = ("--node", "31", "--ramp-time", "0.3")
-    async with (
-        sim_process(*args) as proc,
-        rig([drive(31)], interface="socketcan", channel=VCAN) as r,
-    ):
-        await r.wait("d31", online, within=15.0)
-        r.hub.submit("d31", Z, DriveCommand(run=True, speed_rpm=900.0))
-        await r.wait("d31", lambda s: s.running and s.speed_rpm == 900.0)
-        r.hub.submit("d31", Z, DriveCommand(run=False))
-        await r.wait("d31", lambda s: not s.running and s.speed_rpm == 0.0)
-        proc.terminate()
-        assert await asyncio.wait_for(proc.wait(), scaled(SIM_STOP_BOUND)) == 0
-        await r.wait("d31", lambda s: s.comm is CommState.OFFLINE, within=10.0)
