@@ -221,7 +221,7 @@ def test_the_fieldbus_libraries_are_the_shared_link_layers() -> None:
     """One link per medium: pyserial and python-can are imported by adapters.link, and by a
     bus's own link module only for its settings (8E1, the CAN frame it carries). The CANopen
     simulator is the exception: a device built on the canopen library's LocalNode (issue 22)
-    with its own network, never the gateway's link."""
+    on a python-can bus of its own, never the gateway's link."""
     own_links = [f"{pkg}.link" for pkg in CODEC_NAMES]
     library_devices = ("adapters.canopen.sim",)
 

@@ -66,6 +66,7 @@ from adapters.canopen.frames import (
 from adapters.canopen.sim.drive import Cia402Drive, CommLoss, DriveConfig, Emcy, Mode
 from gateway.config import shipped_file
 from gateway.errors import GatewayError
+from gateway.sim import FaultInjector
 
 log = logging.getLogger(__name__)
 
@@ -124,11 +125,11 @@ class SimNodeConfig:
 
 @dataclass
 class Injection:
-    """What a test asks the node to suffer (besides a fault code and power)."""
+    """What a test asks the node to suffer besides the shared :class:`FaultInjector`
+    (whose ``delay`` makes SDO answers late and ``drop_rate`` loses frames sent)."""
 
     silent: bool = False  # a pulled cable: no frame in, no frame out
     refuse_sdo: bool = False  # SDO requests go unanswered (the client times out)
-    sdo_delay: float = 0.0  # s before an SDO request is served
 
 
 class _Periodic(canopen.network.PeriodicMessageTask):
@@ -159,7 +160,8 @@ class _Port(canopen.Network):
         self.real = real
 
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        if self.node.powered and not self.node.injection.silent:
+        node = self.node
+        if node.powered and not node.injection.silent and not node.faults.drop():
             try:
                 self.real.send_message(can_id, data, remote)
             except can.CanError as exc:
@@ -232,6 +234,7 @@ class SimNode:
         self.lock = threading.RLock()
         self.network = network
         self.injection = Injection()
+        self.faults = FaultInjector()
         self.powered = False
         self.now = clock()
         self.sent = 0
@@ -249,6 +252,9 @@ class SimNode:
         self._hb_node = 0
         self._sdo_queue: list[_Delayed] = []
         self._pdo_dirty = False
+        self.on_routes_changed: Callable[[], None] = _nothing
+        """Called when the COB-IDs the node listens to may have changed (the runner's
+        routing table)."""
         self._new_local()
 
     # ------------------------------------------------------------ construction
@@ -403,7 +409,14 @@ class SimNode:
 
     def delay_sdo(self, delay: float) -> None:
         with self.lock:
-            self.injection.sdo_delay = max(0.0, delay)
+            self.faults.delay = max(0.0, delay)
+
+    def drop_frames(self, rate: float, seed: int = 0) -> None:
+        """Lose this share of the frames the node sends (deterministic for a seed)."""
+        with self.lock:
+            self.faults = FaultInjector(
+                seed=seed, drop_rate=max(0.0, min(rate, 1.0)), delay=self.faults.delay
+            )
 
     def _tick(self) -> float:
         self.now = max(self.now, self.clock())
@@ -421,6 +434,15 @@ class SimNode:
             self._dispatch(now, can_id, bytes(data))
             if self._pdo_dirty:
                 self._reload_pdos()
+
+    def wants(self, can_id: int) -> bool:
+        """Whether a frame with this COB-ID is for this node: NMT, SYNC, heartbeats (a
+        consumer watches them), and what the LocalNode subscribed (SDO, its PDOs)."""
+        return (
+            can_id in (COB_NMT, COB_SYNC)
+            or can_id & ~0x7F == HEARTBEAT_BASE
+            or can_id in self._port.subscribers
+        )
 
     def _dispatch(self, now: float, can_id: int, data: bytes) -> None:
         state = self.nmt_state
@@ -440,8 +462,8 @@ class SimNode:
         if can_id == sdo_rx_id(self.node_id):
             if self.injection.refuse_sdo:
                 return
-            if self.injection.sdo_delay > 0:
-                self._sdo_queue.append(_Delayed(now + self.injection.sdo_delay, data))
+            if self.faults.delay > 0:
+                self._sdo_queue.append(_Delayed(now + self.faults.delay, data))
                 return
         elif state is not NmtState.OPERATIONAL:
             return  # PDOs only in operational
@@ -514,21 +536,8 @@ class SimNode:
 
     def _on_read(self, *, index: int, subindex: int, od: ODVariable) -> int | None:
         self._check_sub(index, subindex)
-        d = self.drive
-        live: dict[tuple[int, int], Callable[[], int]] = {
-            (cia402.STATUSWORD, 0): lambda: d.statusword,
-            (cia402.ERROR_CODE, 0): lambda: d.error_code,
-            (0x1001, 0): lambda: d.error_register,
-            (cia402.VL_VELOCITY_ACTUAL, 0): lambda: _clamp16(d.velocity_actual),
-            (cia402.VL_VELOCITY_DEMAND, 0): lambda: _clamp16(d.velocity_demand),
-            (cia402.VELOCITY_ACTUAL, 0): lambda: d.velocity_actual,
-            (cia402.TORQUE_ACTUAL, 0): lambda: d.torque_permille,
-            (cia402.CURRENT_ACTUAL, 0): lambda: d.current_permille,
-            (cia402.MODES_OF_OPERATION_DISPLAY, 0): lambda: int(d.mode),
-            (0x2000, 3): lambda: d.last_fault,
-        }
-        get = live.get((index, subindex))
-        return None if get is None else get()
+        get = _LIVE.get((index, subindex))
+        return None if get is None else get(self.drive)
 
     def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         """Checks a write before the library stores it (raising an SDO abort refuses it)
@@ -593,6 +602,7 @@ class SimNode:
     def _reload_pdos(self) -> None:
         """The PDO maps as 0x1400-0x1BFF now say (after a write or a boot)."""
         self._pdo_dirty = False
+        self.on_routes_changed()
         local = self.local
         for maps, rx in ((_maps(local.rpdo), True), (_maps(local.tpdo), False)):
             for number, pdo_map in maps.items():
@@ -695,6 +705,10 @@ class SimNode:
             self.local.emcy.send(e.code, e.register)
 
 
+def _nothing() -> None:
+    return
+
+
 def _maps(pdo: PdoBase) -> Mapping[int, PdoMap]:
     return pdo.map if pdo.map is not None else {}
 
@@ -733,6 +747,20 @@ def _set_mode(drive: Cia402Drive, value: int) -> list[Emcy] | None:
 def _set_controlword(drive: Cia402Drive, value: int) -> list[Emcy] | None:
     return drive.set_controlword(drive.last, value)
 
+
+_LIVE: dict[tuple[int, int], Callable[[Cia402Drive], int]] = {
+    # objects read from the drive model as it is now (SDO upload, TPDO)
+    (cia402.STATUSWORD, 0): lambda d: d.statusword,
+    (cia402.ERROR_CODE, 0): lambda d: d.error_code,
+    (0x1001, 0): lambda d: d.error_register,
+    (cia402.VL_VELOCITY_ACTUAL, 0): lambda d: _clamp16(d.velocity_actual),
+    (cia402.VL_VELOCITY_DEMAND, 0): lambda d: _clamp16(d.velocity_demand),
+    (cia402.VELOCITY_ACTUAL, 0): lambda d: d.velocity_actual,
+    (cia402.TORQUE_ACTUAL, 0): lambda d: d.torque_permille,
+    (cia402.CURRENT_ACTUAL, 0): lambda d: d.current_permille,
+    (cia402.MODES_OF_OPERATION_DISPLAY, 0): lambda d: int(d.mode),
+    (0x2000, 3): lambda d: d.last_fault,
+}
 
 _INPUTS: dict[tuple[int, int], Callable[[Cia402Drive, int], list[Emcy] | None]] = {
     (cia402.CONTROLWORD, 0): _set_controlword,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -30,14 +31,30 @@ NOTIFIER_TIMEOUT = 0.05  # s: the notifier thread's read timeout (how fast it st
 
 
 class _SimNetwork(canopen.Network):
-    """The shared network: every frame goes to every node (each filters its own)."""
+    """The shared network: a frame goes to the nodes that listen to its COB-ID (a table
+    built on demand, dropped whenever a node's PDO configuration changes)."""
 
     def __init__(self, bus: can.BusABC, runner: SimRunner) -> None:
         super().__init__(bus)
         self.runner = runner
+        self._routes: dict[int, list[SimNode]] = {}
+        self._routes_lock = threading.Lock()
+
+    def routes_changed(self) -> None:
+        with self._routes_lock:
+            self._routes = {}
+
+    def _targets(self, can_id: int) -> list[SimNode]:
+        with self._routes_lock:
+            routes = self._routes
+            found = routes.get(can_id)
+            if found is None:
+                found = [n for n in self.runner.nodes.values() if n.wants(can_id)]
+                routes[can_id] = found
+            return found
 
     def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        for node in self.runner.nodes.values():
+        for node in self._targets(can_id):
             try:
                 node.on_frame(can_id, bytes(data))
             except Exception:  # a broken node must not stop the others
@@ -102,7 +119,9 @@ class SimRunner:
         network = _SimNetwork(bus, self)
         try:
             for cfg in self.configs.values():
-                self.nodes[cfg.node_id] = SimNode(cfg, network, clock=self.clock)
+                node = SimNode(cfg, network, clock=self.clock)
+                node.on_routes_changed = network.routes_changed
+                self.nodes[cfg.node_id] = node
             network.notifier = can.Notifier(bus, network.listeners, NOTIFIER_TIMEOUT)
             self.network = network
             if self.powered:

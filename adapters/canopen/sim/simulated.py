@@ -23,6 +23,7 @@ from adapters.link.can import CanLinks
 from gateway.config import BusConfig
 
 SIM_START_BOUND: Final = 2.0  # s
+SIM_DEFAULT_RATED_CURRENT: Final = 10.0  # A, for a drive whose config and EDS give none
 
 
 def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
@@ -41,6 +42,7 @@ def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
                 boot_state=BootState.OPERATIONAL
                 if s.boot_operational
                 else BootState.PRE_OPERATIONAL,
+                rated_current=o.rated_current or SIM_DEFAULT_RATED_CURRENT,
             )
         )
     return out

@@ -1,6 +1,7 @@
 """``drive-gateway sim canopen`` as a process of its own on SocketCAN vcan0, against the
-canopen library's client in this process: two processes on one kernel bus, which
-``virtual`` cannot give. Marked ``vcan``: ``make test-vcan`` runs them (tests/vcan_vm)."""
+canopen library's client and against the gateway's CANopen adapter in this process: two
+processes on one kernel bus, which ``virtual`` cannot give. Marked ``vcan``: ``make
+test-vcan`` runs them (tests/vcan_vm)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,10 @@ from pathlib import Path
 import pytest
 
 from adapters.canopen.cia402 import State, decode_state
+from gateway.model import CommState, DriveCommand
+from tests.canopen.integration.conftest import FAST_BUS, drive
 from tests.canopen.sim.conftest import Client
+from tests.canopen.sim.test_adapter import Z, online, rig
 from tests.support.timing import scaled
 
 pytestmark = pytest.mark.vcan
@@ -100,3 +104,23 @@ async def test_the_simulator_process_answers_the_canopen_client(vcan_client: Cli
         assert c.seen(0x196) == []  # node 22 stays pre-operational: no PDO
         proc.terminate()
         assert await asyncio.wait_for(proc.wait(), scaled(SIM_STOP_BOUND)) == 0
+
+
+async def test_the_adapter_and_a_simulator_process_share_vcan0() -> None:
+    """The gateway's adapter brings up a node of another process, runs and stops it, and
+    takes it offline when that process ends (timings scaled: tests/support/timing.py)."""
+    problem = vcan_problem()
+    if problem is not None:
+        pytest.skip(problem)
+    async with (
+        sim_process("--node", "31", "--ramp-time", "0.3") as proc,
+        rig([drive(31)], interface="socketcan", channel=VCAN, bus=FAST_BUS) as r,
+    ):
+        await r.wait("d31", online, within=15.0)
+        r.hub.submit("d31", Z, DriveCommand(run=True, speed_rpm=900.0))
+        await r.wait("d31", lambda s: s.running and s.speed_rpm == 900.0)
+        r.hub.submit("d31", Z, DriveCommand(run=False))
+        await r.wait("d31", lambda s: not s.running and s.speed_rpm == 0.0)
+        proc.terminate()
+        assert await asyncio.wait_for(proc.wait(), scaled(SIM_STOP_BOUND)) == 0
+        await r.wait("d31", lambda s: s.comm is CommState.OFFLINE, within=10.0)

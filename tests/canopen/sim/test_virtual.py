@@ -346,3 +346,13 @@ async def test_two_nodes_one_bus(rig: Rig) -> None:
 
 def test_controlword_helper_matches_vl_run() -> None:
     assert controlword(DeviceCommand.ENABLE_OPERATION, extra=VL_RUN) == 0x7F
+
+
+async def test_dropped_frames_are_lost_deterministically(rig: Rig) -> None:
+    c, node = rig.client, rig.client.remote(NODE)
+    sim = rig.runner.node(NODE)
+    sim.drop_frames(1.0)
+    with pytest.raises(SdoCommunicationError):
+        await c.call(lambda: node.sdo[0x1000].raw)
+    sim.drop_frames(0.0)
+    assert await c.call(lambda: node.sdo[0x1000].raw) == 0x00010192
