@@ -432,10 +432,15 @@ def test_fault_reads_and_one_reset_pulse() -> None:
     line.run(1.0)
     words = node.controlwords[before:]
     with_bit = [w & 0x80 for w in words]
-    # one run of set bits, at least two RPDOs long, then never again
+    # one run of set bits, then never again
     runs = [k for k, _ in itertools.groupby(with_bit)]
     assert runs == [0x80, 0]
-    assert with_bit.count(0x80) >= 2
+    # the bit is in force across at least two SYNCs (a synchronous RPDO acts on the next)
+    rpdo = [(i, fr) for i, fr in enumerate(line.sent) if fr.cob_id == 0x205]
+    set_at = next(i for i, fr in rpdo if fr.data[0] & 0x80)
+    clear_at = next(i for i, fr in rpdo if i > set_at and not fr.data[0] & 0x80)
+    syncs = [fr for fr in line.sent[set_at:clear_at] if fr == f.encode_sync()]
+    assert len(syncs) >= 2
     assert node.state is State.SWITCHED_ON  # reset, then stepped to switched on (no run)
     assert RESET_PULSE_CYCLES >= 2
 
@@ -511,3 +516,14 @@ def test_leave_sends_the_last_rpdo_and_pre_operational() -> None:
     assert frames_[1].data == bytes((f.NmtCommand.ENTER_PRE_OPERATIONAL, 5))
     assert line.master.step(line.now + 1) == []
     assert Phase.ONLINE is line.master.nodes[5].phase
+
+
+def test_an_unchanged_rpdo_is_sent_on_change_and_refreshed() -> None:
+    line, node = up()
+    start = len([fr for fr in line.sent if fr.cob_id == 0x205])
+    line.run(0.5)  # 50 cycles, nothing changes
+    steady = len([fr for fr in line.sent if fr.cob_id == 0x205]) - start
+    assert 4 <= steady <= 6  # refreshed every RPDO_REFRESH (0.1 s), not every cycle
+    line.master.set_want(5, Want(run=True, target=10))
+    line.run(0.05)
+    assert node.state is State.OPERATION_ENABLED  # changes go out at the next cycle

@@ -62,6 +62,7 @@ from adapters.canopen.master.events import (
 )
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
+RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
 
@@ -214,10 +215,16 @@ class Master:
         if self.config.sync_period > 0:
             out.append(Send(frames.encode_sync()))
             self.figures["syncs_tx"] += 1
+        refresh = max(RPDO_REFRESH, self.config.cycle)
         for node in self.nodes.values():
-            if node.phase is Phase.ONLINE:
-                out.append(Send(self._rpdo(node, now)))
-                node.figures["rpdo_tx"] += 1
+            if node.phase is not Phase.ONLINE:
+                continue
+            frame = self._rpdo(node, now)
+            if frame.data == node.rpdo_sent and now - node.rpdo_at < refresh:
+                continue  # the drive holds the last RPDO (CiA 301 §7.2.2): sent on change
+            node.rpdo_sent, node.rpdo_at = frame.data, now
+            out.append(Send(frame))
+            node.figures["rpdo_tx"] += 1
 
     def _rpdo(self, node: Node, now: float) -> CanFrame:
         want = node.want
@@ -249,6 +256,7 @@ class Master:
         node.state = node.statusword = None
         node.want = STOPPED
         node.reset_until = 0.0
+        node.rpdo_sent, node.rpdo_at = None, 0.0
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen

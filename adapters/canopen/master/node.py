@@ -69,6 +69,8 @@ class Node:
     state: State | None = None
     want: Want = STOPPED
     reset_until: float = 0.0
+    rpdo_sent: bytes | None = None  # the last RPDO1 data sent, and when
+    rpdo_at: float = 0.0
     figures: dict[str, int] = field(
         default_factory=lambda: {
             "tpdo_rx": 0,
