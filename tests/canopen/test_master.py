@@ -512,8 +512,8 @@ def test_leave_sends_the_last_rpdo_and_pre_operational() -> None:
     line, _node = up()
     actions = line.master.leave(line.now)
     frames_ = [a.frame for a in actions if isinstance(a, Send)]
-    assert [fr.cob_id for fr in frames_] == [0x205, 0x000]
-    assert frames_[1].data == bytes((f.NmtCommand.ENTER_PRE_OPERATIONAL, 5))
+    assert [fr.cob_id for fr in frames_] == [0x205, 0x080, 0x000]
+    assert frames_[2].data == bytes((f.NmtCommand.ENTER_PRE_OPERATIONAL, 5))
     assert line.master.step(line.now + 1) == []
     assert Phase.ONLINE is line.master.nodes[5].phase
 

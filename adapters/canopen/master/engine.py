@@ -117,15 +117,17 @@ class Master:
 
     def leave(self, now: float) -> list[Action]:
         """Leaving the line (shutdown): each online node gets its last RPDO (the wish as
-        it is, stopped after the gateway's shutdown stop) and, from an NMT master, NMT
-        enter pre-operational (no PDO is obeyed after it; the drive's 0x6007 reaction
-        follows when the gateway's heartbeat stops)."""
-        out: list[Action] = []
-        for node in self.nodes.values():
-            if node.phase is Phase.ONLINE:
-                out.append(Send(self._rpdo(node, now)))
-                if self.config.nmt_master:
-                    out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
+        it is, stopped after the gateway's shutdown stop), a SYNC for the synchronous
+        RPDOs to act, and, from an NMT master, NMT enter pre-operational (no PDO is
+        obeyed after it; the drive's 0x6007 reaction follows when the gateway's
+        heartbeat stops)."""
+        online = [n for n in self.nodes.values() if n.phase is Phase.ONLINE]
+        out: list[Action] = [Send(self._rpdo(node, now)) for node in online]
+        if online and self.config.sync_period > 0:
+            out.append(Send(frames.encode_sync()))  # synchronous RPDOs act on a SYNC
+        if self.config.nmt_master:
+            for node in online:
+                out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
         self._left = True
         return out
 

@@ -57,14 +57,14 @@ class Rig:
     seen: list[Event] = field(default_factory=list)
 
     async def wait(
-        self, drive_id: str, predicate: Callable[[DriveState], bool], within: float = 5.0
+        self, drive_id: str, predicate: Callable[[DriveState], bool], within: float = 10.0
     ) -> DriveState:
         return await asyncio.wait_for(self.hub.wait_for(drive_id, predicate), scaled(within))
 
-    async def until(self, predicate: Callable[[], bool], within: float = 5.0) -> None:
+    async def until(self, predicate: Callable[[], bool], within: float = 10.0) -> None:
         await asyncio.wait_for(self.sim.until(predicate), scaled(within))
 
-    async def event(self, predicate: Callable[[Event], bool], within: float = 5.0) -> Event:
+    async def event(self, predicate: Callable[[Event], bool], within: float = 10.0) -> Event:
         async def find() -> Event:
             while True:
                 ev = await self.events.get()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
@@ -149,3 +150,18 @@ async def test_a_pdo_mapping_the_node_refuses(drive_eds: Path) -> None:
         with pytest.raises(DriveOffline):
             await r.hub.read_param("d5", 0x6041, 0)
         assert r.adapter.diagnostics()["drives"]["d5"]["problem"] == ev.text
+
+
+async def test_leaving_the_line_stops_and_pre_operational() -> None:
+    """Shutdown (rule 4): the last RPDO carries the stop, then NMT enter pre-operational."""
+    async with rig([drive(5)]) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+        await r.until(lambda: r.sim.node(5).drive.state is State.OPERATION_ENABLED)
+        r.hub.apply_shutdown()
+        r.task.cancel()
+        await asyncio.gather(r.task, return_exceptions=True)
+        node = r.sim.node(5)
+        await r.until(lambda: node.nmt_state is NmtState.PRE_OPERATIONAL)
+        assert node.drive.state is not State.OPERATION_ENABLED
+        assert r.hub.state("d5").comm is CommState.OFFLINE
