@@ -1,6 +1,9 @@
 """A drive's bring-up plan: the SDO writes the engine makes at every connect, built from
 the drive's config and its object dictionary (sizes from the EDS).
 
+First a Shutdown written to the controlword by SDO: a drive found running when the
+gateway (re)starts stops before it is configured (safety rule 1).
+
 CiA 301 §7.5.2.35-38 (PDO parameters) gives the order of a PDO re-mapping: disable the
 PDO (COB-ID bit 31), set the number of entries to 0, write the entries, set the number,
 then the transmission type, then enable the PDO. Each write is read back (a COB-ID on
@@ -14,6 +17,7 @@ from __future__ import annotations
 import math
 
 from adapters.canopen import cia402, frames
+from adapters.canopen.cia402 import Cw
 from adapters.canopen.frames import MappingEntry
 from adapters.canopen.master.control import VL_OPERATION_BITS
 from adapters.canopen.master.events import NodeConfig, PdoField, SdoStep
@@ -75,7 +79,16 @@ def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig
     """The engine's view of one drive (see the module docstring)."""
     eds = opts.eds
     sync = bus.sync_period > 0
-    steps = [_write(eds, 0x1017, 0, opts.heartbeat_ms, "producer heartbeat time 0x1017")]
+    # A drive found running (a gateway restart) stops before anything else: Shutdown by
+    # SDO (CiA 402-2 transition 8, its 0x605B reaction); harmless in every other state.
+    stop = SdoStep(
+        cia402.CONTROLWORD,
+        0,
+        int(Cw.SHUTDOWN).to_bytes(opts.controlword.bits // 8, "little"),
+        "controlword 0x6040 = Shutdown (a running drive stops first)",
+        read_back=False,
+    )
+    steps = [stop, _write(eds, 0x1017, 0, opts.heartbeat_ms, "producer heartbeat time 0x1017")]
     if bus.heartbeat > 0 and opts.has_consumer_heartbeat:
         consumer_ms = min(0xFFFF, math.ceil(bus.heartbeat * bus.heartbeat_factor))
         steps.append(

@@ -53,7 +53,9 @@ def test_the_demo_eds_gives_a_full_plan() -> None:
     assert opts.mode is Mode.PROFILE_VELOCITY and opts.max_rpm == 1800.0
     plan = node_config(5, opts, bus.options)
     whats = [s.what for s in plan.steps]
-    assert whats[0] == "producer heartbeat time 0x1017"
+    assert whats[0] == "controlword 0x6040 = Shutdown (a running drive stops first)"
+    assert (plan.steps[0].data, plan.steps[0].read_back) == (b"\x06\x00", False)
+    assert whats[1] == "producer heartbeat time 0x1017"
     assert any(w.startswith("consumer heartbeat time 0x1016:1 (node 127") for w in whats)
     assert "abort connection option 0x6007 (fault signal)" in whats
     assert [(f.entry.index, f.entry.bits) for f in plan.tpdo] == [

@@ -78,14 +78,10 @@ class Rig:
         return await asyncio.wait_for(find(), scaled(within))
 
 
-@contextlib.asynccontextmanager
-async def rig(
-    drives: list[dict[str, Any]],
-    *,
-    bus: dict[str, Any] | None = None,
-    sims: list[SimNodeConfig] | None = None,
-) -> AsyncIterator[Rig]:
-    channel = f"co-{uuid.uuid4().hex[:10]}"
+def gateway_side(
+    drives: list[dict[str, Any]], channel: str, bus: dict[str, Any] | None = None
+) -> tuple[Hub, CanOpenAdapter]:
+    """A hub and a CANopen adapter for ``drives`` on ``channel`` (not running)."""
     table = {
         "adapter": "canopen",
         "interface": "virtual",
@@ -101,7 +97,19 @@ async def rig(
     hub = build_hub(config)
     adapter = CanOpenAdapter(config.buses[0])
     hub.attach_params([d["id"] for d in drives], adapter)
-    runner = SimRunner("virtual", channel, sim_configs(config.buses[0]) if sims is None else sims)
+    return hub, adapter
+
+
+@contextlib.asynccontextmanager
+async def rig(
+    drives: list[dict[str, Any]],
+    *,
+    bus: dict[str, Any] | None = None,
+    sims: list[SimNodeConfig] | None = None,
+) -> AsyncIterator[Rig]:
+    channel = f"co-{uuid.uuid4().hex[:10]}"
+    hub, adapter = gateway_side(drives, channel, bus)
+    runner = SimRunner("virtual", channel, sim_configs(adapter.bus) if sims is None else sims)
     sim_task = asyncio.create_task(runner.run(), name="sim")
     await asyncio.wait_for(runner.started.wait(), scaled(5))
     with hub.subscribe_events() as events:

@@ -12,7 +12,8 @@ from adapters.canopen.frames import NmtState
 from adapters.canopen.sim.node import SimNodeConfig
 from gateway.errors import CommandRejected, DriveOffline, ParameterError, ParameterNotWritable
 from gateway.model import CommState, Direction, DriveCommand, DriveState, DriveStatus, Source
-from tests.canopen.integration.conftest import EDS, drive, rig
+from tests.canopen.integration.conftest import EDS, drive, gateway_side, rig
+from tests.support.timing import scaled
 
 
 def online(s: DriveState) -> bool:
@@ -165,3 +166,31 @@ async def test_leaving_the_line_stops_and_pre_operational() -> None:
         await r.until(lambda: node.nmt_state is NmtState.PRE_OPERATIONAL)
         assert node.drive.state is not State.OPERATION_ENABLED
         assert r.hub.state("d5").comm is CommState.OFFLINE
+
+
+async def test_a_drive_found_running_is_stopped_before_it_is_configured() -> None:
+    """A gateway restart finds the drive running (nothing stopped it: no 0x6007 reaction,
+    no gateway heartbeat): the new gateway's bring-up stops it, and it stays stopped."""
+    bus = {"heartbeat": 0}
+    async with rig([drive(5, comm_loss_option=0)], bus=bus) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=900.0))
+        await r.wait("d5", lambda s: s.speed_rpm is not None and s.speed_rpm > 890)
+        r.task.cancel()  # the gateway dies with the run command in force
+        await asyncio.gather(r.task, return_exceptions=True)
+        node = r.sim.node(5)
+        assert node.drive.state is State.OPERATION_ENABLED and node.drive.motor.speed > 890
+        hub, adapter = gateway_side([drive(5, comm_loss_option=0)], r.adapter.options.channel, bus)
+        task = asyncio.create_task(adapter.run(hub))
+        try:
+            await asyncio.wait_for(hub.wait_for("d5", online), scaled(10))
+            assert node.drive.state is not State.OPERATION_ENABLED
+            await r.until(lambda: node.drive.motor.speed == 0.0)
+            assert not hub.desired("d5").run
+            state = await asyncio.wait_for(
+                hub.wait_for("d5", lambda s: s.status is DriveStatus.READY), scaled(10)
+            )
+            assert not state.running
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
