@@ -194,3 +194,17 @@ async def test_a_drive_found_running_is_stopped_before_it_is_configured() -> Non
         finally:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
+
+
+async def test_coast_stop_disables_voltage_and_jog_is_refused() -> None:
+    async with rig([drive(5)]) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=900.0))
+        await r.until(lambda: r.sim.node(5).drive.state is State.OPERATION_ENABLED)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(coast_stop=True))
+        await r.until(lambda: r.sim.node(5).drive.state is State.SWITCH_ON_DISABLED)  # 9
+        state = await r.wait("d5", lambda s: not s.running)
+        assert state.status is DriveStatus.READY
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(coast_stop=False))
+        with pytest.raises(CommandRejected, match="no jog"):
+            r.hub.submit("d5", Source.MODBUS, DriveCommand(jog=True))
