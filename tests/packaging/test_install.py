@@ -51,7 +51,14 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Path]]:
     yield {"wheel": wheel, "sdist": sdist}
 
 
-DATA = ("demo.toml", "site.example.toml", "drive-gateway.service", "zenoh-secure.json5")
+DATA = (
+    "demo.toml",
+    "site.example.toml",
+    "drive-gateway.service",
+    "zenoh-secure.json5",
+    "eds/cfw08-test.eds",
+    "eds/cia402-drive.eds",
+)
 
 
 def test_the_wheel_carries_the_run_time_data(dist: dict[str, Path]) -> None:

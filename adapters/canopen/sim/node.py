@@ -73,6 +73,7 @@ log = logging.getLogger(__name__)
 DEFAULT_EDS = shipped_file("eds/cia402-drive.eds")
 PDO_COUNT = 4  # CiA 301: RPDO/TPDO 1-4 of the predefined connection set
 MAX_PDO_BITS = 64
+EPSILON = 1e-9  # s: float noise in the node's own timers (0.1 + 0.1 + 0.1 > 0.3)
 SUPPORTED_VALUES: dict[int, frozenset[int]] = {
     # option codes and modes this drive implements (CiA 402-2 §6.3, §6.4)
     cia402.QUICK_STOP_OPTION: frozenset({0, 1, 2, 5, 6}),
@@ -201,7 +202,7 @@ class _Watch:
     def expired(self, now: float) -> bool:
         if self.timeout <= 0 or self.last is None or self.fired:
             return False
-        if now - self.last > self.timeout:
+        if now - self.last > self.timeout + EPSILON:
             self.fired = True
             return True
         return False
@@ -637,7 +638,7 @@ class SimNode:
             self.drive.step(now)
             self._emcy(self._watch_comm(now))
             for task in list(self.periodic.values()):
-                if now >= task.due:
+                if now >= task.due - EPSILON:
                     self._port.send_message(task.can_id, task.data)
                     task.due = max(task.due + task.period, now)
             for item in [q for q in self._sdo_queue if q.due <= now]:
@@ -671,9 +672,9 @@ class SimNode:
             event = (pdo_map.event_timer or 0) / 1000.0
             since = None if timer.last_sent is None else now - timer.last_sent
             changed = data != timer.last_data
-            if since is not None and since < inhibit:
+            if since is not None and since < inhibit - EPSILON:
                 continue
-            if changed or since is None or (event > 0 and since >= event):
+            if changed or since is None or (event > 0 and since >= event - EPSILON):
                 self._send_tpdo(now, pdo_map, timer, data)
 
     def _tpdo_data(self, pdo_map: PdoMap) -> bytes:
