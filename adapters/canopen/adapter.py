@@ -70,7 +70,7 @@ from gateway.adapter import (
 from gateway.config import BusConfig, DriveConfig
 from gateway.devices import devices_of
 from gateway.errors import AdapterError, DriveOffline, GatewayTimeout, ParameterError
-from gateway.model import CommState, DesiredCommand, Device, SpeedScale
+from gateway.model import CommState, DesiredCommand, Device, DriveStatus, SpeedScale
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
@@ -86,6 +86,7 @@ class _Drive:
     online: bool = False  # reported online to the hub (first TPDO)
     reset_seen: int = 0
     fault_code: int | None = None
+    was_faulted: bool = False
     emcy_code: int | None = None
     problem: str | None = None
     quick_stop_option: int | None = None
@@ -349,6 +350,10 @@ class CanOpenAdapter:
             return
         d.input_key = key
         changes = readings(action.statusword, action.values, desired, d.opts, d.fault_code)
+        faulted = changes["status"] is DriveStatus.FAULTED
+        if d.was_faulted and not faulted:
+            d.fault_code = None  # the fault ended: the next one brings its own code
+        d.was_faulted = faulted
         if not d.online:
             d.online = True
             hub.update(d.id, comm=CommState.ONLINE, **changes)  # clears a run (rule 1)
