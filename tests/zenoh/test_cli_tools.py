@@ -71,7 +71,9 @@ def test_param_read_write_and_refusal(gw: GatewayProcess) -> None:
     assert unnamed.returncode == 0, unnamed.stderr
     assert unnamed.stdout.strip() == "P134 = 1800"
     bad = tool(gw, "param", "d1", "read", "X100")
-    assert bad.returncode == 2 and "is not a parameter: 100, P0100, 0x6083 or 0x2000:1" in bad.stderr
+    assert (
+        bad.returncode == 2 and "is not a parameter: 100, P0100, 0x6083 or 0x2000:1" in bad.stderr
+    )
     out_of_range = tool(gw, "param", "d1", "write", "101", "99999")
     assert out_of_range.returncode == 1
     assert "parameter value out of limits" in out_of_range.stderr
