@@ -527,3 +527,39 @@ def test_an_unchanged_rpdo_is_sent_on_change_and_refreshed() -> None:
     line.master.set_want(5, Want(run=True, target=10))
     line.run(0.05)
     assert node.state is State.OPERATION_ENABLED  # changes go out at the next cycle
+
+
+def test_a_stopped_node_is_put_in_pre_operational_to_answer() -> None:
+    class Stopped(FakeNode):
+        def _sdo(self, data: bytes) -> bytes:
+            if self.nmt is f.NmtState.STOPPED:
+                raise _NoAnswer
+            return super()._sdo(data)
+
+        def receive(self, frame: f.CanFrame) -> list[f.CanFrame]:
+            try:
+                return super().receive(frame)
+            except _NoAnswer:
+                return []
+
+    node = Stopped()
+    node.nmt = f.NmtState.STOPPED
+    line = Line(Master(config(), [node_config()]), node)
+    line.run(2.0)
+    assert node.nmt_seen[0] is f.NmtCommand.ENTER_PRE_OPERATIONAL
+    assert line.master.online(5)
+
+
+def test_a_failed_node_is_not_watched_until_it_is_tried_again() -> None:
+    node = FakeNode()
+    node.refuse[(0x6060, 0)] = 0x06090030
+    line = Line(Master(config(), [node_config()]), node)
+    line.run(0.5)
+    node.silent = True
+    line.run(2.0)
+    assert not line.of(NodeDown)  # its silence is no news: it was never started
+    assert line.master.nodes[5].phase is Phase.FAILED
+
+
+class _NoAnswer(Exception):
+    pass

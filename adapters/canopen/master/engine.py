@@ -273,6 +273,7 @@ class Master:
         self._drop_jobs(node, f"bring-up failed: {text}", out)
         node.phase = Phase.FAILED
         node.probe_at = None
+        node.watch_heartbeat = False  # not started: its silence is no news
         node.phase_deadline = now + self.config.failed_retry
         node.last_problem = text
         out.append(NodeProblem(node.id, text, code))
@@ -385,6 +386,9 @@ class Master:
                 self._fail(node, now, f"device type 0x1000: {result.message}", None, out)
             else:
                 node.probe_at = now + self.config.retry
+                if self.config.nmt_master and node.heard is NmtState.STOPPED:
+                    # a stopped node serves no SDO (CiA 301 §7.3.2.2.3): wake it up
+                    out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
             return
         if not node.seen:
             node.seen = True
