@@ -346,10 +346,10 @@ def parse_param_ref(text: str) -> tuple[int, int | None]:
 def writable_params(t: Table) -> tuple[frozenset[int], frozenset[tuple[int, int]]]:
     """``writable_params``: numbers (ints, or strings ``"P0100"``, ``"0x6083"``: every
     subindex) and entries (``"0x2000:1"``: that subindex only)."""
-    value = t.data.get("writable_params", [])
-    if "writable_params" not in t.data:
+    if not t.has("writable_params"):
+        t.raw("writable_params", [])  # a known key, even when absent
         return frozenset(), frozenset()
-    t._read.add("writable_params")
+    value = t.raw("writable_params")
     if not isinstance(value, list):
         raise t.error("writable_params", "must be an array of parameter numbers")
     numbers: set[int] = set()

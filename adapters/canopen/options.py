@@ -179,8 +179,8 @@ def _option(t: Table, eds: Dictionary, key: str, index: int, texts: dict[int, st
 def _startup(t: Table, eds: Dictionary) -> tuple[StartupWrite, ...]:
     sub = t.table("startup_sdo")
     out: list[StartupWrite] = []
-    for key, value in sub.data.items():
-        sub._read.add(key)
+    for key in list(sub.data):
+        value = sub.raw(key)
         try:
             index, subindex = parse_object(key)
         except ValueError as exc:
