@@ -208,3 +208,12 @@ async def test_coast_stop_disables_voltage_and_jog_is_refused() -> None:
         r.hub.submit("d5", Source.MODBUS, DriveCommand(coast_stop=False))
         with pytest.raises(CommandRejected, match="no jog"):
             r.hub.submit("d5", Source.MODBUS, DriveCommand(jog=True))
+
+
+async def test_without_sync_rpdos_go_every_pdo_period_and_tpdo1_on_its_timer() -> None:
+    async with rig([drive(5)], bus={"sync_period": 0}) as r:
+        await r.wait("d5", online)
+        assert r.adapter.diagnostics()["syncs_tx"] == 0
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=-450.0))
+        state = await r.wait("d5", lambda s: s.speed_rpm == -450.0)
+        assert state.direction is Direction.REVERSE and state.at_reference
