@@ -5,8 +5,9 @@ with an injected clock (``step(now, event) -> actions``, ``next_deadline()``).
 Per node (CiA 301 §7.3.2, CiA 402-2 §6.2):
 
 1. PROBE: SDO upload of 0x1000 (device type; the low word is the profile, 402) until
-   the node answers; a node heard operational is reset (NMT reset node, then its
-   boot-up awaited) when its config says so, else put in pre-operational.
+   the node answers; a node heard operational, or not heard at all (no heartbeat yet),
+   is reset (NMT reset node, then its boot-up awaited) when its config says so, else put
+   in pre-operational.
 2. CONFIGURE: the bring-up SDO writes (0x1017 heartbeat, RPDO1/TPDO1 communication
    and mapping, 0x1016 consumer, 0x6007, 0x605A, 0x6060, startup SDOs), each read back
    and compared; then the report reads (0x605A as the drive has it). A refusal or a
@@ -405,14 +406,15 @@ class Master:
         if (
             self.config.nmt_master
             and node.config.reset_if_operational
-            and node.heard is NmtState.OPERATIONAL
+            and node.heard in (NmtState.OPERATIONAL, None)  # or not known: no heartbeat yet
             and not node.reset_done
         ):
             node.reset_done = True
             node.phase = Phase.RESET
             node.phase_deadline = now + self.config.boot_timeout
             out.append(Send(frames.encode_nmt(NmtCommand.RESET_NODE, node.id)))
-            out.append(Report(node.id, "node was operational: NMT reset node sent"))
+            heard = "was operational" if node.heard is not None else "sends no heartbeat"
+            out.append(Report(node.id, f"node {heard}: NMT reset node sent"))
             return
         self._configure(node, now, out)
 

@@ -217,3 +217,17 @@ async def test_without_sync_rpdos_go_every_pdo_period_and_tpdo1_on_its_timer() -
         r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=-450.0))
         state = await r.wait("d5", lambda s: s.speed_rpm == -450.0)
         assert state.direction is Direction.REVERSE and state.at_reference
+
+
+async def test_not_the_nmt_master_configures_a_node_another_master_started() -> None:
+    async with rig([drive(5, sim_boot_operational=True)], bus={"nmt_master": False}) as r:
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=300.0))
+        await r.wait("d5", lambda s: s.speed_rpm == 300.0)
+
+
+async def test_reset_if_operational_resets_a_self_started_node() -> None:
+    async with rig([drive(5, sim_boot_operational=True, reset_if_operational=True)]) as r:
+        ev = await r.event(lambda e: "NMT reset node sent" in e.text)
+        assert ev.text == "node sends no heartbeat: NMT reset node sent"
+        await r.wait("d5", online)
