@@ -119,8 +119,8 @@ class Dictionary:
             for_ = f" ({why})" if why else ""
             raise EdsError(
                 self.file,
-                obj_name(index, subindex),
-                f"the EDS has no object {obj_name(index, subindex)}{for_}",
+                obj_name(index, subindex or None),
+                f"the EDS has no object {obj_name(index, subindex or None)}{for_}",
             ) from None
         data_type = int(var.data_type or 0)
         return Variable(

@@ -94,7 +94,7 @@ def test_an_object_the_eds_lacks(tmp_path: Path) -> None:
     cut = without(tmp_path, "60FF")
     text = error_of({"eds": str(cut), "mode": "profile_velocity"})
     assert "buses.co.drives[d5].mode" in text
-    assert f"{cut}: 0x60FF:0: the EDS has no object 0x60FF:0 (mode profile_velocity)" in text
+    assert f"{cut}: 0x60FF: the EDS has no object 0x60FF (mode profile_velocity)" in text
     config({"eds": str(cut)})  # velocity mode does not need it
 
 
