@@ -8,11 +8,13 @@ import uuid
 from collections.abc import AsyncIterator
 from pathlib import Path
 
+import pytest
 import pytest_asyncio
 
 from adapters.canopen.cia402 import State
 from adapters.canopen.sim.runner import SimRunner
 from gateway.config import DEFAULT_CONFIG, load, shipped_file
+from gateway.errors import ConfigErrors
 from gateway.model import CommState, Device
 from tests.e2e.harness import (
     PREFIX,
@@ -214,3 +216,28 @@ async def test_the_demo_line_comes_online(tmp_path: Path) -> None:
         diag = gw.adapter("canopen").diagnostics()
         assert diag["syncs_tx"] > 0
         assert diag["drives"]["cia402b"]["phase"] == "online"
+
+
+def test_a_config_with_a_broken_eds_or_a_missing_object_does_not_start(tmp_path: Path) -> None:
+    """Bad input never starts the gateway: the error names the config file, the key, the
+    EDS file and the object."""
+    broken = tmp_path / "broken.eds"
+    broken.write_text("[DeviceInfo]\nVendorName=x\n[1000]\nDataType=0x00ZZ\n")
+    text = buses("unused").replace(f'eds = "{EDS}"', 'eds = "broken.eds"', 1)
+    cfg = tmp_path / "gateway.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigErrors) as info:
+        load(cfg)
+    assert f"{cfg}: buses.co.drives[n5].eds: {broken}: does not parse as an EDS/DCF" in str(
+        info.value
+    )
+    cut = tmp_path / "no-60ff.eds"
+    eds = EDS.read_text()
+    start = eds.index("[60FF]")
+    cut.write_text(eds[:start] + eds[eds.index("[", start + 1) :])
+    cfg.write_text(buses("unused").replace(f'eds = "{EDS}"', f'eds = "{cut}"'))
+    with pytest.raises(ConfigErrors) as info:
+        load(cfg)
+    assert f"buses.co.drives[n6].mode: {cut}: 0x60FF: the EDS has no object 0x60FF" in str(
+        info.value
+    )
