@@ -563,3 +563,15 @@ def test_a_failed_node_is_not_watched_until_it_is_tried_again() -> None:
 
 class _NoAnswer(Exception):
     pass
+
+
+def test_a_reset_pulse_keeps_the_other_bits() -> None:
+    line, node = up()
+    line.master.set_want(5, Want(run=True, target=100))
+    line.run(0.3)
+    assert node.state is State.OPERATION_ENABLED
+    assert line.master.fault_reset(5, line.now)
+    line.run(0.1)
+    words = [w for w in node.controlwords if w & 0x80]
+    assert words and all(w & 0x0F == 0x0F for w in words)  # still enable operation
+    assert node_state(node) is State.OPERATION_ENABLED

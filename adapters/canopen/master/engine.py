@@ -233,7 +233,9 @@ class Master:
         want = node.want
         cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
         if now < node.reset_until:
-            cw = int(Cw.FAULT_RESET_BIT)  # transition 15 on the drive's 0 -> 1 edge
+            # transition 15 on the drive's 0 -> 1 edge; the other bits stay as they are,
+            # so a reset asked of a drive that is not faulted changes nothing else
+            cw |= Cw.FAULT_RESET_BIT
         values = (cw, target(node.state, want))
         data = bytearray()
         for field_, value in zip(node.config.rpdo, values, strict=False):
