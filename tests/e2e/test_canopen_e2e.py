@@ -45,7 +45,7 @@ modbus_unit = {node}
 eds = "{EDS}"
 mode = "{mode}"
 max_rpm = 1800
-heartbeat = 50
+heartbeat = 100
 comm_loss_option = 1
 quick_stop_option = 2
 writable_params = ["0x605A", "0x2000:4"]
@@ -60,7 +60,7 @@ simulate = true
 sync_period = 0.02
 sdo_timeout = 0.3
 retry = 0.2
-heartbeat = 50
+heartbeat = 100
 {drives}"""
 
 

@@ -30,7 +30,7 @@ FAST_BUS: dict[str, Any] = {
     "sdo_timeout": scaled(0.3),
     "retry": scaled(0.2),
     "boot_timeout": scaled(1.0),
-    "heartbeat": round(scaled(50)),
+    "heartbeat": round(scaled(100)),
 }
 
 
@@ -41,7 +41,7 @@ def drive(node: int, **keys: Any) -> dict[str, Any]:
         "address": node,
         "eds": EDS,
         "max_rpm": 1800.0,
-        "heartbeat": round(scaled(50)),
+        "heartbeat": round(scaled(100)),
         "sim_ramp_time": 0.2,
         **keys,
     }
