@@ -96,11 +96,18 @@ class FakeNode:
         self.controlwords: list[int] = []
         self.nmt_seen: list[f.NmtCommand] = []
         self.sdo_requests: list[f.SdoRequest] = []
+        self.sdo_log: list[str] = []
 
     def statusword(self) -> int:
         return cia402.statusword_bits(self.state) | cia402.SW_REMOTE
 
     def receive(self, frame: f.CanFrame) -> list[f.CanFrame]:
+        if frame.cob_id == f.sdo_rx_id(self.id):
+            request = f.decode_sdo_request(frame.data)
+            self.sdo_log.append("abort" if isinstance(request, f.Abort) else "request")
+            if self.silent or isinstance(request, f.Abort):
+                return []
+            self.sdo_log.append("response")
         if self.silent:
             return []
         if frame.cob_id == f.COB_NMT:
@@ -575,3 +582,48 @@ def test_a_reset_pulse_keeps_the_other_bits() -> None:
     words = [w for w in node.controlwords if w & 0x80]
     assert words and all(w & 0x0F == 0x0F for w in words)  # still enable operation
     assert node_state(node) is State.OPERATION_ENABLED
+
+
+@given(
+    st.lists(
+        st.tuples(st.sampled_from(["submit", "run", "silence", "talk"]), st.integers(1, 30)),
+        max_size=25,
+    )
+)
+def test_one_sdo_transfer_in_flight_and_every_job_ends(script: list[tuple[str, int]]) -> None:
+    """Whatever the order of jobs, silences and time: at most one SDO request is waiting
+    for its answer per node, and every job of the adapter ends exactly once."""
+    line, node = up()
+    tokens: list[int] = []
+    for op, n in script:
+        if op == "submit" and line.master.online(5):
+            tokens += [line.master.submit(5, 0x605A, 0, None) for _ in range(n % 4 + 1)]
+        elif op == "run":
+            line.run(n / 100, heartbeats=not node.silent, tpdo=not node.silent)
+        elif op == "silence":
+            node.silent = True
+        else:
+            node.silent = False
+    node.silent = False
+    line.run(3.0)
+    outstanding = 0
+    for entry in node.sdo_log:
+        if entry == "request":
+            assert outstanding == 0, node.sdo_log  # one transfer in flight
+            outstanding = 1
+        else:
+            outstanding = 0
+    done = [a.token for a in line.of(SdoDone) if isinstance(a, SdoDone)]
+    assert sorted(done) == sorted(tokens)  # each ended once (answered, aborted or dropped)
+    assert node.sdo_requests  # it was asked
+
+
+def test_a_transfer_under_way_when_the_node_is_lost_is_aborted() -> None:
+    line, node = up(sdo_timeout=5.0)  # longer than the heartbeat watch
+    node.silent = True
+    token = line.master.submit(5, 0x605A, 0, None)
+    line.run(0.5, heartbeats=False, tpdo=False)
+    done = next(a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token)
+    assert done.error is not None and done.error.startswith("node lost: no heartbeat")
+    abort = f.encode_sdo_request(f.Abort(0x605A, 0, codes.ABORT_GENERAL))
+    assert f.CanFrame(0x605, abort) in line.sent

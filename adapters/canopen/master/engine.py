@@ -32,7 +32,7 @@ import itertools
 import math
 from collections.abc import Sequence
 
-from adapters.canopen import frames
+from adapters.canopen import codes, frames
 from adapters.canopen.cia402 import Cw, State, decode_state
 from adapters.canopen.errors import CanOpenDecodeError
 from adapters.canopen.frames import CanFrame, Kind, NmtCommand, NmtState, SdoClientTransfer
@@ -244,16 +244,16 @@ class Master:
 
     def _phase_timeout(self, node: Node, now: float, out: list[Action]) -> None:
         if node.phase is Phase.RESET:
-            self._to_probe(node, now, now)  # no boot-up: ask again
+            self._to_probe(node, now, now, out)  # no boot-up: ask again
         elif node.phase is Phase.START:
             self._lose(node, now, "did not become operational after NMT start", out)
         elif node.phase is Phase.FAILED:
-            self._to_probe(node, now, now)
+            self._to_probe(node, now, now, out)
 
     # ------------------------------------------------------------ phases
 
-    def _to_probe(self, node: Node, now: float, at: float) -> None:
-        self._drop_jobs(node, "node lost", None)
+    def _to_probe(self, node: Node, now: float, at: float, out: list[Action]) -> None:
+        self._drop_jobs(node, "node lost", out)
         node.phase = Phase.PROBE
         node.phase_deadline = None
         node.probe_at = at
@@ -266,7 +266,7 @@ class Master:
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
         self._drop_jobs(node, f"node lost: {reason}", out)
-        self._to_probe(node, now, now + self.config.retry)
+        self._to_probe(node, now, now + self.config.retry, out)
         node.seen = False
         node.figures["lost"] += 1
         if was_seen:
@@ -281,15 +281,23 @@ class Master:
         node.last_problem = text
         out.append(NodeProblem(node.id, text, code))
 
-    def _drop_jobs(self, node: Node, why: str, out: list[Action] | None) -> None:
+    def _drop_jobs(self, node: Node, why: str, out: list[Action]) -> None:
+        """End every SDO job of the node; a transfer under way is aborted on the line
+        (CiA 301 §7.2.4.3.17, general error) so that the server starts afresh."""
         jobs = list(node.jobs)
         if node.current is not None:
             jobs.insert(0, node.current)
+            transfer = node.transfer
+            if transfer is not None and transfer.result is None:
+                abort = frames.Abort(transfer.index, transfer.subindex, codes.ABORT_GENERAL)
+                out.append(
+                    Send(CanFrame(frames.sdo_rx_id(node.id), frames.encode_sdo_request(abort)))
+                )
         node.jobs.clear()
         node.current = node.transfer = None
         node.sdo_deadline = None
         for job in jobs:
-            if job.purpose is Purpose.USER and out is not None:
+            if job.purpose is Purpose.USER:
                 out.append(SdoDone(job.token, node.id, error=why))
 
     def _configure(self, node: Node, now: float, out: list[Action]) -> None:
@@ -535,7 +543,7 @@ class Master:
         phase = node.phase
         if state is NmtState.BOOTUP:
             if phase is Phase.RESET:
-                self._to_probe(node, now, now)
+                self._to_probe(node, now, now, out)
             elif phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
                 self._lose(node, now, "the node restarted (boot-up message)", out)
                 node.probe_at = now  # it is there: bring it up at once
