@@ -298,8 +298,10 @@ def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
         _start(
             plant,
             "canbus",
-            [PY, "-m", "bench.plant.canbus", "--path", str(sock), "--bitrate", str(CAN_BITRATE)]
-            + ["--out", str(tmp / "canbus")],
+            [
+                *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
+                *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / "canbus")),
+            ],
             tmp,
         )
         _wait("the CAN broker", sock.exists, 20, plant, tmp)
@@ -307,9 +309,11 @@ def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
         _start(
             plant,
             "devicenet-sim",
-            [*launch, "--", "sim", "devicenet", "--interface", canbus.INTERFACE]
-            + ["--channel", str(sock), "--nodes", nodes, "--assembly", "21"]
-            + ["--log-level", "WARNING"],
+            [
+                *(*launch, "--", "sim", "devicenet", "--interface", canbus.INTERFACE),
+                *("--channel", str(sock), "--nodes", nodes, "--assembly", "21"),
+                *("--log-level", "WARNING"),
+            ],
             tmp,
         )
     if plant.profibus:
@@ -317,8 +321,11 @@ def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
         _start(
             plant,
             "profibus-sim",
-            [PY, "-m", "bench.plant.pbsim", "--config", str(config), "--baud", str(PROFIBUS_BAUD)]
-            + ["--link", str(link), "--out", str(tmp / "profibus-sim.json")],
+            [
+                *(PY, "-m", "bench.plant.pbsim", "--config", str(config)),
+                *("--baud", str(PROFIBUS_BAUD), "--link", str(link)),
+                *("--out", str(tmp / "profibus-sim.json")),
+            ],
             tmp,
         )
         _wait("the Profibus pty", link.exists, 20, plant, tmp)
@@ -385,20 +392,26 @@ def measure(plant: Plant) -> list[Figure]:
         _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
         load_before = os.getloadavg()
         client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
-        _start(
-            plant,
-            "modbus-clients",
-            [PY, "-m", "bench.plant.clients", "modbus", "--port", str(modbus_port)]
-            + ["--units", f"1-{drives}", "--clients", str(plant.modbus_clients)]
-            + ["--rate", str(plant.modbus_rate), *client_args],
-            tmp,
-            stdout=subprocess.PIPE,
-        )
+        if plant.modbus_clients:
+            _start(
+                plant,
+                "modbus-clients",
+                [
+                    *(PY, "-m", "bench.plant.clients", "modbus", "--port", str(modbus_port)),
+                    *("--units", f"1-{drives}", "--clients", str(plant.modbus_clients)),
+                    *("--rate", str(plant.modbus_rate), *client_args),
+                ],
+                tmp,
+                stdout=subprocess.PIPE,
+            )
         _start(
             plant,
             "zenoh-subscriber",
-            [PY, "-m", "bench.plant.clients", "zenoh", "--connect", f"tcp/127.0.0.1:{zenoh_port}"]
-            + ["--key", "plant/drives/*/state", *client_args],
+            [
+                *(PY, "-m", "bench.plant.clients", "zenoh"),
+                *("--connect", f"tcp/127.0.0.1:{zenoh_port}", "--key", "plant/drives/*/state"),
+                *client_args,
+            ],
             tmp,
             stdout=subprocess.PIPE,
         )
@@ -411,6 +424,8 @@ def measure(plant: Plant) -> list[Figure]:
         load_after = os.getloadavg()
         clients: dict[str, Any] = {}
         for name in ("modbus-clients", "zenoh-subscriber"):
+            if name not in plant.procs:
+                continue
             out, _ = plant.procs[name].communicate(timeout=plant.settle + 30)
             clients[name] = json.loads(out.decode().strip().splitlines()[-1])
         # the end: SIGTERM; the launcher writes the cycles, the simulators their figures
@@ -424,21 +439,22 @@ def measure(plant: Plant) -> list[Figure]:
         broker = _read_json(tmp / "canbus.json")
     return _figures(
         plant,
-        t0,
-        t1,
-        (cpu1 - cpu0) / (t1 - t0),
-        rss,
-        cycles,
-        pbsim,
-        canlog,
-        broker,
-        clients,
-        (load_before, load_after),
+        t0=t0,
+        t1=t1,
+        cpu_share=(cpu1 - cpu0) / (t1 - t0),
+        rss=rss,
+        cycles=cycles,
+        pbsim=pbsim,
+        canlog=canlog,
+        broker=broker,
+        clients=clients,
+        load=(load_before, load_after),
     )
 
 
 def _figures(
     plant: Plant,
+    *,
     t0: float,
     t1: float,
     cpu_share: float,

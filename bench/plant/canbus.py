@@ -16,8 +16,9 @@ simulated nodes in separate processes, on a line that carries frames no faster t
   order (a controller's transmit FIFO); when the bus is free the lowest identifier among the
   queue heads wins (CAN arbitration) and occupies the bus for :func:`frame_bits` bit times;
   at its end the frame is delivered to every other connection. The broker waits with
-  ``select`` and a 1 us timer slack (``PR_SET_TIMERSLACK``), so the pacing is
-  microsecond-grade; the lateness of each delivery is recorded.
+  ``select`` and a 1 us timer slack (``PR_SET_TIMERSLACK``); a frame that waited starts
+  at the end of the one before on the bus's own timeline (the broker's wake-up lateness
+  delays a delivery, never the frames after it); the lateness of each delivery is recorded.
 
 Bit time of a frame (ISO 11898-1, base format data frame): SOF 1, identifier 11, RTR, IDE
 and r0 3, DLC 4, data 8 x n, CRC 15 -- that stretch is bit-stuffed (one stuff bit after
@@ -177,7 +178,8 @@ class Broker:
         self.listener.listen(16)
         self.listener.setblocking(False)
         self.clients: list[socket.socket] = []
-        self.queues: dict[socket.socket, deque[tuple[int, bytes, int]]] = {}
+        # per sender: (identifier, record, bit times, arrival time)
+        self.queues: dict[socket.socket, deque[tuple[int, bytes, int, float]]] = {}
         self.current: tuple[socket.socket, bytes, float, int] | None = None
         self.busy_until = 0.0
         self.ends = array.array("d")  # end time of each frame carried
@@ -192,7 +194,7 @@ class Broker:
             if self.current is not None and now >= self.current[2]:
                 self._deliver(now)
             if self.current is None:
-                self._arbitrate(now)
+                self._arbitrate()
             timeout = None if self.current is None else max(0.0, self.current[2] - now)
             try:
                 ready, _, _ = select.select([self.listener, *self.clients], [], [], timeout)
@@ -226,7 +228,8 @@ class Broker:
                 self._drop(sock)
                 return
             ident, _, dlc, data = RECORD.unpack(record)
-            self.queues[sock].append((ident, record, frame_bits(ident, data[:dlc])))
+            bits = frame_bits(ident, data[:dlc])
+            self.queues[sock].append((ident, record, bits, time.monotonic()))
 
     def _drop(self, sock: socket.socket) -> None:
         if sock in self.queues:
@@ -236,13 +239,15 @@ class Broker:
             self.current = None
         sock.close()
 
-    def _arbitrate(self, now: float) -> None:
+    def _arbitrate(self) -> None:
         heads = [(q[0][0], sock) for sock, q in self.queues.items() if q]
         if not heads:
             return
         _, sender = min(heads, key=lambda h: h[0])
-        _, record, bits = self.queues[sender].popleft()
-        start = max(now, self.busy_until)
+        _, record, bits, arrived = self.queues[sender].popleft()
+        # a frame waiting while the bus was busy starts at the end of the one before (back
+        # to back, 3-bit intermission included), however late this loop noticed that end
+        start = max(arrived, self.busy_until)
         end = start + bits * self.t_bit
         self.busy_until = end
         self.current = (sender, record, end, bits)
@@ -301,12 +306,12 @@ def serve(path: str, bitrate: int, out: str) -> None:
     try:
         broker.run()
     finally:
-        with open(out + ".ends", "wb") as f:
-            broker.ends.tofile(f)
-        with open(out + ".bits", "wb") as f:
-            broker.bits.tofile(f)
-        with open(out + ".json", "w") as f:
-            json.dump(broker.summary(), f)
+        with open(out + ".ends", "wb") as ends:
+            broker.ends.tofile(ends)
+        with open(out + ".bits", "wb") as bits:
+            broker.bits.tofile(bits)
+        with open(out + ".json", "w") as summary:
+            json.dump(broker.summary(), summary)
         with contextlib.suppress(OSError):
             os.unlink(path)
 

@@ -38,7 +38,7 @@ def parse_units(text: str) -> list[int]:
 
 
 async def _client(
-    port: int, units: list[int], rate: float, start: float, end: float, out: dict[str, Any]
+    port: int, units: list[int], *, rate: float, start: float, end: float, out: dict[str, Any]
 ) -> None:
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     tid = 0
@@ -84,12 +84,12 @@ async def _modbus(args: argparse.Namespace) -> dict[str, Any]:
     units = parse_units(args.units)
     now = time.monotonic()
     start, end = now + args.settle, now + args.settle + args.seconds
-    outs = [
+    outs: list[dict[str, Any]] = [
         {"rounds": 0, "replies": 0, "exceptions": 0, "late_rounds": 0, "round_times": []}
         for _ in range(args.clients)
     ]
     await asyncio.gather(
-        *(_client(args.port, units, args.rate, start, end, out) for out in outs)
+        *(_client(args.port, units, rate=args.rate, start=start, end=end, out=out) for out in outs)
     )
     times = sorted(t for out in outs for t in out["round_times"])
     replies = sum(out["replies"] for out in outs)

@@ -60,88 +60,107 @@ def _summary(values: deque[float]) -> dict[str, float]:
     }
 
 
-def serve(config_path: str, baud: int, link: str, out: str) -> None:
-    fine_timer_slack()
-    config = load(config_path)
-    line = build_line([], config)
-    bus = BusParams.for_baudrate(baud)
-    t_bit = 1.0 / baud
-    master_fd, slave_fd = os.openpty()
-    tty.setraw(slave_fd)
-    os.set_blocking(master_fd, False)
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(link)
-    os.symlink(os.ttyname(slave_fd), link)
-    stop = False
+class PacedLine:
+    """The simulated line on its pty, replies held for their line time (module docstring)."""
 
-    def on_term(*_: object) -> None:
-        nonlocal stop
-        stop = True
+    def __init__(self, config_path: str, baud: int, link: str) -> None:
+        self.line = build_line([], load(config_path))
+        self.bus = BusParams.for_baudrate(baud)
+        self.t_bit = 1.0 / baud
+        self.link = link
+        self.master_fd, self.slave_fd = os.openpty()
+        tty.setraw(self.slave_fd)
+        os.set_blocking(self.master_fd, False)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(link)
+        os.symlink(os.ttyname(self.slave_fd), link)
+        self.stop = False
+        self.lateness: deque[float] = deque(maxlen=KEEP)
+        self.turnaround: deque[float] = deque(maxlen=KEEP)
+        self.replies = 0
+        self.request_bytes = 0  # of the request being received
+        self.last_rx = 0.0
+        self.last_reply: float | None = None
 
-    signal.signal(signal.SIGTERM, on_term)
-    signal.signal(signal.SIGINT, on_term)
-    lateness: deque[float] = deque(maxlen=KEEP)
-    turnaround: deque[float] = deque(maxlen=KEEP)
-    replies = 0
-    request_bytes = 0
-    last_rx = 0.0
-    last_reply: float | None = None
-    next_tick = time.monotonic() + TICK
-    try:
-        while not stop:
-            now = time.monotonic()
+    def run(self) -> None:
+        next_tick = time.monotonic() + TICK
+        while not self.stop:
             try:
-                ready, _, _ = select.select([master_fd], [], [], max(0.0, next_tick - now))
+                ready, _, _ = select.select(
+                    [self.master_fd], [], [], max(0.0, next_tick - time.monotonic())
+                )
             except InterruptedError:
                 continue
             now = time.monotonic()
             if ready:
-                try:
-                    data = os.read(master_fd, 4096)
-                except BlockingIOError:
-                    data = b""
-                if data:
-                    if request_bytes == 0 and last_reply is not None:
-                        turnaround.append(now - last_reply)
-                        last_reply = None
-                    request_bytes += len(data)
-                    last_rx = now
-                    outgoing = line.receive(data, now)
-                    if outgoing or not line.decoder.buffered:
-                        sent = request_bytes
-                        request_bytes = 0
-                        for reply in outgoing:
-                            bits = BITS_PER_CHAR * (sent + len(reply.data)) + bus.min_tsdr
-                            due = max(reply.at, now + bits * t_bit)
-                            wait = due - time.monotonic()
-                            if wait > 0:
-                                time.sleep(wait)
-                            os.write(master_fd, reply.data)
-                            written = time.monotonic()
-                            lateness.append(written - due)
-                            last_reply = written
-                            replies += 1
-                            sent = 0  # a second reply (none in DP) follows the first
+                self._readable(now)
             if now >= next_tick:
-                line.tick(now)
-                if line.decoder.buffered and now - last_rx >= IDLE_AFTER:
-                    line.idle()
-                    request_bytes = 0
+                self.line.tick(now)
+                if self.line.decoder.buffered and now - self.last_rx >= IDLE_AFTER:
+                    self.line.idle()
+                    self.request_bytes = 0
                 next_tick = now + TICK
-    finally:
-        result: dict[str, Any] = {
-            "slaves": len(line.slaves),
-            "replies": replies,
-            "reply_lateness": _summary(lateness),
-            "master_turnaround": _summary(turnaround),
-            "tsyn_us": round(bus.tsyn * 1e6, 2),
+
+    def _readable(self, now: float) -> None:
+        try:
+            data = os.read(self.master_fd, 4096)
+        except BlockingIOError:
+            return
+        if not data:
+            return
+        if self.request_bytes == 0 and self.last_reply is not None:
+            self.turnaround.append(now - self.last_reply)
+            self.last_reply = None
+        self.request_bytes += len(data)
+        self.last_rx = now
+        outgoing = self.line.receive(data, now)
+        if not outgoing and self.line.decoder.buffered:
+            return  # the rest of the request is still to come
+        sent, self.request_bytes = self.request_bytes, 0
+        for reply in outgoing:
+            bits = BITS_PER_CHAR * (sent + len(reply.data)) + self.bus.min_tsdr
+            due = max(reply.at, now + bits * self.t_bit)
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)  # the line is busy with this reply: nothing else to do
+            os.write(self.master_fd, reply.data)
+            written = time.monotonic()
+            self.lateness.append(written - due)
+            self.last_reply = written
+            self.replies += 1
+            sent = 0  # a second reply (none in DP) would follow the first
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "slaves": len(self.line.slaves),
+            "replies": self.replies,
+            "reply_lateness": _summary(self.lateness),
+            "master_turnaround": _summary(self.turnaround),
+            "tsyn_us": round(self.bus.tsyn * 1e6, 2),
         }
-        with open(out, "w") as f:
-            json.dump(result, f)
+
+    def close(self) -> None:
         with contextlib.suppress(OSError):
-            os.unlink(link)
-        os.close(master_fd)
-        os.close(slave_fd)
+            os.unlink(self.link)
+        os.close(self.master_fd)
+        os.close(self.slave_fd)
+
+
+def serve(config_path: str, baud: int, link: str, out: str) -> None:
+    fine_timer_slack()
+    paced = PacedLine(config_path, baud, link)
+
+    def on_term(*_: object) -> None:
+        paced.stop = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    signal.signal(signal.SIGINT, on_term)
+    try:
+        paced.run()
+    finally:
+        with open(out, "w") as f:
+            json.dump(paced.summary(), f)
+        paced.close()
 
 
 def main() -> None:
