@@ -268,6 +268,13 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
 
 
+def _host_busy() -> tuple[int, int]:
+    """(busy, total) jiffies of all CPUs (/proc/stat): what else ran on the machine."""
+    fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    idle = fields[3] + fields[4]  # idle, iowait
+    return sum(fields) - idle, sum(fields)
+
+
 def _rss_mb(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -418,8 +425,19 @@ def measure(plant: Plant) -> list[Figure]:
         pid = plant.procs["gateway"].pid
         time.sleep(plant.settle)
         t0, cpu0 = time.monotonic(), _cpu_seconds(pid)
+        others0 = {n: _cpu_seconds(p.pid) for n, p in plant.procs.items() if p.poll() is None}
+        host0 = _host_busy()
         time.sleep(plant.seconds)
         t1, cpu1 = time.monotonic(), _cpu_seconds(pid)
+        others = {
+            n: round((_cpu_seconds(plant.procs[n].pid) - c) / (t1 - t0), 3)
+            for n, c in others0.items()
+            if n != "gateway" and plant.procs[n].poll() is None
+        }
+        host = _host_busy()
+        others["host (all CPUs)"] = round(
+            (host[0] - host0[0]) / max(host[1] - host0[1], 1) * (os.cpu_count() or 1), 3
+        )
         rss = _rss_mb(pid)
         load_after = os.getloadavg()
         clients: dict[str, Any] = {}
@@ -449,6 +467,7 @@ def measure(plant: Plant) -> list[Figure]:
         broker=broker,
         clients=clients,
         load=(load_before, load_after),
+        others=others,
     )
 
 
@@ -465,11 +484,13 @@ def _figures(
     broker: Any,
     clients: dict[str, Any],
     load: tuple[tuple[float, ...], tuple[float, ...]],
+    others: dict[str, float],
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
         f"{drives} drives; {os.cpu_count()} CPUs, load average {load[0][0]:.2f} before, "
-        f"{load[1][0]:.2f} after; window {t1 - t0:.1f} s"
+        f"{load[1][0]:.2f} after; window {t1 - t0:.1f} s; CPU of the bench's other "
+        f"processes and of the whole host, in cores: {json.dumps(others)}"
     )
     figures = [
         Figure(
@@ -493,9 +514,11 @@ def _figures(
                 f"p50 {late['p50_us']} us p99 {late['p99_us']} us"
             )
         request, reply = exchange_bits()
+        pb = _cycles_in(cycles["profibus"], t0, t1)
+        extra += f"; {len(pb) * plant.profibus / (t1 - t0):.0f} Data_Exchange/s"
         figures += _line_figures(
             f"profibus_{plant.profibus}_slaves_1500k",
-            _cycles_in(cycles["profibus"], t0, t1),
+            pb,
             felser_cycle(plant.profibus, bus),
             f"Felser: {plant.profibus} x ({request} + {reply} + TSDR {bus.min_tsdr} + TSYN 33) "
             "bits + Global_Control",
@@ -513,6 +536,7 @@ def _figures(
         if broker:
             late = broker["lateness_us"]
             extra += f"; broker lateness p50 {late['p50']} us p99 {late['p99']} us"
+        extra += f"; {len(dn) * plant.devicenet / (t1 - t0):.0f} polls/s"
         figures += _line_figures(
             f"devicenet_{plant.devicenet}_nodes_500k",
             dn,

@@ -77,11 +77,13 @@ IpNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network
 CURRENT_CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("modbus_client", default="")
 """The peer address of the request being served (set around each request)."""
 
-READ_PDU = struct.Struct(">BHH")  # function, starting address, quantity (MB AP 6.3, 6.4)
-READ_REPLY = struct.Struct(">HHHBBB")  # MBAP header, function, byte count
-READ_PDU_LENGTH = 1 + READ_PDU.size  # the MBAP length of a read request: unit id + PDU
+# a read request: MBAP header, function, starting address, quantity (MB AP 6.3, 6.4)
+READ_REQUEST = struct.Struct(">HHHBBHH")
+READ_REPLY = struct.Struct(">HHBBB")  # its reply after the transaction id: MBAP, function, count
+READ_PDU_LENGTH = 6  # the MBAP length of a read request: unit id + 5 bytes of PDU
 MAX_READ_REGISTERS = 125  # MB AP 6.3, 6.4: quantity 1 to 125
 READ_INPUTS, READ_HOLDINGS = 4, 3
+REPLY_CACHE_LIMIT = 4096  # short-path replies kept (units x distinct reads)
 
 REFUSED_LOG_LIMIT = 256  # distinct refused addresses logged at WARNING; later ones at DEBUG
 PIPELINE_LIMIT = 64  # requests of one connection waiting to be served; more pause its reading
@@ -213,18 +215,52 @@ class AccessPolicy:
 
 class StatusBlock(Protocol):
     """A drive unit's status block as the map encodes it (input registers 0..n-1, also
-    holding registers ``mirror`` + n), newest encoding."""
+    holding registers ``mirror`` + n), newest encoding: a new list for every encoding,
+    never changed in place (:class:`FastReads` keeps replies while the list is the same)."""
 
     @property
     def inputs(self) -> list[int]: ...
 
 
-@dataclass(frozen=True)
 class FastReads:
-    """The units whose status-block reads take the short path, and where the mirror is."""
+    """The units whose status-block reads take the short path, and where the mirror is.
 
-    blocks: Mapping[int, StatusBlock]
-    mirror: int
+    A reply (after its transaction id) is kept per unit and request until the unit's
+    registers are replaced (every new encoding is a new list): polling clients read the
+    same block again and again.
+    """
+
+    def __init__(self, blocks: Mapping[int, StatusBlock], mirror: int) -> None:
+        self.blocks = blocks
+        self.mirror = mirror
+        self._replies: dict[tuple[int, int, int, int], tuple[list[int], bytes]] = {}
+
+    def reply(self, unit: int, function: int, address: int, count: int) -> bytes | None:
+        """The reply to a read of ``unit``'s status block after its transaction id, or None
+        (no such unit, another function, or not within the block)."""
+        block = self.blocks.get(unit)
+        if block is None:
+            return None
+        registers = block.inputs
+        key = (unit, function, address, count)
+        cached = self._replies.get(key)
+        if cached is not None and cached[0] is registers:
+            return cached[1]
+        if function == READ_INPUTS:
+            start = address
+        elif function == READ_HOLDINGS:
+            start = address - self.mirror
+        else:
+            return None
+        if start < 0 or not 1 <= count <= MAX_READ_REGISTERS or start + count > len(registers):
+            return None
+        body = READ_REPLY.pack(0, 3 + 2 * count, unit, function, 2 * count) + struct.pack(
+            f">{count}H", *registers[start : start + count]
+        )
+        if len(self._replies) >= REPLY_CACHE_LIMIT:
+            self._replies.clear()  # a client reading every possible range: start again
+        self._replies[key] = (registers, body)
+        return body
 
 
 class GatewayRequestHandler(ServerRequestHandler):
@@ -363,6 +399,7 @@ class GatewayRequestHandler(ServerRequestHandler):
                 break  # the rest of a frame is still to come
             used += size
             framed += 1
+        if framed:
             self.last_request = self.loop.time()
         self._flush_out()
         if self.transport is not None and len(self._queue) >= PIPELINE_LIMIT:
@@ -381,28 +418,21 @@ class GatewayRequestHandler(ServerRequestHandler):
         fast = self.gateway.fast_reads
         if fast is None or self._queue or self._worker is not None:
             return 0
-        end = at + HEADER_SIZE + READ_PDU.size
+        end = at + READ_REQUEST.size
         if len(data) < end:
             return 0
-        transaction, protocol, length, unit = READ_REPLY.unpack_from(data, at)[:4]
+        transaction, protocol, length, unit, function, address, count = READ_REQUEST.unpack_from(
+            data, at
+        )
         if protocol != 0 or length != READ_PDU_LENGTH:
             return 0
-        block = fast.blocks.get(unit)
-        if block is None:
-            return 0
-        function, address, count = READ_PDU.unpack_from(data, at + HEADER_SIZE)
-        if function == READ_INPUTS:
-            start = address
-        elif function == READ_HOLDINGS:
-            start = address - fast.mirror
-        else:
-            return 0
-        registers = block.inputs
-        if start < 0 or not 1 <= count <= MAX_READ_REGISTERS or start + count > len(registers):
+        body = fast.reply(unit, function, address, count)
+        if body is None:
             return 0
         self.gateway.counters.requests += 1
-        self._out += READ_REPLY.pack(transaction, 0, 3 + 2 * count, unit, function, 2 * count)
-        self._out += struct.pack(f">{count}H", *registers[start : start + count])
+        out = self._out
+        out += transaction.to_bytes(2, "big")
+        out += body
         return end - at
 
     def _flush_out(self) -> None:

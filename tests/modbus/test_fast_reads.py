@@ -105,3 +105,19 @@ async def test_a_flood_of_status_reads_is_served_in_bounded_batches(
     assert sum(writes) == flood * reply_size
     assert max(writes) <= 64 * reply_size  # PIPELINE_LIMIT replies at most per write
     assert len(writes) < flood // 4  # batched, not one write per reply
+
+
+async def test_a_new_encoding_is_read_at_once(
+    start_gateway: StartGateway, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Replies are kept while a unit's registers stay the same list; a new state's
+    encoding (a new list) is what the next read returns."""
+    gw = await start_gateway()
+    monkeypatch.setattr(DriveUnit, "update", lambda self, state: None)
+    unit = gw.frontend.drives["d1"]
+    frame = mbap(D1, read(4, 0, INPUTS))
+    for base in (100, 200, 200, 300):
+        if unit.inputs[0] != base:
+            unit.inputs = [base + i for i in range(INPUTS)]
+        (reply,) = await exchange(gw.port, frame, 1)
+        assert reply[9:] == b"".join(v.to_bytes(2, "big") for v in range(base, base + INPUTS))
