@@ -345,6 +345,22 @@ def _cycles_in(cycles: list[list[float]], t0: float, t1: float) -> list[float]:
     return [seconds for end, seconds in cycles if t0 <= end < t1]
 
 
+def _gc_figure(pauses: list[list[float]], window: float) -> Figure:
+    """The gateway's longest garbage-collection pause in the window, and how much there was."""
+    longest = max((p[2] for p in pauses), default=0.0)
+    by_gen = {g: sum(1 for p in pauses if p[1] == g) for g in (0, 1, 2)}
+    total = sum(p[2] for p in pauses)
+    return Figure(
+        "plant_gateway_gc_pause_max",
+        round(longest * 1e3, 3),
+        "ms",
+        note=(
+            f"collections per generation {by_gen}, {total / window * 100:.2f} % of the time "
+            "(a pause holds every line's loop)"
+        ),
+    )
+
+
 def _jitter_p99(cycles: list[float]) -> tuple[float, float]:
     """(median cycle, p99 of |cycle - median|), seconds."""
     median = statistics.median(cycles)
@@ -450,6 +466,7 @@ def measure(plant: Plant) -> list[Figure]:
         _stop_all(plant)
         doc = _read_json(record) or {}
         cycles = doc.get("cycles", {"profibus": [], "devicenet": []})
+        gc_pauses = [p for p in doc.get("gc", []) if t0 <= p[0] < t1]
         pbsim = _read_json(tmp / "profibus-sim.json")
         canlog = None
         if plant.devicenet and (tmp / "canbus.ends").exists():
@@ -468,6 +485,7 @@ def measure(plant: Plant) -> list[Figure]:
         clients=clients,
         load=(load_before, load_after),
         others=others,
+        gc_pauses=gc_pauses,
     )
 
 
@@ -485,6 +503,7 @@ def _figures(
     clients: dict[str, Any],
     load: tuple[tuple[float, ...], tuple[float, ...]],
     others: dict[str, float],
+    gc_pauses: list[list[float]],
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
@@ -501,6 +520,7 @@ def _figures(
             note=f"gateway utime+stime / wall; {conditions}",
         ),
         Figure("plant_gateway_rss", round(rss, 1), "MiB", note="VmRSS at the end of the window"),
+        _gc_figure(gc_pauses, t1 - t0),
     ]
     if plant.profibus:
         bus = bus_params()

@@ -10,7 +10,8 @@
   request to end of the cycle, :class:`~adapters.profibus.figures.LineFigures`.cycle;
   DeviceNet scanner: poll cycle), as (monotonic end time, seconds) pairs, and twice a
   second the number of drives online; written at ``--record`` (the status part every
-  0.5 s, the cycles when the daemon ends). The recording is a list append per cycle;
+  0.5 s, the cycles when the daemon ends), and every garbage collection's pause. The
+  recording is a list append per cycle and per collection;
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
 
 The daemon is the real one (``gateway.daemon.Daemon``), set up as ``drive-gateway run``
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import cProfile
+import gc
 import json
 import logging
 import os
@@ -32,6 +34,21 @@ from typing import Any
 from bench.plant import canbus
 
 CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": []}
+GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
+
+
+def _hook_gc() -> None:
+    """Record every garbage collection's pause (its generation, its duration)."""
+    started = [0.0]
+
+    def on_gc(phase: str, info: dict[str, int]) -> None:
+        now = time.perf_counter()
+        if phase == "start":
+            started[0] = now
+        else:
+            GC_PAUSES.append((time.monotonic(), info["generation"], now - started[0]))
+
+    gc.callbacks.append(on_gc)
 
 
 def _hook_cycles() -> None:
@@ -68,6 +85,7 @@ def _write(path: str, online: int, total: int, final: bool) -> None:
     doc: dict[str, Any] = {"online": online, "drives": total, "final": final, "pid": os.getpid()}
     if final:
         doc["cycles"] = CYCLES
+        doc["gc"] = GC_PAUSES
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         json.dump(doc, f)
@@ -118,6 +136,7 @@ def main() -> None:
 
             setup_logging(args.log_level)
             _hook_cycles()
+            _hook_gc()
             status = asyncio.run(_daemon(argv[argv.index("--config") + 1], args.record))
         else:
             from gateway.cli import main as gateway_main

@@ -7,7 +7,7 @@ import contextlib
 from types import SimpleNamespace
 from typing import Any
 
-from gateway.zenoh.frontend import HEARTBEAT_BATCH, ZenohFrontEnd
+from gateway.zenoh.frontend import DIAG_BATCH, HEARTBEAT_BATCH, ZenohFrontEnd
 
 PERIOD = 1.0
 DRIVES = 20
@@ -67,3 +67,29 @@ async def test_heartbeats_due_soon_go_with_the_one_due_now() -> None:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
+
+
+async def test_diagnostics_of_many_drives_let_the_loop_run_between_batches() -> None:
+    clock = [0.0]
+    fe = fake_front_end(clock)
+    fe._drive_ids = [f"d{i}" for i in range(5 * DIAG_BATCH)]
+    sent: list[str] = []
+    fe._send_diag = lambda drive_id, wall: sent.append(drive_id)
+    seen: list[int] = []
+
+    async def probe() -> None:
+        while len(sent) < len(fe._drive_ids):
+            seen.append(len(sent))
+            await asyncio.sleep(0)
+
+    prober = asyncio.create_task(probe())
+    task = asyncio.create_task(ZenohFrontEnd._heartbeat(fe))
+    try:
+        await asyncio.wait_for(prober, 5.0)
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    assert sent == fe._drive_ids  # every drive's diagnostics, once, in order
+    # other tasks ran while the pass was under way, a batch apart
+    assert {n for n in seen if 0 < n < len(sent)} == {DIAG_BATCH * k for k in range(1, 5)}
