@@ -565,22 +565,23 @@ def _figures(
             extra,
         )
     mb = clients.get("modbus-clients", {})
-    figures.append(
-        Figure(
-            "plant_modbus_poll_rate",
-            round(mb.get("polls_per_unit_per_s", math.nan), 3),
-            "Hz",
-            reference=plant.modbus_rate,
-            target="ratio >= 0.99",
-            note=(
-                f"{plant.modbus_clients} clients x {drives} units, FC4 x 21 registers; "
-                f"{mb.get('requests_per_s', 0):.0f} requests/s, {mb.get('exceptions')} "
-                f"exceptions, {mb.get('late_rounds')} late rounds, round p50 "
-                f"{mb.get('round_ms_p50') or math.nan:.1f} ms p99 "
-                f"{mb.get('round_ms_p99') or math.nan:.1f} ms"
-            ),
+    if mb:
+        figures.append(
+            Figure(
+                "plant_modbus_poll_rate",
+                round(mb.get("polls_per_unit_per_s", math.nan), 3),
+                "Hz",
+                reference=plant.modbus_rate,
+                target="ratio >= 0.99",
+                note=(
+                    f"{plant.modbus_clients} clients x {drives} units, FC4 x 21 registers; "
+                    f"{mb.get('requests_per_s', 0):.0f} requests/s, {mb.get('exceptions')} "
+                    f"exceptions, {mb.get('late_rounds')} late rounds, round p50 "
+                    f"{mb.get('round_ms_p50') or math.nan:.1f} ms p99 "
+                    f"{mb.get('round_ms_p99') or math.nan:.1f} ms"
+                ),
+            )
         )
-    )
     zn = clients.get("zenoh-subscriber", {})
     figures.append(
         Figure(

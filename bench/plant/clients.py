@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import statistics
 import struct
 import threading
 import time
@@ -67,6 +68,7 @@ async def _client(
                 replies += 1
             done = time.monotonic()
             if began >= start:
+                out["began"].append(began)
                 out["rounds"] += 1
                 out["replies"] += replies
                 out["exceptions"] += exceptions
@@ -85,7 +87,14 @@ async def _modbus(args: argparse.Namespace) -> dict[str, Any]:
     now = time.monotonic()
     start, end = now + args.settle, now + args.settle + args.seconds
     outs: list[dict[str, Any]] = [
-        {"rounds": 0, "replies": 0, "exceptions": 0, "late_rounds": 0, "round_times": []}
+        {
+            "rounds": 0,
+            "replies": 0,
+            "exceptions": 0,
+            "late_rounds": 0,
+            "round_times": [],
+            "began": [],
+        }
         for _ in range(args.clients)
     ]
     await asyncio.gather(
@@ -100,7 +109,13 @@ async def _modbus(args: argparse.Namespace) -> dict[str, Any]:
         "replies": replies,
         "exceptions": sum(out["exceptions"] for out in outs),
         "late_rounds": sum(out["late_rounds"] for out in outs),
-        "polls_per_unit_per_s": replies / len(units) / args.clients / args.seconds,
+        # each client's rounds per second, from the first round it began to its last
+        "polls_per_unit_per_s": statistics.fmean(
+            (len(out["began"]) - 1) / (out["began"][-1] - out["began"][0])
+            if len(out["began"]) > 1
+            else 0.0
+            for out in outs
+        ),
         "requests_per_s": replies / args.seconds,
         "round_ms_p50": times[len(times) // 2] * 1e3 if times else None,
         "round_ms_p99": times[int(0.99 * (len(times) - 1))] * 1e3 if times else None,
