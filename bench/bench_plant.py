@@ -530,8 +530,9 @@ def _figures(
             late = pbsim["reply_lateness"]
             extra = (
                 f"; master turnaround seen on the line p50 {turn['p50_us']} us p99 "
-                f"{turn['p99_us']} us (TSYN {pbsim['tsyn_us']} us); simulator reply lateness "
-                f"p50 {late['p50_us']} us p99 {late['p99_us']} us"
+                f"{turn['p99_us']} us mean {turn['mean_us']} us (TSYN {pbsim['tsyn_us']} us); "
+                f"simulator reply lateness p50 {late['p50_us']} us p99 {late['p99_us']} us "
+                f"mean {late['mean_us']} us"
             )
         request, reply = exchange_bits()
         pb = _cycles_in(cycles["profibus"], t0, t1)

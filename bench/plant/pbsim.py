@@ -57,6 +57,7 @@ def _summary(values: deque[float]) -> dict[str, float]:
         "p50_us": round(_pct(data, 0.5) * 1e6, 1),
         "p99_us": round(_pct(data, 0.99) * 1e6, 1),
         "max_us": round(max(data, default=0.0) * 1e6, 1),
+        "mean_us": round(sum(data) / len(data) * 1e6, 1) if data else 0.0,
     }
 
 
