@@ -63,7 +63,7 @@ from adapters.profibus.dp import DataExchange, build_request
 from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
 from adapters.profibus.timing import BITS_PER_CHAR, BusParams
 from bench.common import Figure
-from bench.plant import canbus
+from bench.plant import PIN_ENV, canbus
 
 PROFIBUS_SLAVES: Final = 125
 PROFIBUS_BAUD: Final = 1_500_000
@@ -95,7 +95,13 @@ class Plant:
     seconds: float = MEASURE
     settle: float = SETTLE
     profile: str | None = None  # cProfile stats of the gateway, written here
+    # the gateway on one CPU, everything else on another (placement); off by default: on a
+    # machine shared with other work it made every figure worse (the gateway could not move
+    # away from a CPU another job held: 0.21 core but 15.6 x the Profibus minimum, 2.3 x on
+    # DeviceNet, Modbus late, in a run beside the unpinned ones of docs/decisions.md)
+    pin: bool = False
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+    logs: list[Any] = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------- the physics
@@ -228,10 +234,24 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def placement() -> tuple[frozenset[int], frozenset[int]] | None:
+    """(the gateway's CPU, the other processes' CPU), or None with fewer than two CPUs."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    return frozenset(cpus[:1]), frozenset(cpus[1:2])
+
+
 def _start(plant: Plant, name: str, argv: list[str], tmp: Path, **kw: Any) -> None:
-    log = open(tmp / f"{name}.log", "wb")  # noqa: SIM115 - closed with the process
+    log = open(tmp / f"{name}.log", "wb")  # noqa: SIM115 - closed in _stop_all
+    plant.logs.append(log)
+    where = placement() if plant.pin else None
+    env = dict(os.environ)
+    if where is not None:  # bench.plant.pin_from_env, before the child starts a thread
+        cpus = where[0] if name == "gateway" else where[1]
+        env[PIN_ENV] = ",".join(str(c) for c in sorted(cpus))
     plant.procs[name] = subprocess.Popen(
-        argv, cwd=HERE, stdout=kw.pop("stdout", log), stderr=log, **kw
+        argv, cwd=HERE, stdout=kw.pop("stdout", log), stderr=log, env=env, **kw
     )
 
 
@@ -261,6 +281,9 @@ def _stop_all(plant: Plant) -> None:
             with contextlib.suppress(ProcessLookupError):
                 proc.kill()
             proc.wait()
+    for log in plant.logs:
+        log.close()
+    plant.logs.clear()
 
 
 def _cpu_seconds(pid: int) -> float:
@@ -615,6 +638,11 @@ def main() -> int:
     parser.add_argument("--modbus-clients", type=int, default=MODBUS_CLIENTS)
     parser.add_argument("--modbus-rate", type=float, default=MODBUS_RATE)
     parser.add_argument("--profile", help="write the gateway's cProfile stats here")
+    parser.add_argument(
+        "--pin",
+        action="store_true",
+        help="the gateway on one CPU, the simulators and clients on another",
+    )
     args = parser.parse_args()
     plant = Plant(
         profibus=args.profibus,
@@ -623,6 +651,7 @@ def main() -> int:
         modbus_rate=args.modbus_rate,
         seconds=args.seconds,
         profile=args.profile,
+        pin=args.pin,
     )
     for figure in measure(plant):
         print(figure.line(), flush=True)

@@ -12,3 +12,16 @@ Nothing here is production code and nothing in ``gateway/`` or ``adapters/`` imp
   under cProfile);
 - :mod:`bench.plant.clients`: the Modbus TCP clients and the Zenoh subscriber.
 """
+
+import os
+
+PIN_ENV = "DRIVE_GATEWAY_BENCH_CPUS"
+"""The CPUs a bench process keeps to (comma-separated), set by :mod:`bench.bench_plant`."""
+
+
+def pin_from_env() -> None:
+    """Keep this process on the CPUs :data:`PIN_ENV` names (first thing in a main, so every
+    thread it starts inherits them)."""
+    text = os.environ.get(PIN_ENV)
+    if text:
+        os.sched_setaffinity(0, {int(c) for c in text.split(",")})

@@ -47,6 +47,8 @@ from typing import Any, Final
 
 import can
 
+from bench.plant import pin_from_env
+
 INTERFACE: Final = "plantcan"
 RECORD: Final = struct.Struct("<IBB8s")  # identifier, flags, DLC, data
 EXTENDED: Final = 0x01
@@ -331,6 +333,7 @@ def main() -> None:
     parser.add_argument("--bitrate", type=int, default=500_000)
     parser.add_argument("--out", required=True, help="prefix of the frame log files")
     args = parser.parse_args()
+    pin_from_env()
     serve(args.path, args.bitrate, args.out)
 
 

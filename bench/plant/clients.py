@@ -26,6 +26,8 @@ import threading
 import time
 from typing import Any
 
+from bench.plant import pin_from_env
+
 MBAP = struct.Struct(">HHHB")  # transaction, protocol 0, length, unit
 STATUS_REGISTERS = 21  # input registers 0-20: the drive's status block (docs/modbus-map.md)
 
@@ -176,6 +178,7 @@ def main() -> None:
         p.add_argument("--settle", type=float, default=2.0)
         p.add_argument("--seconds", type=float, required=True)
     args = parser.parse_args()
+    pin_from_env()
     result = asyncio.run(_modbus(args)) if args.what == "modbus" else _zenoh(args)
     print(json.dumps(result), flush=True)
     if args.what == "zenoh":

@@ -31,7 +31,7 @@ import sys
 import time
 from typing import Any
 
-from bench.plant import canbus
+from bench.plant import canbus, pin_from_env
 
 CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": []}
 GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
@@ -124,6 +124,7 @@ def main() -> None:
     parser.add_argument("--log-level", default="WARNING")
     parser.add_argument("argv", nargs=argparse.REMAINDER, help="-- drive-gateway arguments")
     args = parser.parse_args()
+    pin_from_env()
     argv = [a for a in args.argv if a != "--"] if args.argv[:1] == ["--"] else args.argv
     canbus.register()
     profiler = cProfile.Profile() if args.profile else None
