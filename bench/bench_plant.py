@@ -484,7 +484,11 @@ def measure(plant: Plant) -> list[Figure]:
             if name not in plant.procs:
                 continue
             out, _ = plant.procs[name].communicate(timeout=plant.settle + 30)
-            clients[name] = json.loads(out.decode().strip().splitlines()[-1])
+            lines = out.decode().strip().splitlines()
+            if not lines:  # it failed: its log says why
+                text = (tmp / f"{name}.log").read_text(errors="replace")[-2000:]
+                raise RuntimeError(f"{name} ended without its figures:\n{text}")
+            clients[name] = json.loads(lines[-1])
         # the end: SIGTERM; the launcher writes the cycles, the simulators their figures
         _stop_all(plant)
         doc = _read_json(record) or {}
