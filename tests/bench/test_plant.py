@@ -83,7 +83,7 @@ def test_the_bench_bus_carries_frames_between_processes_paced(tmp_path: Path) ->
 
 def test_a_tiny_plant_runs_and_stops() -> None:
     plant = bench_plant.Plant(
-        profibus=2, devicenet=2, modbus_clients=2, modbus_rate=5.0, seconds=1.5, settle=0.5
+        profibus=2, devicenet=2, modbus_clients=2, modbus_rate=5.0, seconds=2.5, settle=0.5
     )
     figures = {f.name: f for f in bench_plant.measure(plant)}
     assert all(proc.poll() is not None for proc in plant.procs.values())
