@@ -208,15 +208,25 @@ def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> s
 
 
 def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
-    """TODO(canopen): the CANopen line, once ``adapters/canopen`` is merged.
+    """TODO(canopen): the CANopen line, once ``adapters/canopen`` is merged here.
 
-    Fill in: a ``[buses.canopen]`` table (``adapter = "canopen"``, ``interface =
-    canbus.INTERFACE``, ``channel = tmp / "canopen.sock"``, 500 kbit/s) with
-    ``plant.canopen`` CiA 402 drives, units from ``first_unit``; in :func:`_start_lines` a
-    second broker on that socket and ``drive-gateway sim canopen`` through
-    :mod:`bench.plant.launch` on it; in :func:`_line_figures` the "canopen" cycles (add a
-    hook for its cycle to ``bench.plant.launch._hook_cycles``) against the bit-time sum of
-    its frames, as for DeviceNet.
+    What main has (read there, 2026-11-27): bus keys ``interface``, ``channel``,
+    ``bitrate``, ``sync_period``, ``pdo_period``, ``heartbeat``... (adapters/canopen/
+    options.py), drives with ``device`` a CiA 402 model and ``eds``; the simulator is
+    ``drive-gateway sim canopen --interface I --channel C --node N [--node N ...]``
+    (adapters/canopen/cli.py); the master is SYNC-driven (``Master._cycle`` at each SYNC,
+    adapters/canopen/master/engine.py), so its cycle is ``sync_period``, not back to back.
+
+    To fill in: a ``[buses.canopen]`` table (``adapter = "canopen"``, ``interface =
+    canbus.INTERFACE``, ``channel = tmp / "canopen.sock"``, ``bitrate = 500000``, a
+    ``sync_period`` a little above the bit-time sum of one SYNC cycle's frames: SYNC +
+    32 RPDOs + 32 TPDOs, about 9 ms) with ``plant.canopen`` drives, units from
+    ``first_unit``; in :func:`_start_lines` a second broker on that socket and ``sim
+    canopen`` through :mod:`bench.plant.launch` with ``--node 1 ... --node 32``; a hook in
+    ``launch._hook_cycles`` recording the time between two ``Master._cycle`` calls; in
+    :func:`_figures` the "canopen" cycles against ``sync_period`` (its jitter) and the
+    bit-time sum of the frames per SYNC cycle from its broker's log (must fit in it), as
+    for DeviceNet. Then ``Plant.canopen = CANOPEN_NODES`` by default.
     """
     if plant.canopen:
         raise NotImplementedError("the CANopen line of the plant bench is not there yet")
