@@ -220,8 +220,8 @@ def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
     To fill in: a ``[buses.canopen]`` table (``adapter = "canopen"``, ``interface =
     canbus.INTERFACE``, ``channel = tmp / "canopen.sock"``, ``bitrate = 500000``, a
     ``sync_period`` a little above the bit-time sum of one SYNC cycle's frames: SYNC +
-    32 RPDOs + 32 TPDOs, about 9 ms) with ``plant.canopen`` drives, units from
-    ``first_unit``; in :func:`_start_lines` a second broker on that socket and ``sim
+    32 RPDOs + 32 TPDOs of 4 bytes, about 5,500 bit times: 11 ms) with ``plant.canopen``
+    drives, units from ``first_unit``; in :func:`_start_lines` a second broker on that socket and ``sim
     canopen`` through :mod:`bench.plant.launch` with ``--node 1 ... --node 32``; a hook in
     ``launch._hook_cycles`` recording the time between two ``Master._cycle`` calls; in
     :func:`_figures` the "canopen" cycles against ``sync_period`` (its jitter) and the
