@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import pkgutil
 import sys
 import time
@@ -25,7 +26,14 @@ def main() -> int:
     parser.add_argument(
         "only", nargs="*", help="run only benchmarks whose module name contains this"
     )
+    parser.add_argument(
+        "--short",
+        action="store_true",
+        help="shorter measuring windows where a benchmark has them (bench_plant: 8 s, not 30 s)",
+    )
     args = parser.parse_args()
+    if args.short:
+        os.environ["BENCH_SHORT"] = "1"
     figures: list[Figure] = []
     for name in discover(args.only):
         module = importlib.import_module(f"bench.{name}")

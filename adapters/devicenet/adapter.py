@@ -238,6 +238,7 @@ class DeviceNetAdapter:
         self.link: Link | None = None
         self._driver: CanDriver[CanFrame, Event, Action] | None = None
         self._next_refresh = 0.0
+        self._refreshed_cycle = -1  # the poll cycles counted at the last refresh
         self._hub: HubPort | None = None
         self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
         self._adr: LineProbe | None = None
@@ -314,6 +315,7 @@ class DeviceNetAdapter:
         link = links.link()
         engine = Scanner(self.scanner_config(), self.node_configs())
         self._next_refresh = 0.0
+        self._refreshed_cycle = -1
         async with link:
             self.link, self.engine = link, engine
             driver = self._driver = CanDriver(engine, link, _Line(self), self.clock)
@@ -342,14 +344,32 @@ class DeviceNetAdapter:
         self._pending.clear()
 
     def _before_step(self, now: float) -> None:
-        """Desired commands reach the outputs once per poll."""
-        if now >= self._next_refresh:
+        """Desired commands reach the outputs once per poll: every ``poll_interval``, and
+        no more than once per poll cycle (a cycle longer than the interval polls each node
+        once; refreshing the outputs meanwhile would cost a pass over every drive, every
+        interval, for nothing)."""
+        if now >= self._next_refresh and self._refresh_due():
             self._refresh_outputs(now)
             self._next_refresh = now + self.options.poll_interval
+            if self.engine is not None:
+                self._refreshed_cycle = self.engine.line.cycles
 
-    def _wake_at(self) -> float:
+    def _refresh_due(self) -> bool:
+        """No poll cycle under way, or one ended since the last refresh."""
+        engine = self.engine
+        return (
+            engine is None
+            or engine.schedule.cycle_started is None
+            or engine.line.cycles != self._refreshed_cycle
+        )
+
+    def _wake_at(self) -> float | None:
         adr = self._adr.next_deadline() if self._adr is not None else None
-        return self._next_refresh if adr is None else min(self._next_refresh, adr)
+        # mid-cycle the refresh waits for the cycle's end: an event (its last poll reply,
+        # or the scanner's own poll timeout), which steps the driver anyway
+        refresh = self._next_refresh if self._refresh_due() else None
+        times = [t for t in (refresh, adr) if t is not None]
+        return min(times) if times else None
 
     def _received(self, now: float, event: LinkEvent) -> None:
         if self._adr is not None and isinstance(event, RxFrame):

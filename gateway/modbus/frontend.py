@@ -48,6 +48,7 @@ from gateway.modbus.server import (
     CURRENT_CLIENT,
     AccessPolicy,
     Counters,
+    FastReads,
     GatewayServer,
 )
 from gateway.model import DriveState, Source
@@ -291,6 +292,7 @@ class ModbusFrontEnd:
                 idle_timeout=self.section.idle_timeout,
             ),
             on_peer=self.shared.memory.peer,
+            fast_reads=FastReads({u.unit: u for u in self.drives.values()}, MIRROR_OFFSET),
         )
         self.address = await server.start()
         self._server = server

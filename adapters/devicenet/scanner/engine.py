@@ -223,8 +223,11 @@ class Scanner:
         if self.phase is not LinePhase.ONLINE:
             return min(times) if times else None
         times.extend(self.schedule.deadlines())
+        soonest = self.machine.soonest
         for node in self.nodes.values():
-            times.extend(self.machine.deadlines(node))
+            t = soonest(node)
+            if t is not None:
+                times.append(t)
         return min(times) if times else None
 
     def _tick(self, now: float) -> None:
@@ -234,8 +237,10 @@ class Scanner:
             return
         self.schedule.bringing = self.schedule.bringups()
         ticks = self._ticks
+        idle = self.machine.idle_until
         for node in self.nodes.values():
-            ticks[node.phase](node, now)
+            if not idle(node, now):  # a steady node with nothing due: its tick is a no-op
+                ticks[node.phase](node, now)
         if not self._ctx.leaving:
             self.schedule.polls(now)
 
@@ -247,7 +252,9 @@ class Scanner:
         node = ctx.touched
         if node is not None:
             self._ticks[node.phase](node, now)
-            ctx.fold(self.machine.deadlines(node))
+            soonest = self.machine.soonest(node)
+            if soonest is not None:
+                ctx.fold((soonest,))
         if not ctx.leaving:
             self.schedule.after_frame(now)
 

@@ -100,6 +100,41 @@ class NodeMachine:
             Phase.RELEASED: _nothing,
         }
 
+    @staticmethod
+    def steady(node: Node) -> bool:
+        """Online, polled, and nothing under way but its polls: its only timers are the
+        inactivity and the keep-alive (what :meth:`deadlines` gives it then)."""
+        return (
+            node.phase is Phase.ONLINE
+            and node.cfg.io is IoKind.POLLED
+            and node.unconnected is None
+            and node.current is None
+            and not node.queue
+            and node.reassembler.deadline is None
+            and node.io_reassembler.deadline is None
+        )
+
+    def soonest(self, node: Node) -> float | None:
+        """``min(deadlines(node))``, or None: a steady node's two timers without the list
+        (the scanner takes it for every node on each timer step)."""
+        if self.steady(node):
+            ctx = self.ctx
+            return min(
+                node.last_rx + INACTIVITY_EPR_FACTOR * node.epr,
+                ctx.gated(node.last_explicit + ctx.config.explicit_epr / 2),
+            )
+        times = self.deadlines(node)
+        return min(times) if times else None
+
+    def idle_until(self, node: Node, now: float) -> bool:
+        """A steady node whose tick at ``now`` would do nothing: neither its inactivity
+        nor its keep-alive (ungated: the tick queues it whatever the send hold) has come."""
+        return (
+            self.steady(node)
+            and now < node.last_rx + INACTIVITY_EPR_FACTOR * node.epr
+            and now < node.last_explicit + self.ctx.config.explicit_epr / 2
+        )
+
     def deadlines(self, node: Node) -> list[float]:
         """The node's timers; those that lead to a send are gated by the send hold."""
         ctx = self.ctx

@@ -1,0 +1,676 @@
+"""A whole plant on one gateway: every line paced at its bit rate, every front end loaded.
+
+Processes (all on 127.0.0.1, each started and killed by pid):
+
+- the gateway: ``drive-gateway run`` through :mod:`bench.plant.launch` (which registers the
+  bench CAN bus and records each line's cycles), with the drives, lines and front ends below;
+- Profibus DP: :data:`PROFIBUS_SLAVES` CFW700 drives (4 I/O words, manufacturer profile) at
+  1.5 Mbit/s, master at address 0, slaves 1-125, cycle back to back; the slaves simulated
+  in their own process on a pty (:mod:`bench.plant.pbsim`, the line of
+  ``drive-gateway sim profibus --config``), each reply held for its line time;
+- DeviceNet: :data:`DEVICENET_NODES` CFW-08 drives (polled, assembly 21/71) at 500 kbit/s:
+  ``drive-gateway sim devicenet`` in its own process, on the bench CAN bus
+  (:mod:`bench.plant.canbus`: a broker process that arbitrates and paces every frame at its
+  bit time); the scanner's poll interval is its minimum (1 ms): cycles back to back;
+- CANopen: :data:`CANOPEN_NODES` CiA 402 drives once the ``canopen`` adapter exists
+  (see :func:`canopen_line`, a marked hook);
+- :data:`MODBUS_CLIENTS` Modbus TCP clients each polling every drive's status block at
+  :data:`MODBUS_RATE` Hz, and one Zenoh subscriber to every drive's state
+  (:mod:`bench.plant.clients`, one process each).
+
+Figures, over the measured window (after every drive is online and a settling time):
+
+- the gateway's CPU as a share of one core: its process's utime + stime
+  (``/proc/<pid>/stat``) over the wall time; its RSS (``/proc/<pid>/status`` VmRSS);
+- each line's median cycle time against its physical minimum (the reference; target
+  ratio <= 1.05). Profibus (Felser): the sum over the slaves of request and reply telegram
+  bits (11 bits per character) + min TSDR + TSYN, plus the Global_Control broadcast
+  (its telegram + TSYN every ``global_control_period``); DeviceNet: the bit-time sum of the
+  frames the broker carried in the window (stuff bits counted exactly, see
+  :func:`bench.plant.canbus.frame_bits`) divided by the cycles in it;
+- each line's p99 cycle jitter: the 99th percentile of |cycle - median cycle|, against the
+  median cycle (target ratio < 0.10);
+- what the clients saw: polls per drive per second (reference: the rate asked) and Zenoh
+  state samples per second over the drives that published;
+- line diagnostics: the master's turnaround seen from the Profibus line (reply written ->
+  next request read, against TSYN), how late the paced simulators and the CAN broker were.
+
+``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--profile F]``;
+``make bench`` runs it with :data:`MEASURE` seconds (``BENCH_PLANT_SECONDS`` overrides, the
+``--short`` flag of ``python -m bench`` gives :data:`SHORT_MEASURE`). Start-up is bounded
+by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from adapters.profibus.dp import DataExchange, build_request
+from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
+from adapters.profibus.timing import BITS_PER_CHAR, BusParams
+from bench.common import Figure
+from bench.plant import PIN_ENV, canbus
+
+PROFIBUS_SLAVES: Final = 125
+PROFIBUS_BAUD: Final = 1_500_000
+PROFIBUS_WORDS: Final = 4  # CFW700 I/O words (P0922 = 3), in and out
+MASTER_ADDRESS: Final = 0
+DEVICENET_NODES: Final = 63
+CAN_BITRATE: Final = 500_000
+CANOPEN_NODES: Final = 32  # used once the canopen adapter exists (canopen_line)
+MODBUS_CLIENTS: Final = 10
+MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
+MEASURE: Final = 30.0  # s measured (make bench)
+SHORT_MEASURE: Final = 8.0  # s measured with --short
+SETTLE: Final = 3.0  # s of full load before the window opens
+STARTUP_BOUND: Final = 60.0  # s for every drive to come online
+STOP_BOUND: Final = 15.0  # s for a process to end after SIGTERM (then SIGKILL)
+PY: Final = sys.executable
+HERE: Final = Path(__file__).resolve().parent.parent
+
+
+@dataclass
+class Plant:
+    """What one run starts; sizes can be made tiny (the test)."""
+
+    profibus: int = PROFIBUS_SLAVES
+    devicenet: int = DEVICENET_NODES
+    canopen: int = 0  # TODO(canopen): CANOPEN_NODES once the adapter is merged
+    modbus_clients: int = MODBUS_CLIENTS
+    modbus_rate: float = MODBUS_RATE
+    seconds: float = MEASURE
+    settle: float = SETTLE
+    profile: str | None = None  # cProfile stats of the gateway, written here
+    # the gateway on one CPU, everything else on another (placement); off by default: on a
+    # machine shared with other work it made every figure worse (the gateway could not move
+    # away from a CPU another job held: 0.21 core but 15.6 x the Profibus minimum, 2.3 x on
+    # DeviceNet, Modbus late, in a run beside the unpinned ones of docs/decisions.md)
+    pin: bool = False
+    procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+    logs: list[Any] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------- the physics
+
+
+def bus_params() -> BusParams:
+    return BusParams.for_baudrate(PROFIBUS_BAUD, master_address=MASTER_ADDRESS)
+
+
+def exchange_bits(words: int = PROFIBUS_WORDS) -> tuple[int, int]:
+    """Line bits of a Data_Exchange request and of its reply with ``words`` words each way."""
+    data = bytes(2 * words)
+    request = build_request(DataExchange(data), da=1, sa=MASTER_ADDRESS, fc=_srd())
+    reply = DataTelegram(MASTER_ADDRESS, 1, ResponseFc(ResponseStatus.DL), data=data)
+    return BITS_PER_CHAR * len(request.encode()), BITS_PER_CHAR * len(reply.encode())
+
+
+def _srd() -> Any:
+    from adapters.profibus.fdl import FcbState
+
+    return FcbState(fcb=True, fcv=True).fc(RequestFunction.SRD_HIGH)
+
+
+def felser_cycle(slaves: int, bus: BusParams | None = None) -> float:
+    """The physical minimum of a DP cycle, seconds (module docstring; fact sheet 1.1)."""
+    bus = bus or bus_params()
+    request, reply = exchange_bits()
+    per_slave = request + reply + bus.min_tsdr + 33  # TSYN: 33 bit times before a request
+    slaves_time = slaves * per_slave * bus.t_bit
+    from adapters.profibus.dp import GlobalControl, global_control_request
+
+    gc = global_control_request(GlobalControl.operate(), sa=MASTER_ADDRESS).encode()
+    gc_time = (BITS_PER_CHAR * len(gc) + 33) * bus.t_bit
+    return slaves_time / (1.0 - gc_time / bus.global_control_period)
+
+
+# ---------------------------------------------------------------------- the config
+
+
+def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> str:
+    lines = [
+        "[gateway]",
+        'name = "plant"',
+        'log_level = "WARNING"',
+        "[zenoh]",
+        'prefix = "plant"',
+        'mode = "peer"',
+        f'listen = ["tcp/127.0.0.1:{zenoh_port}"]',
+        "connect = []",
+        "multicast_scouting = false",
+        "[modbus]",
+        f'bind = "127.0.0.1:{modbus_port}"',
+        'allow = ["127.0.0.0/8"]',
+    ]
+    unit = 1
+    if plant.profibus:
+        lines += [
+            "[buses.profibus]",
+            'adapter = "profibus"',
+            f'port = "{tmp / "profibus.tty"}"',
+            f"baudrate = {PROFIBUS_BAUD}",
+            f"master_address = {MASTER_ADDRESS}",
+            "cycle_time = 0.0",
+            "watchdog = 2.0",
+            "latency = 0.05",
+            "live_list_period = 0.0",
+        ]
+        for address in range(1, plant.profibus + 1):
+            lines += [
+                "[[buses.profibus.drives]]",
+                f'id = "pb{address}"',
+                'device = "CFW700"',
+                f"address = {address}",
+                f"modbus_unit = {unit}",
+                'data_profile = "manufacturer"',
+                f"words = {PROFIBUS_WORDS}",
+            ]
+            unit += 1
+    if plant.devicenet:
+        lines += [
+            "[buses.devicenet]",
+            'adapter = "devicenet"',
+            f'interface = "{canbus.INTERFACE}"',
+            f'channel = "{tmp / "can.sock"}"',
+            f"bitrate = {CAN_BITRATE}",
+            "mac = 0",
+            "poll_interval = 0.001",
+            "expected_packet_rate = 0.5",
+        ]
+        for mac in range(1, plant.devicenet + 1):
+            lines += [
+                "[[buses.devicenet.drives]]",
+                f'id = "dn{mac}"',
+                'device = "CFW-08"',
+                f"address = {mac}",
+                f"modbus_unit = {unit}",
+                "assembly = 21",
+                'connection = "polled"',
+                "max_rpm = 1800",
+            ]
+            unit += 1
+    lines += canopen_line(plant, tmp, unit)
+    return "\n".join(lines) + "\n"
+
+
+def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
+    """TODO(canopen): the CANopen line, once ``adapters/canopen`` is merged here.
+
+    What main has (read there, 2026-11-27): bus keys ``interface``, ``channel``,
+    ``bitrate``, ``sync_period``, ``pdo_period``, ``heartbeat``... (adapters/canopen/
+    options.py), drives with ``device`` a CiA 402 model and ``eds``; the simulator is
+    ``drive-gateway sim canopen --interface I --channel C --node N [--node N ...]``
+    (adapters/canopen/cli.py); the master is SYNC-driven (``Master._cycle`` at each SYNC,
+    adapters/canopen/master/engine.py), so its cycle is ``sync_period``, not back to back.
+
+    To fill in: a ``[buses.canopen]`` table (``adapter = "canopen"``, ``interface =
+    canbus.INTERFACE``, ``channel = tmp / "canopen.sock"``, ``bitrate = 500000``, a
+    ``sync_period`` a little above the bit-time sum of one SYNC cycle's frames: SYNC +
+    32 RPDOs + 32 TPDOs of 4 bytes, about 5,500 bit times: 11 ms) with ``plant.canopen``
+    drives, units from ``first_unit``; in :func:`_start_lines` a second broker on that socket and ``sim
+    canopen`` through :mod:`bench.plant.launch` with ``--node 1 ... --node 32``; a hook in
+    ``launch._hook_cycles`` recording the time between two ``Master._cycle`` calls; in
+    :func:`_figures` the "canopen" cycles against ``sync_period`` (its jitter) and the
+    bit-time sum of the frames per SYNC cycle from its broker's log (must fit in it), as
+    for DeviceNet. Then ``Plant.canopen = CANOPEN_NODES`` by default.
+    """
+    if plant.canopen:
+        raise NotImplementedError("the CANopen line of the plant bench is not there yet")
+    return []
+
+
+# ---------------------------------------------------------------------- processes
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def placement() -> tuple[frozenset[int], frozenset[int]] | None:
+    """(the gateway's CPU, the other processes' CPU), or None with fewer than two CPUs."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    return frozenset(cpus[:1]), frozenset(cpus[1:2])
+
+
+def _start(plant: Plant, name: str, argv: list[str], tmp: Path, **kw: Any) -> None:
+    log = open(tmp / f"{name}.log", "wb")  # noqa: SIM115 - closed in _stop_all
+    plant.logs.append(log)
+    where = placement() if plant.pin else None
+    env = dict(os.environ)
+    if where is not None:  # bench.plant.pin_from_env, before the child starts a thread
+        cpus = where[0] if name == "gateway" else where[1]
+        env[PIN_ENV] = ",".join(str(c) for c in sorted(cpus))
+    plant.procs[name] = subprocess.Popen(
+        argv, cwd=HERE, stdout=kw.pop("stdout", log), stderr=log, env=env, **kw
+    )
+
+
+def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
+    end = time.monotonic() + bound
+    while not ready():
+        for name, proc in plant.procs.items():
+            if proc.poll() is not None:
+                text = (tmp / f"{name}.log").read_text(errors="replace")[-2000:]
+                raise RuntimeError(f"{name} ended ({proc.returncode}) before {what}:\n{text}")
+        if time.monotonic() > end:
+            raise RuntimeError(f"no {what} within {bound:g} s")
+        time.sleep(0.1)
+
+
+def _stop_all(plant: Plant) -> None:
+    """SIGTERM every process started, by pid; SIGKILL what has not ended in STOP_BOUND."""
+    for proc in plant.procs.values():
+        if proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(signal.SIGTERM)
+    end = time.monotonic() + STOP_BOUND
+    for proc in plant.procs.values():
+        try:
+            proc.wait(max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+            proc.wait()
+    for log in plant.logs:
+        log.close()
+    plant.logs.clear()
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+
+
+def _host_busy() -> tuple[int, int]:
+    """(busy, total) jiffies of all CPUs (/proc/stat): what else ran on the machine."""
+    fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    idle = fields[3] + fields[4]  # idle, iowait
+    return sum(fields) - idle, sum(fields)
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+@contextlib.contextmanager
+def _plant(plant: Plant) -> Iterator[Path]:
+    with tempfile.TemporaryDirectory(prefix="plant-") as name:
+        try:
+            yield Path(name)
+        finally:
+            _stop_all(plant)
+
+
+def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
+    launch = [PY, "-m", "bench.plant.launch"]
+    if plant.devicenet:
+        sock = tmp / "can.sock"
+        _start(
+            plant,
+            "canbus",
+            [
+                *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
+                *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / "canbus")),
+            ],
+            tmp,
+        )
+        _wait("the CAN broker", sock.exists, 20, plant, tmp)
+        nodes = f"1-{plant.devicenet}" if plant.devicenet > 1 else "1"
+        _start(
+            plant,
+            "devicenet-sim",
+            [
+                *(*launch, "--", "sim", "devicenet", "--interface", canbus.INTERFACE),
+                *("--channel", str(sock), "--nodes", nodes, "--assembly", "21"),
+                *("--log-level", "WARNING"),
+            ],
+            tmp,
+        )
+    if plant.profibus:
+        link = tmp / "profibus.tty"
+        _start(
+            plant,
+            "profibus-sim",
+            [
+                *(PY, "-m", "bench.plant.pbsim", "--config", str(config)),
+                *("--baud", str(PROFIBUS_BAUD), "--link", str(link)),
+                *("--out", str(tmp / "profibus-sim.json")),
+            ],
+            tmp,
+        )
+        _wait("the Profibus pty", link.exists, 20, plant, tmp)
+
+
+# ---------------------------------------------------------------------- figures
+
+
+def _cycles_in(cycles: list[list[float]], t0: float, t1: float) -> list[float]:
+    return [seconds for end, seconds in cycles if t0 <= end < t1]
+
+
+def _gc_figure(pauses: list[list[float]], window: float) -> Figure:
+    """The gateway's longest garbage-collection pause in the window, and how much there was."""
+    longest = max((p[2] for p in pauses), default=0.0)
+    by_gen = {g: sum(1 for p in pauses if p[1] == g) for g in (0, 1, 2)}
+    total = sum(p[2] for p in pauses)
+    return Figure(
+        "plant_gateway_gc_pause_max",
+        round(longest * 1e3, 3),
+        "ms",
+        note=(
+            f"collections per generation {by_gen}, {total / window * 100:.2f} % of the time "
+            "(a pause holds every line's loop)"
+        ),
+    )
+
+
+def _jitter_p99(cycles: list[float]) -> tuple[float, float]:
+    """(median cycle, p99 of |cycle - median|), seconds."""
+    median = statistics.median(cycles)
+    dev = sorted(abs(c - median) for c in cycles)
+    return median, dev[min(len(dev) - 1, int(0.99 * len(dev)))]
+
+
+def _line_figures(
+    name: str, cycles: list[float], minimum: float, note: str, extra: str = ""
+) -> list[Figure]:
+    if not cycles:
+        return [Figure(f"plant_{name}_cycle", math.nan, "ms", note="no cycle in the window")]
+    median, jitter = _jitter_p99(cycles)
+    return [
+        Figure(
+            f"plant_{name}_cycle",
+            round(median * 1e3, 3),
+            "ms",
+            reference=round(minimum * 1e3, 3),
+            target="ratio <= 1.05",
+            note=f"median of {len(cycles)} cycles; reference: {note}{extra}",
+        ),
+        Figure(
+            f"plant_{name}_jitter_p99",
+            round(jitter * 1e3, 3),
+            "ms",
+            reference=round(median * 1e3, 3),
+            target="ratio < 0.10",
+            note="p99 of |cycle - median|; reference: the median cycle",
+        ),
+    ]
+
+
+def measure(plant: Plant) -> list[Figure]:
+    """Run the plant; the figures (module docstring)."""
+    with _plant(plant) as tmp:
+        modbus_port, zenoh_port = _free_port(), _free_port()
+        config = tmp / "plant.toml"
+        config.write_text(config_text(plant, tmp, modbus_port, zenoh_port))
+        _start_lines(plant, tmp, config)
+        record = tmp / "gateway.json"
+        gateway = [PY, "-m", "bench.plant.launch", "--record", str(record)]
+        if plant.profile:
+            gateway += ["--profile", plant.profile]
+        _start(plant, "gateway", [*gateway, "--", "run", "--config", str(config)], tmp)
+        drives = plant.profibus + plant.devicenet + plant.canopen
+
+        def all_online() -> bool:
+            doc = _read_json(record)
+            return bool(doc) and doc["online"] == drives
+
+        _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
+        load_before = os.getloadavg()
+        client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
+        if plant.modbus_clients:
+            _start(
+                plant,
+                "modbus-clients",
+                [
+                    *(PY, "-m", "bench.plant.clients", "modbus", "--port", str(modbus_port)),
+                    *("--units", f"1-{drives}", "--clients", str(plant.modbus_clients)),
+                    *("--rate", str(plant.modbus_rate), *client_args),
+                ],
+                tmp,
+                stdout=subprocess.PIPE,
+            )
+        _start(
+            plant,
+            "zenoh-subscriber",
+            [
+                *(PY, "-m", "bench.plant.clients", "zenoh"),
+                *("--connect", f"tcp/127.0.0.1:{zenoh_port}", "--key", "plant/drives/*/state"),
+                *client_args,
+            ],
+            tmp,
+            stdout=subprocess.PIPE,
+        )
+        pid = plant.procs["gateway"].pid
+        time.sleep(plant.settle)
+        t0, cpu0 = time.monotonic(), _cpu_seconds(pid)
+        others0 = {n: _cpu_seconds(p.pid) for n, p in plant.procs.items() if p.poll() is None}
+        host0 = _host_busy()
+        time.sleep(plant.seconds)
+        t1, cpu1 = time.monotonic(), _cpu_seconds(pid)
+        others = {
+            n: round((_cpu_seconds(plant.procs[n].pid) - c) / (t1 - t0), 3)
+            for n, c in others0.items()
+            if n != "gateway" and plant.procs[n].poll() is None
+        }
+        host = _host_busy()
+        others["host (all CPUs)"] = round(
+            (host[0] - host0[0]) / max(host[1] - host0[1], 1) * (os.cpu_count() or 1), 3
+        )
+        rss = _rss_mb(pid)
+        load_after = os.getloadavg()
+        clients: dict[str, Any] = {}
+        for name in ("modbus-clients", "zenoh-subscriber"):
+            if name not in plant.procs:
+                continue
+            out, _ = plant.procs[name].communicate(timeout=plant.settle + 30)
+            lines = out.decode().strip().splitlines()
+            if not lines:  # it failed: its log says why
+                text = (tmp / f"{name}.log").read_text(errors="replace")[-2000:]
+                raise RuntimeError(f"{name} ended without its figures:\n{text}")
+            clients[name] = json.loads(lines[-1])
+        # the end: SIGTERM; the launcher writes the cycles, the simulators their figures
+        _stop_all(plant)
+        doc = _read_json(record) or {}
+        cycles = doc.get("cycles", {"profibus": [], "devicenet": []})
+        gc_pauses = [p for p in doc.get("gc", []) if t0 <= p[0] < t1]
+        pbsim = _read_json(tmp / "profibus-sim.json")
+        canlog = None
+        if plant.devicenet and (tmp / "canbus.ends").exists():
+            canlog = canbus.load_log(str(tmp / "canbus"))
+        broker = _read_json(tmp / "canbus.json")
+    return _figures(
+        plant,
+        t0=t0,
+        t1=t1,
+        cpu_share=(cpu1 - cpu0) / (t1 - t0),
+        rss=rss,
+        cycles=cycles,
+        pbsim=pbsim,
+        canlog=canlog,
+        broker=broker,
+        clients=clients,
+        load=(load_before, load_after),
+        others=others,
+        gc_pauses=gc_pauses,
+    )
+
+
+def _figures(
+    plant: Plant,
+    *,
+    t0: float,
+    t1: float,
+    cpu_share: float,
+    rss: float,
+    cycles: dict[str, list[list[float]]],
+    pbsim: Any,
+    canlog: Any,
+    broker: Any,
+    clients: dict[str, Any],
+    load: tuple[tuple[float, ...], tuple[float, ...]],
+    others: dict[str, float],
+    gc_pauses: list[list[float]],
+) -> list[Figure]:
+    drives = plant.profibus + plant.devicenet + plant.canopen
+    conditions = (
+        f"{drives} drives; {os.cpu_count()} CPUs, load average {load[0][0]:.2f} before, "
+        f"{load[1][0]:.2f} after; window {t1 - t0:.1f} s; CPU of the bench's other "
+        f"processes and of the whole host, in cores: {json.dumps(others)}"
+    )
+    figures = [
+        Figure(
+            "plant_gateway_cpu",
+            round(cpu_share, 4),
+            "core",
+            target="value < 0.25",
+            note=f"gateway utime+stime / wall; {conditions}",
+        ),
+        Figure("plant_gateway_rss", round(rss, 1), "MiB", note="VmRSS at the end of the window"),
+        _gc_figure(gc_pauses, t1 - t0),
+    ]
+    if plant.profibus:
+        bus = bus_params()
+        extra = ""
+        if pbsim:
+            turn = pbsim["master_turnaround"]
+            late = pbsim["reply_lateness"]
+            extra = (
+                f"; master turnaround seen on the line p50 {turn['p50_us']} us p99 "
+                f"{turn['p99_us']} us mean {turn['mean_us']} us (TSYN {pbsim['tsyn_us']} us); "
+                f"simulator reply lateness p50 {late['p50_us']} us p99 {late['p99_us']} us "
+                f"mean {late['mean_us']} us"
+            )
+        request, reply = exchange_bits()
+        pb = _cycles_in(cycles["profibus"], t0, t1)
+        extra += f"; {len(pb) * plant.profibus / (t1 - t0):.0f} Data_Exchange/s"
+        figures += _line_figures(
+            f"profibus_{plant.profibus}_slaves_1500k",
+            pb,
+            felser_cycle(plant.profibus, bus),
+            f"Felser: {plant.profibus} x ({request} + {reply} + TSDR {bus.min_tsdr} + TSYN 33) "
+            "bits + Global_Control",
+            extra,
+        )
+    if plant.devicenet:
+        dn = _cycles_in(cycles["devicenet"], t0, t1)
+        minimum = math.nan
+        extra = ""
+        if canlog is not None and dn:
+            ends, bits = canlog
+            carried = canbus.bits_between(ends, bits, t0, t1)
+            minimum = carried / len(dn) / CAN_BITRATE
+            extra = f"; bus load {carried / CAN_BITRATE / (t1 - t0):.3f}"
+        if broker:
+            late = broker["lateness_us"]
+            extra += f"; broker lateness p50 {late['p50']} us p99 {late['p99']} us"
+        extra += f"; {len(dn) * plant.devicenet / (t1 - t0):.0f} polls/s"
+        figures += _line_figures(
+            f"devicenet_{plant.devicenet}_nodes_500k",
+            dn,
+            minimum,
+            "bit-time sum of the frames carried per cycle (stuffing exact)",
+            extra,
+        )
+    mb = clients.get("modbus-clients", {})
+    if mb:
+        figures.append(
+            Figure(
+                "plant_modbus_poll_rate",
+                round(mb.get("polls_per_unit_per_s", math.nan), 3),
+                "Hz",
+                reference=plant.modbus_rate,
+                target="ratio >= 0.99",
+                note=(
+                    f"{plant.modbus_clients} clients x {drives} units, FC4 x 21 registers; "
+                    f"{mb.get('requests_per_s', 0):.0f} requests/s, {mb.get('exceptions')} "
+                    f"exceptions, {mb.get('late_rounds')} late rounds, round p50 "
+                    f"{mb.get('round_ms_p50') or math.nan:.1f} ms p99 "
+                    f"{mb.get('round_ms_p99') or math.nan:.1f} ms"
+                ),
+            )
+        )
+    zn = clients.get("zenoh-subscriber", {})
+    figures.append(
+        Figure(
+            "plant_zenoh_states",
+            round(zn.get("samples_per_s", math.nan), 1),
+            "samples/s",
+            note=(
+                f"one subscriber to plant/drives/*/state: {zn.get('keys')} of {drives} drives "
+                f"seen, at least {zn.get('min_per_key')} samples each"
+            ),
+        )
+    )
+    return figures
+
+
+def run() -> list[Figure]:
+    seconds = float(
+        os.environ.get(
+            "BENCH_PLANT_SECONDS", SHORT_MEASURE if os.environ.get("BENCH_SHORT") else MEASURE
+        )
+    )
+    return measure(Plant(seconds=seconds))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.bench_plant")
+    parser.add_argument("--seconds", type=float, default=MEASURE)
+    parser.add_argument("--profibus", type=int, default=PROFIBUS_SLAVES)
+    parser.add_argument("--devicenet", type=int, default=DEVICENET_NODES)
+    parser.add_argument("--modbus-clients", type=int, default=MODBUS_CLIENTS)
+    parser.add_argument("--modbus-rate", type=float, default=MODBUS_RATE)
+    parser.add_argument("--profile", help="write the gateway's cProfile stats here")
+    parser.add_argument(
+        "--pin",
+        action="store_true",
+        help="the gateway on one CPU, the simulators and clients on another",
+    )
+    args = parser.parse_args()
+    plant = Plant(
+        profibus=args.profibus,
+        devicenet=args.devicenet,
+        modbus_clients=args.modbus_clients,
+        modbus_rate=args.modbus_rate,
+        seconds=args.seconds,
+        profile=args.profile,
+        pin=args.pin,
+    )
+    for figure in measure(plant):
+        print(figure.line(), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

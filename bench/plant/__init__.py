@@ -1,0 +1,27 @@
+"""Bench-only helpers of the full-plant benchmark (:mod:`bench.bench_plant`).
+
+Nothing here is production code and nothing in ``gateway/`` or ``adapters/`` imports it:
+
+- :mod:`bench.plant.canbus`: a cross-process CAN bus for the bench: a python-can bus class
+  (interface name :data:`~bench.plant.canbus.INTERFACE`) over a Unix-domain socket to a
+  broker process that arbitrates and paces the frames at the CAN bit time;
+- :mod:`bench.plant.pbsim`: the simulated Profibus slaves of a config (the same line as
+  ``drive-gateway sim profibus --config``) on a pty, each reply held for its line time;
+- :mod:`bench.plant.launch`: runs ``drive-gateway`` (the daemon, or ``sim devicenet``) with
+  the bench CAN bus registered, and for the daemon records each line's cycles (optionally
+  under cProfile);
+- :mod:`bench.plant.clients`: the Modbus TCP clients and the Zenoh subscriber.
+"""
+
+import os
+
+PIN_ENV = "DRIVE_GATEWAY_BENCH_CPUS"
+"""The CPUs a bench process keeps to (comma-separated), set by :mod:`bench.bench_plant`."""
+
+
+def pin_from_env() -> None:
+    """Keep this process on the CPUs :data:`PIN_ENV` names (first thing in a main, so every
+    thread it starts inherits them)."""
+    text = os.environ.get(PIN_ENV)
+    if text:
+        os.sched_setaffinity(0, {int(c) for c in text.split(",")})

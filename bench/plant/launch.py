@@ -1,0 +1,157 @@
+"""Run ``drive-gateway`` for the plant benchmark, with the bench CAN bus registered.
+
+``python -m bench.plant.launch [--record JSON] [--profile FILE] -- <drive-gateway args>``
+
+- registers :class:`bench.plant.canbus.PlantCanBus` as python-can interface
+  ``plantcan`` (a config's ``interface = "plantcan"``, ``channel = <broker socket>``),
+  then runs the command line of ``drive-gateway`` (``run --config ...`` or
+  ``sim devicenet ...``);
+- ``--record``, for ``run`` only: every bus cycle of each line (Profibus master: first
+  request to end of the cycle, :class:`~adapters.profibus.figures.LineFigures`.cycle;
+  DeviceNet scanner: poll cycle), as (monotonic end time, seconds) pairs, and twice a
+  second the number of drives online; written at ``--record`` (the status part every
+  0.5 s, the cycles when the daemon ends), and every garbage collection's pause. The
+  recording is a list append per cycle and per collection;
+- ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
+
+The daemon is the real one (``gateway.daemon.Daemon``), set up as ``drive-gateway run``
+sets it up; only the two figure hooks above are added.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import cProfile
+import gc
+import json
+import logging
+import os
+import sys
+import time
+from typing import Any
+
+from bench.plant import canbus, pin_from_env
+
+CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": []}
+GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
+
+
+def _hook_gc() -> None:
+    """Record every garbage collection's pause (its generation, its duration)."""
+    started = [0.0]
+
+    def on_gc(phase: str, info: dict[str, int]) -> None:
+        now = time.perf_counter()
+        if phase == "start":
+            started[0] = now
+        else:
+            GC_PAUSES.append((time.monotonic(), info["generation"], now - started[0]))
+
+    gc.callbacks.append(on_gc)
+
+
+def _hook_cycles() -> None:
+    """Record each line's cycles (see the module docstring)."""
+    from adapters.devicenet.scanner.scheduler import Scheduler
+    from adapters.profibus.figures import LineFigures, Samples
+
+    profibus = CYCLES["profibus"]
+
+    class RecordingSamples(Samples):
+        def add(self, value: float) -> None:
+            super().add(value)
+            profibus.append((time.monotonic(), value))
+
+    init = LineFigures.__init__
+
+    def line_figures_init(self: LineFigures, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        self.cycle = RecordingSamples()
+
+    LineFigures.__init__ = line_figures_init  # type: ignore[method-assign]
+
+    devicenet = CYCLES["devicenet"]
+    done = Scheduler._cycle_done
+
+    def cycle_done(self: Scheduler, seconds: float) -> None:
+        done(self, seconds)
+        devicenet.append((time.monotonic(), seconds))
+
+    Scheduler._cycle_done = cycle_done  # type: ignore[method-assign]
+
+
+def _write(path: str, online: int, total: int, final: bool) -> None:
+    doc: dict[str, Any] = {"online": online, "drives": total, "final": final, "pid": os.getpid()}
+    if final:
+        doc["cycles"] = CYCLES
+        doc["gc"] = GC_PAUSES
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(doc, f)
+    os.replace(tmp, path)
+
+
+async def _daemon(config_path: str, record: str | None) -> int:
+    from gateway.config import load
+    from gateway.daemon import Daemon
+    from gateway.model import CommState
+
+    daemon = Daemon(load(config_path))
+    total = len(daemon.config.drives)
+
+    def online() -> int:
+        return sum(1 for s in daemon.hub.states() if s.comm is CommState.ONLINE)
+
+    async def report() -> None:
+        while record is not None:
+            _write(record, online(), total, final=False)
+            await asyncio.sleep(0.5)
+
+    reporter = asyncio.create_task(report())
+    try:
+        return await daemon.run()
+    finally:
+        reporter.cancel()
+        if record is not None:
+            _write(record, online(), total, final=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(prog="python -m bench.plant.launch")
+    parser.add_argument("--record", help="JSON: drives online, then each line's cycles")
+    parser.add_argument("--profile", help="cProfile stats file")
+    parser.add_argument("--log-level", default="WARNING")
+    parser.add_argument("argv", nargs=argparse.REMAINDER, help="-- drive-gateway arguments")
+    args = parser.parse_args()
+    pin_from_env()
+    argv = [a for a in args.argv if a != "--"] if args.argv[:1] == ["--"] else args.argv
+    canbus.register()
+    profiler = cProfile.Profile() if args.profile else None
+    status = 0
+    if profiler is not None:
+        profiler.enable()
+    try:
+        if argv[:1] == ["run"] and "--config" in argv:
+            from gateway.cli import setup_logging
+
+            setup_logging(args.log_level)
+            _hook_cycles()
+            _hook_gc()
+            status = asyncio.run(_daemon(argv[argv.index("--config") + 1], args.record))
+        else:
+            from gateway.cli import main as gateway_main
+
+            status = gateway_main(argv)
+    finally:
+        if profiler is not None:
+            profiler.disable()
+            profiler.dump_stats(args.profile)
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)  # Zenoh's native threads: leave as drive-gateway run does
+
+
+if __name__ == "__main__":
+    main()
