@@ -48,7 +48,6 @@ import socket
 import stat
 import termios
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
@@ -362,27 +361,17 @@ class SerialLink:
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
 
-    def wait_readable(self, timeout: float) -> bool:
-        """Block up to ``timeout`` s (sub-millisecond: a driver's wait for TSYN) until bytes
-        can be read; a port without a file descriptor is only waited out."""
-        if timeout <= 0 or self._closed:
-            return False
-        if self._fd is None:
-            end = time.monotonic() + timeout
-            while time.monotonic() < end:
-                pass
-            return False
-        try:
-            readable, _, _ = select.select([self._fd], [], [], timeout)
-        except (OSError, ValueError):
-            return False
-        return bool(readable)
-
     def read_now(self) -> None:
-        """Read what has arrived now (as the reader callback would) and hand it on."""
+        """Read what has arrived now (as the reader callback would) and hand it on (a
+        driver's timer does, before it judges a reply deadline)."""
         if self._fd is None:
             self._polled_once()
-        else:
+            return
+        try:  # a tty with VMIN = 0 reads nothing (not EAGAIN) when nothing came: look first
+            readable = select.select([self._fd], [], [], 0)[0]
+        except (OSError, ValueError):
+            return
+        if readable:
             self._readable()
 
     def _polled_once(self) -> None:
