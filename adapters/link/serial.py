@@ -356,10 +356,21 @@ class SerialLink:
             self._fail(exc)
             return
         if not data:
-            self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
+            if self._readable_now():  # a hangup stays readable: the device is gone
+                self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
+            # else a tty (VMIN = 0) read nothing: what made it readable was read meanwhile
+            # (read_now, in a callback of the same loop turn)
             return
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
+
+    def _readable_now(self) -> bool:
+        if self._fd is None:
+            return False
+        try:
+            return bool(select.select([self._fd], [], [], 0)[0])
+        except (OSError, ValueError):
+            return True  # a descriptor that cannot be polled is no good either
 
     def read_now(self) -> None:
         """Read what has arrived now (as the reader callback would) and hand it on (a
@@ -367,11 +378,7 @@ class SerialLink:
         if self._fd is None:
             self._polled_once()
             return
-        try:  # a tty with VMIN = 0 reads nothing (not EAGAIN) when nothing came: look first
-            readable = select.select([self._fd], [], [], 0)[0]
-        except (OSError, ValueError):
-            return
-        if readable:
+        if self._readable_now():  # a tty (VMIN = 0) reads nothing, not EAGAIN: look first
             self._readable()
 
     def _polled_once(self) -> None:

@@ -40,6 +40,7 @@ from adapters.link.timer import loop_timer
 
 log = logging.getLogger(__name__)
 
+NEAR: Final = 0.002  # s: a deadline this close has a timer of its own (see _arm)
 LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
 MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
 MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
@@ -118,10 +119,13 @@ class StreamDriver(Generic[EventT]):
         self.on_action = on_action
         self.on_flushed = on_flushed
         self.on_stepped = on_stepped
-        self._timer = loop_timer(self.loop, self._on_timer)  # the engine's next deadline
+        # the engine's next deadline: one timer for those within NEAR (TSYN, an idle time),
+        # one for the later ones (a reply wait), kept armed while it is no later than due
+        self._near = loop_timer(self.loop, lambda: self._on_timer(self._near_at))
+        self._far = loop_timer(self.loop, lambda: self._on_timer(self._far_at))
+        self._near_at = self._far_at = 0.0  # the time each was last armed for
         self._write_timer = loop_timer(self.loop, self._on_write_due)
         self._writes: deque[Transmission] = deque()  # waiting for their not_before, in order
-        self._armed_at = 0.0  # the time the deadline timer was last armed for
         self._stepping = False
         self._queued: deque[EventT | None] = deque()
         self._postponed_for: float | None = None
@@ -137,7 +141,8 @@ class StreamDriver(Generic[EventT]):
         """No more stepping (the link stays open: the caller closes it)."""
         self._stopped = True
         self._writes.clear()
-        self._timer.close()
+        self._near.close()
+        self._far.close()
         self._write_timer.close()
 
     def poke(self) -> None:
@@ -194,22 +199,27 @@ class StreamDriver(Generic[EventT]):
         """A timer for the engine's next deadline.
 
         A timer already armed for an earlier time is kept: it fires early, the step finds
-        nothing due and arms again. The deadline of a request moves on with every message,
-        so this saves a timer per message; a later deadline is rescheduled only when due.
+        nothing due and arms again. The reply deadline moves on with every message, so
+        the far timer is armed about once per reply wait, not once per message; the near
+        one (the idle time before the next request) once per message.
         """
         if self._stopped:
             return
         deadline = self.engine.next_deadline()
         if deadline is None:
             return  # nothing due: an armed timer only causes one idle step
-        armed = self._timer.at
-        if armed is not None and armed <= deadline:
+        if deadline - self.loop.time() <= NEAR:
+            armed = self._near.at
+            if armed is None or armed > deadline:
+                self._near_at = deadline
+                self._near.set(deadline)
             return
-        self._armed_at = deadline
-        self._timer.set(deadline)
+        armed = self._far.at
+        if armed is None or armed > deadline:
+            self._far_at = deadline
+            self._far.set(deadline)
 
-    def _on_timer(self) -> None:
-        armed = self._armed_at
+    def _on_timer(self, armed: float) -> None:
         if self.engine.awaiting_reply():
             self.link.read_now()  # a reply that came meanwhile is judged first
             if self._stopped or not self.engine.awaiting_reply():
@@ -234,8 +244,8 @@ class StreamDriver(Generic[EventT]):
             return False
         self._postpones += 1
         self.postponed += 1
-        self._armed_at = self.loop.time() + min(lag, MAX_POSTPONE)
-        self._timer.set(self._armed_at)
+        self._far_at = self.loop.time() + min(lag, MAX_POSTPONE)
+        self._far.set(self._far_at)
         return True
 
     # ------------------------------------------------------------------ receiving
