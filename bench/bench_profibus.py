@@ -360,6 +360,9 @@ class MasterRun:
     turnaround: float  # s, median: reply in -> next request out
     cpu_per_exchange: float = math.nan  # s: the whole measured stretch's CPU / exchanges
     lateness: list[float] = dataclasses.field(default_factory=list)  # s, written - not_before
+    exchanges: int = 0  # in the measured stretch
+    seconds: float = 0.0  # the measured stretch, wall
+    cpu: float = 0.0  # s, this process's CPU time over the measured stretch
 
 
 def _params(slaves: int) -> list[SlaveParams]:
@@ -376,7 +379,9 @@ def _params(slaves: int) -> list[SlaveParams]:
     ]
 
 
-async def run_master(path: str, slaves: int, duration: float, bus: BusParams = BUS) -> MasterRun:
+async def run_master(
+    path: str, slaves: int, duration: float, bus: BusParams = BUS, settle: float = SETTLE
+) -> MasterRun:
     loop = asyncio.get_running_loop()
     master = Master(bus, _params(slaves), loop.time())
     exchanges = 0
@@ -401,14 +406,15 @@ async def run_master(path: str, slaves: int, duration: float, bus: BusParams = B
             # The bench drives the engine without a hub: poll its states.
             while not all(master.state_of(a) is SlaveState.DATA_EXCHANGE for a in master.addresses):  # noqa: ASYNC110
                 await asyncio.sleep(0.01)
-        await asyncio.sleep(SETTLE)
+        await asyncio.sleep(settle)
         turnarounds.clear()
         lateness.clear()
         measured = windows = Windows()
         windows.tick(exchanges)
-        first, cpu = exchanges, time.process_time()
+        first, cpu, wall = exchanges, time.process_time(), time.perf_counter()
         await asyncio.sleep(duration)
         cpu, done = time.process_time() - cpu, exchanges - first
+        wall = time.perf_counter() - wall
         windows = None
     finally:
         driver.stop()
@@ -419,6 +425,9 @@ async def run_master(path: str, slaves: int, duration: float, bus: BusParams = B
         statistics.median(turnarounds),
         cpu / done if done else math.nan,
         lateness,
+        done,
+        wall,
+        cpu,
     )
 
 
