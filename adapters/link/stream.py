@@ -187,18 +187,24 @@ class StreamDriver(Generic[EventT]):
         handler does can change it; the line must not wait while the adapter decodes a
         reply's inputs and updates the hub (the master's turnaround).
         """
+        if not actions:
+            return
         others: list[Any] = []
-        todo = deque(actions)
+        todo = actions
         transmission = self.protocol.transmission
-        while todo:
-            action = todo.popleft()
+        i = 0
+        while i < len(todo):
+            action = todo[i]
+            i += 1
             out = transmission(action)
             if out is None:
                 others.append(action)
                 continue
             at = self._transmit(out)
             if at is not None:  # confirmed at once: what the engine does next comes first
-                todo.extend(self.engine.step(self.loop.time(), self.protocol.written(at)))
+                more = self.engine.step(self.loop.time(), self.protocol.written(at))
+                if more:
+                    todo, i = [*todo[i:], *more], 0
         for action in others:
             try:
                 self.on_action(action)
@@ -229,10 +235,8 @@ class StreamDriver(Generic[EventT]):
     def _on_timer(self, armed: float) -> None:
         if self.engine.awaiting_reply():
             self.link.read_now()  # a reply that came meanwhile is judged first
-            if self._stopped or not self.engine.awaiting_reply():
+            if self._stopped or not self.engine.awaiting_reply() or self._postpone(armed):
                 return
-        if self._postpone(armed):
-            return
         self._step(None)
 
     def _postpone(self, armed: float) -> bool:
