@@ -317,11 +317,14 @@ class Master:
         line.idle_since = max(line.idle_since, now)
         sl.answered(p, now)
         sl.took_inputs(bytes(t.data))
+        if line.unwritten or now < line.busy_until or now < line.idle_since + line.tsyn:
+            # the line is not free yet (with TSYN > 0, always: its idle time starts at this
+            # reply), and the scheduler would send nothing: the step at that deadline takes
+            # the short path (_steady_turn)
+            self._steady_due = True
+            return True
         scheduler = self._scheduler
         if not scheduler.steady_next(now):
-            # most often the line is not free yet (TSYN from this reply): the step at
-            # that deadline takes the short path then (_steady_turn)
-            self._steady_due = line.pending is None
             scheduler.send_next(now)
         return True
 
