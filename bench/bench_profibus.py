@@ -45,6 +45,7 @@ at 500 and 187.5 kbit/s.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import dataclasses
 import itertools
@@ -60,6 +61,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Final
 
+from adapters.link.stream import Transmission
 from adapters.profibus.dp import DataExchange, build_request
 from adapters.profibus.driver import LineDriver
 from adapters.profibus.errors import ProfibusDecodeError
@@ -356,6 +358,11 @@ class MasterRun:
     cycles_per_s: float
     cpu_per_cycle: float  # s
     turnaround: float  # s, median: reply in -> next request out
+    cpu_per_exchange: float = math.nan  # s: the whole measured stretch's CPU / exchanges
+    lateness: list[float] = dataclasses.field(default_factory=list)  # s, written - not_before
+    exchanges: int = 0  # in the measured stretch
+    seconds: float = 0.0  # the measured stretch, wall
+    cpu: float = 0.0  # s, this process's CPU time over the measured stretch
 
 
 def _params(slaves: int) -> list[SlaveParams]:
@@ -372,9 +379,11 @@ def _params(slaves: int) -> list[SlaveParams]:
     ]
 
 
-async def run_master(path: str, slaves: int, duration: float) -> MasterRun:
+async def run_master(
+    path: str, slaves: int, duration: float, bus: BusParams = BUS, settle: float = SETTLE
+) -> MasterRun:
     loop = asyncio.get_running_loop()
-    master = Master(BUS, _params(slaves), loop.time())
+    master = Master(bus, _params(slaves), loop.time())
     exchanges = 0
     turnarounds: list[float] = []
     windows: Windows | None = None  # while measuring
@@ -387,25 +396,63 @@ async def run_master(path: str, slaves: int, duration: float) -> MasterRun:
             if windows is not None:
                 windows.tick(exchanges)
 
-    link = await open_link(path, BUS.baudrate, loop, lambda d, n: None, lambda e: None)
+    link = await open_link(path, bus.baudrate, loop, lambda d, n: None, lambda e: None)
     driver = LineDriver(master, link, on_action)
     _time_turnaround(link, turnarounds)
+    lateness = _time_lateness(driver)
     try:
         driver.start()
         async with asyncio.timeout(10):
             # The bench drives the engine without a hub: poll its states.
             while not all(master.state_of(a) is SlaveState.DATA_EXCHANGE for a in master.addresses):  # noqa: ASYNC110
                 await asyncio.sleep(0.01)
-        await asyncio.sleep(SETTLE)
+        await asyncio.sleep(settle)
         turnarounds.clear()
+        lateness.clear()
         measured = windows = Windows()
         windows.tick(exchanges)
+        first, cpu, wall = exchanges, time.process_time(), time.perf_counter()
         await asyncio.sleep(duration)
+        cpu, done = time.process_time() - cpu, exchanges - first
+        wall = time.perf_counter() - wall
         windows = None
     finally:
         driver.stop()
         await link.aclose()
-    return MasterRun(measured.best_rate(), measured.least_cpu(), statistics.median(turnarounds))
+    return MasterRun(
+        measured.best_rate(),
+        measured.least_cpu(),
+        statistics.median(turnarounds),
+        cpu / done if done else math.nan,
+        lateness,
+        done,
+        wall,
+        cpu,
+    )
+
+
+def _time_lateness(driver: LineDriver) -> list[float]:
+    """Wrap the driver's codec: each request's write time against its ``not_before``."""
+    stream = driver.stream
+    due: collections.deque[float] = collections.deque()
+    out: list[float] = []
+    transmission = stream.transmission
+    written = stream.written
+
+    def timed_transmission(action: Any) -> Transmission | None:
+        t = transmission(action)
+        if t is not None:
+            due.append(t.not_before)
+        return t
+
+    def timed_written(at: float) -> Any:
+        if due:
+            out.append(at - due.popleft())
+        return written(at)
+
+    stream.transmission = timed_transmission  # type: ignore[method-assign]
+    stream.written = timed_written  # type: ignore[method-assign]
+    return out
 
 
 def _time_turnaround(link: SerialLink, out: list[float]) -> None:
@@ -472,6 +519,97 @@ def measure(slaves: int, where: Placement | None = None) -> Case:
         median(blocking_raw),
         median(peer_check),
     )
+
+
+# ---------------------------------------------------------------------------------------
+# line timing honoured against timing off
+
+
+TIMED_BUS: Final = BusParams.for_baudrate(
+    500000, master_address=MASTER, latency=0.05, gc_period=0.1
+)
+TIMING_ROUNDS: Final = 8  # rounds of each (timing off, timing on), alternating
+TIMING_MEASURE: Final = 1.0  # s per round
+TIMING_TARGET: Final = "ratio <= 1.5"
+
+
+@dataclass
+class TimingCase:
+    """Medians of the rounds with 500 kbit/s timing honoured (``timed``) and with timing
+    off (``untimed``: 12 Mbit/s, TSYN 2.75 us), and every request's lateness (all rounds)."""
+
+    timed: MasterRun
+    untimed: MasterRun
+    lateness: list[float]
+
+
+def measure_timing(slaves: int, where: Placement | None = None) -> TimingCase:
+    """CPU per exchange with the line's timing kept, against timing off, same child."""
+    timed: list[MasterRun] = []
+    untimed: list[MasterRun] = []
+    with _pinned(where), _child(_serve_slaves, slaves, where=where) as path:
+        for _ in range(TIMING_ROUNDS):
+            untimed.append(asyncio.run(run_master(path, slaves, TIMING_MEASURE, BUS)))
+            timed.append(asyncio.run(run_master(path, slaves, TIMING_MEASURE, TIMED_BUS)))
+    return TimingCase(
+        _median_run(timed), _median_run(untimed), [x for r in timed for x in r.lateness]
+    )
+
+
+def _median_run(runs: list[MasterRun]) -> MasterRun:
+    median = statistics.median
+    return MasterRun(
+        median(r.cycles_per_s for r in runs),
+        median(r.cpu_per_cycle for r in runs),
+        median(r.turnaround for r in runs),
+        median(r.cpu_per_exchange for r in runs),
+    )
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The ``q`` quantile (0..1) of ``values``, nearest rank."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
+
+
+def _timing_figures(slaves: int, case: TimingCase) -> list[Figure]:
+    cond = (
+        f"{slaves} slave(s) in a child process on a pty, 8 bytes I/O each; master CPU time "
+        f"(process time) over {TIMING_MEASURE:g} s / exchanges, median of {TIMING_ROUNDS} "
+        "alternating rounds"
+    )
+    figures = [
+        Figure(
+            f"profibus_timed_cpu_per_exchange_{slaves}_slaves",
+            case.timed.cpu_per_exchange * 1e6,
+            "us",
+            reference=case.untimed.cpu_per_exchange * 1e6,
+            target=TIMING_TARGET,
+            note=f"500 kbit/s timing honoured (TSYN, line time, on a timerfd); reference: "
+            f"timing off (12 Mbit/s); {cond}",
+        ),
+        Figure(
+            f"profibus_timed_exchanges_per_s_{slaves}_slaves",
+            case.timed.cycles_per_s,
+            "1/s",
+            reference=case.untimed.cycles_per_s,
+            note="best window; reference: timing off. At 500 kbit/s a 14-byte request's "
+            "line time and TSYN (374 us) bound it near 2,670/s on a pty",
+        ),
+    ]
+    for q, label in ((0.5, "p50"), (0.99, "p99"), (0.999, "p99_9")):
+        figures.append(
+            Figure(
+                f"profibus_timed_lateness_{label}_{slaves}_slaves",
+                percentile(case.lateness, q) * 1e6,
+                "us",
+                note=f"write time - not_before of each request at 500 kbit/s "
+                f"({len(case.lateness)} requests, all rounds); never negative",
+            )
+        )
+    return figures
 
 
 # ---------------------------------------------------------------------------------------
@@ -648,6 +786,8 @@ def run() -> list[Figure]:
     figures: list[Figure] = []
     turnaround: dict[int, float] = {}
     where = placement()
+    for slaves in (1, 8):
+        figures += _timing_figures(slaves, measure_timing(slaves, where))
     for slaves in (1, 32):
         case = measure(slaves, where)
         turnaround[slaves] = case.master.turnaround

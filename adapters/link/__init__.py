@@ -6,7 +6,8 @@
   RS-485 direction control), opened through a :class:`~.serial.SerialLinks` factory: the
   real port, or a simulated line the composition root chooses.
 * :mod:`.stream`: the driver loop of a byte-stream engine on a serial link (bytes -> the
-  protocol's stream codec -> ``step``; transmits written when due).
+  protocol's stream codec -> ``step``; transmits written when due); :mod:`.timer`: the
+  precise timer its waits are slept on (a timerfd the loop watches).
 * :mod:`.can`: a python-can bus on the event loop (``Notifier(loop=...)``), opened through a
   :class:`~.can.CanLinks` factory; :mod:`.canerror` decodes SocketCAN error frames.
 * :mod:`.candriver`: the driver loop of a frame engine on a CAN link.

@@ -48,7 +48,6 @@ import socket
 import stat
 import termios
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
@@ -357,32 +356,29 @@ class SerialLink:
             self._fail(exc)
             return
         if not data:
-            self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
+            if self._readable_now():  # a hangup stays readable: the device is gone
+                self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
+            # else a tty (VMIN = 0) read nothing: what made it readable was read meanwhile
+            # (read_now, in a callback of the same loop turn)
             return
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
 
-    def wait_readable(self, timeout: float) -> bool:
-        """Block up to ``timeout`` s (sub-millisecond: a driver's wait for TSYN) until bytes
-        can be read; a port without a file descriptor is only waited out."""
-        if timeout <= 0 or self._closed:
-            return False
+    def _readable_now(self) -> bool:
         if self._fd is None:
-            end = time.monotonic() + timeout
-            while time.monotonic() < end:
-                pass
             return False
         try:
-            readable, _, _ = select.select([self._fd], [], [], timeout)
+            return bool(select.select([self._fd], [], [], 0)[0])
         except (OSError, ValueError):
-            return False
-        return bool(readable)
+            return True  # a descriptor that cannot be polled is no good either
 
     def read_now(self) -> None:
-        """Read what has arrived now (as the reader callback would) and hand it on."""
+        """Read what has arrived now (as the reader callback would) and hand it on (a
+        driver's timer does, before it judges a reply deadline)."""
         if self._fd is None:
             self._polled_once()
-        else:
+            return
+        if self._readable_now():  # a tty (VMIN = 0) reads nothing, not EAGAIN: look first
             self._readable()
 
     def _polled_once(self) -> None:

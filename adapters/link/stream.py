@@ -12,12 +12,15 @@ steps the engine at ``engine.next_deadline()``. Before each request the codec is
 line was idle (:meth:`StreamProtocol.idle`), so a reply cut short by noise cannot swallow
 the next one.
 
-A deadline closer than :data:`SPIN_LIMIT` (Profibus TSYN is 66 us at 500 kbit/s) is waited
-for on the port itself (``select`` with a sub-millisecond timeout) instead of a loop timer,
-which cannot sleep less than a millisecond: bytes arriving meanwhile are read and stepped
-at once, so a stray reply restarts the idle time before the next request is decided. At
-most :data:`MAX_SHORT_WAITS` such waits per step, so the rest of the loop always gets its
-turn.
+Every wait is slept on a precise timer the loop waits on like on a port
+(:func:`adapters.link.timer.loop_timer`: a timerfd, armed at an absolute time of the
+loop's clock): one for the engine's next deadline, one for the write whose ``not_before``
+has not come. Nothing spins: a wait of 66 us (Profibus TSYN at 500 kbit/s) is a sleep of
+66 us and the wake-up that follows, not a millisecond (the loop's own timers) nor a busy
+loop. A write never goes before its ``not_before`` (the kernel never fires a timer early;
+the driver checks the clock once more), and writes go in the order the engine gave them.
+Bytes that arrived before a timer expired are read first (the loop's poller reports them
+first); a reply deadline's timer reads the port once more before the engine judges it.
 
 A reply deadline whose timer fires late (the process was not scheduled) is judged once more
 that much later (:meth:`StreamDriver._postpone`): what could not run meanwhile includes a
@@ -26,20 +29,19 @@ simulated line's devices, which share the loop.
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, Final, Generic, Protocol, TypeVar
 
 from adapters.link.engine import Engine
 from adapters.link.serial import SerialLink
+from adapters.link.timer import loop_timer
 
 log = logging.getLogger(__name__)
 
-SPIN_LIMIT: Final = 0.001  # s: shorter waits are spent watching the port, longer ones slept
-MAX_SHORT_WAITS: Final = 8  # short waits in one step before the loop gets its turn back
+MAX_DUE_STEPS: Final = 8  # steps at once for deadlines already come, then the loop's turn
+NEAR: Final = 0.002  # s: a deadline this close has a timer of its own (see _arm)
 LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
 MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
 MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
@@ -118,9 +120,13 @@ class StreamDriver(Generic[EventT]):
         self.on_action = on_action
         self.on_flushed = on_flushed
         self.on_stepped = on_stepped
-        self._timer: asyncio.TimerHandle | None = None
-        self._timer_at: float | None = None
-        self._delayed: asyncio.TimerHandle | None = None
+        # the engine's next deadline: one timer for those within NEAR (TSYN, an idle time),
+        # one for the later ones (a reply wait), kept armed while it is no later than due
+        self._near = loop_timer(self.loop, lambda: self._on_timer(self._near_at))
+        self._far = loop_timer(self.loop, lambda: self._on_timer(self._far_at))
+        self._near_at = self._far_at = 0.0  # the time each was last armed for
+        self._write_timer = loop_timer(self.loop, self._on_write_due)
+        self._writes: deque[Transmission] = deque()  # waiting for their not_before, in order
         self._stepping = False
         self._queued: deque[EventT | None] = deque()
         self._postponed_for: float | None = None
@@ -135,10 +141,10 @@ class StreamDriver(Generic[EventT]):
     def stop(self) -> None:
         """No more stepping (the link stays open: the caller closes it)."""
         self._stopped = True
-        for handle in (self._timer, self._delayed):
-            if handle is not None:
-                handle.cancel()
-        self._timer = self._delayed = None
+        self._writes.clear()
+        self._near.close()
+        self._far.close()
+        self._write_timer.close()
 
     def poke(self) -> None:
         """Step the engine now (after a command: new outputs, an acyclic job...)."""
@@ -149,39 +155,30 @@ class StreamDriver(Generic[EventT]):
     def _step(self, event: EventT | None) -> None:
         if self._stopped:
             return
-        if self._stepping:  # from inside a step (a callback, bytes read in a short wait)
+        if self._stepping:  # from inside a step (a callback, the port read at a deadline)
             self._queued.append(event)
             return
         self._stepping = True
         try:
             self._queued.append(event)
             self._drain()
-            waits = 0
-            while waits < MAX_SHORT_WAITS and self._short_wait():
-                waits += 1
+            deadline = self.engine.next_deadline()
+            due = 0
+            # a deadline already come (12 Mbit/s TSYN is 2.75 us: over before the step
+            # ends) is stepped at once: a timer would cost a sleep and a wake-up for nothing
+            while deadline is not None and due < MAX_DUE_STEPS and deadline <= self.loop.time():
+                due += 1
+                self._queued.append(None)
                 self._drain()
+                deadline = self.engine.next_deadline()
         finally:
             self._stepping = False
-        self._arm()
+        self._arm(deadline)
         self.on_stepped()
 
     def _drain(self) -> None:
         while self._queued and not self._stopped:
             self._run(self.engine.step(self.loop.time(), self._queued.popleft()))
-
-    def _short_wait(self) -> bool:
-        """Wait for a deadline closer than SPIN_LIMIT on the port itself; True if it came
-        (or bytes did, read and queued meanwhile) and the engine wants stepping again."""
-        if self._stopped:
-            return False
-        deadline = self.engine.next_deadline()
-        if deadline is None or deadline - self.loop.time() > SPIN_LIMIT:
-            return False
-        if self.link.wait_readable(deadline - self.loop.time()):
-            self.link.read_now()  # -> _on_data -> queued events
-        if not self._queued:
-            self._queued.append(None)
-        return True
 
     def _run(self, actions: Sequence[Any]) -> None:
         """Requests first, then the other actions in their order.
@@ -190,57 +187,64 @@ class StreamDriver(Generic[EventT]):
         handler does can change it; the line must not wait while the adapter decodes a
         reply's inputs and updates the hub (the master's turnaround).
         """
+        if not actions:
+            return
         others: list[Any] = []
-        todo = deque(actions)
+        todo = actions
         transmission = self.protocol.transmission
-        while todo:
-            action = todo.popleft()
+        i = 0
+        while i < len(todo):
+            action = todo[i]
+            i += 1
             out = transmission(action)
             if out is None:
                 others.append(action)
                 continue
             at = self._transmit(out)
             if at is not None:  # confirmed at once: what the engine does next comes first
-                todo.extend(self.engine.step(self.loop.time(), self.protocol.written(at)))
+                more = self.engine.step(self.loop.time(), self.protocol.written(at))
+                if more:
+                    todo, i = [*todo[i:], *more], 0
         for action in others:
             try:
                 self.on_action(action)
             except Exception:  # a profile bug must not stop the line
                 log.exception("handling %r failed", action)
 
-    def _arm(self) -> None:
+    def _arm(self, deadline: float | None) -> None:
         """A timer for the engine's next deadline.
 
         A timer already armed for an earlier time is kept: it fires early, the step finds
-        nothing due and arms again. The deadline of a request moves on with every message,
-        so this saves a timer per message; a later deadline is rescheduled only when due.
+        nothing due and arms again. The reply deadline moves on with every message, so
+        the far timer is armed about once per reply wait, not once per message; the near
+        one (the idle time before the next request) once per message.
         """
-        if self._stopped:
-            return
-        deadline = self.engine.next_deadline()
-        if deadline is None:
+        if self._stopped or deadline is None:
             return  # nothing due: an armed timer only causes one idle step
-        if self._timer is not None and self._timer_at is not None and self._timer_at <= deadline:
+        if deadline - self.loop.time() <= NEAR:
+            armed = self._near.at
+            if armed is None or armed > deadline:
+                self._near_at = deadline
+                self._near.set(deadline)
             return
-        if self._timer is not None:
-            self._timer.cancel()
-        self._timer_at = deadline
-        self._timer = self.loop.call_at(deadline, self._on_timer)
+        armed = self._far.at
+        if armed is None or armed > deadline:
+            self._far_at = deadline
+            self._far.set(deadline)
 
-    def _on_timer(self) -> None:
-        armed = self._timer_at
-        self._timer = None
-        self._timer_at = None
-        if armed is not None and self._postpone(armed):
-            return
+    def _on_timer(self, armed: float) -> None:
+        if self.engine.awaiting_reply():
+            self.link.read_now()  # a reply that came meanwhile is judged first
+            if self._stopped or not self.engine.awaiting_reply() or self._postpone(armed):
+                return
         self._step(None)
 
     def _postpone(self, armed: float) -> bool:
         """A reply deadline whose timer ran late (the loop did not run meanwhile) is judged
         as much later, at most :data:`MAX_POSTPONES` times: a device simulated on the same
         loop, and the pty between, could not answer while the loop stood still. (On a real
-        line the reply is in the port by then and read first: the loop runs its I/O
-        callbacks before its timers.)"""
+        line the reply is in the port by then and read first: :meth:`_on_timer` reads the
+        port before it judges a reply deadline.)"""
         deadline = self.engine.next_deadline()
         if deadline is None or not self.engine.awaiting_reply():
             return False
@@ -251,8 +255,8 @@ class StreamDriver(Generic[EventT]):
             return False
         self._postpones += 1
         self.postponed += 1
-        self._timer_at = self.loop.time() + min(lag, MAX_POSTPONE)
-        self._timer = self.loop.call_at(self._timer_at, self._on_timer)
+        self._far_at = self.loop.time() + min(lag, MAX_POSTPONE)
+        self._far.set(self._far_at)
         return True
 
     # ------------------------------------------------------------------ receiving
@@ -272,22 +276,27 @@ class StreamDriver(Generic[EventT]):
     # ------------------------------------------------------------------ sending
 
     def _transmit(self, out: Transmission) -> float | None:
-        """Write ``out`` when due; the time it was written, or None if it waits for a
-        timer (confirmed to the engine from there)."""
+        """Write ``out`` when due; the time it was written, or None if it waits for its
+        time (confirmed to the engine from :meth:`_on_write_due`)."""
         for event in self.protocol.idle():  # the line was idle before this request
             self.on_flushed(event)
-        wait = out.not_before - self.loop.time()
-        if wait > SPIN_LIMIT:
-            self._delayed = self.loop.call_at(out.not_before, self._write, out.data)
+        if self._writes or out.not_before > self.loop.time():
+            self._writes.append(out)  # after any still waiting: writes keep their order
+            if self._write_timer.at is None:
+                self._write_timer.set(self._writes[0].not_before)
             return None
-        while time.monotonic() < out.not_before:  # the loop's clock is time.monotonic
-            pass
         self.link.write(out.data)
         return self.loop.time()
 
-    def _write(self, data: bytes) -> None:
-        self._delayed = None
-        if self._stopped:
-            return
-        self.link.write(data)
-        self._step(self.protocol.written(self.loop.time()))  # when it really went, however late
+    def _on_write_due(self) -> None:
+        """The first waiting write's time has come: write what is due, in order, each
+        confirmed with the time it really went, however late."""
+        writes = self._writes
+        while writes and not self._stopped:
+            out = writes[0]
+            if out.not_before > self.loop.time():  # never early (a fallback timer may be)
+                self._write_timer.set(out.not_before)
+                return
+            writes.popleft()
+            self.link.write(out.data)
+            self._step(self.protocol.written(self.loop.time()))

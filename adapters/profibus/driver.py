@@ -1,7 +1,7 @@
 """Runs a sans-IO Profibus engine (the master or a live-list scan) on a serial link.
 
 The driver loop is the shared one (:class:`adapters.link.stream.StreamDriver`: stepping,
-timers, short waits on the port, late reply deadlines); this module gives it the FDL
+precise timers on the loop, late reply deadlines); this module gives it the FDL
 stream codec (:class:`FdlStream`: a whole telegram per read, or the streaming decoder with
 its noise and "receiving" events) and says which master actions are requests
 (:class:`~adapters.profibus.events.Transmit`, confirmed with
@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any, Final
 
 from adapters.link.serial import SerialLink
-from adapters.link.stream import SPIN_LIMIT, ReplyEngine, StreamDriver, Transmission
+from adapters.link.stream import ReplyEngine, StreamDriver, Transmission
 from adapters.profibus.fdl import (
     DataTelegram,
     Discarded,
@@ -25,7 +25,7 @@ from adapters.profibus.fdl import (
 )
 from adapters.profibus.master import Event, FrameIn, LineNoise, Receiving, Transmit, Written
 
-__all__ = ["SPIN_LIMIT", "FdlStream", "LineDriver"]
+__all__ = ["FdlStream", "LineDriver"]
 
 _TELEGRAMS: Final = (DataTelegram, ShortAck, TokenTelegram)
 _RECEIVING: Final = Receiving()

@@ -116,3 +116,23 @@ def test_pinned_rounds_give_the_process_its_affinity_back(monkeypatch: pytest.Mo
     assert os.sched_getaffinity(0) == before
     assert case.master.cycles_per_s > 0
     assert case.loop_raw.round_trips_per_s > 0
+
+
+def test_percentile_is_the_nearest_rank() -> None:
+    values = [float(v) for v in range(1, 1001)]
+    assert bench.percentile(values, 0.5) == 500
+    assert bench.percentile(values, 0.99) == 990
+    assert bench.percentile(values, 0.999) == 999
+    assert bench.percentile([], 0.5) != bench.percentile([], 0.5)  # NaN
+
+
+def test_one_short_timing_round_keeps_every_not_before(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both settings exchange, and no request went before its not_before (500 kbit/s)."""
+    monkeypatch.setattr(bench, "TIMING_MEASURE", 0.1)
+    monkeypatch.setattr(bench, "TIMING_ROUNDS", 1)
+    monkeypatch.setattr(bench, "SETTLE", 0.01)
+    case = bench.measure_timing(2)
+    assert case.timed.cycles_per_s > 0 and case.untimed.cycles_per_s > 0
+    assert case.lateness and min(case.lateness) >= 0
+    figures = {f.name: f for f in bench._timing_figures(2, case)}
+    assert figures["profibus_timed_cpu_per_exchange_2_slaves"].ratio is not None

@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 import serial
 
-from adapters.profibus.driver import SPIN_LIMIT, LineDriver
+from adapters.profibus.driver import LineDriver
 from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
 from adapters.profibus.master import FrameIn, Transmit, Written
@@ -223,26 +223,30 @@ async def test_the_driver_keeps_the_idle_time_before_a_request() -> None:
     with pty_pair() as (master, path):
         os.set_blocking(master, False)
         link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
-        engine = _Engine()
+        engine = _Recorder()
         driver = LineDriver(engine, link)
         try:
-            soon = loop.time() + SPIN_LIMIT / 2  # spun out
+            soon = loop.time() + 0.0005  # TSYN-sized: slept on the precise timer, not spun
             engine.queue.append(Transmit(b"\x01", soon))
             driver.poke()
-            assert loop.time() >= soon
-            later = loop.time() + 0.25  # slept on a timer: the loop goes on meanwhile
+            assert link.bytes_out == 0  # the loop goes on meanwhile
+            later = soon + 0.25
             engine.queue.append(Transmit(b"\x02", later))
             driver.poke()
-            assert loop.time() < later
             got = bytearray()
 
             def read() -> bool:
                 with contextlib.suppress(BlockingIOError):
                     got.extend(os.read(master, 10))
-                return got == b"\x01\x02"
+                return bool(got)
 
             await until(read)
-            assert loop.time() >= later
+            first = loop.time()
+            assert got == b"\x01" and engine.written()[0] >= soon
+            got.clear()
+            await until(read)
+            assert got == b"\x02" and loop.time() >= later > first
+            assert engine.written()[1] >= later
         finally:
             driver.stop()
             link.close()
@@ -341,10 +345,10 @@ async def test_the_driver_confirms_a_late_write_with_the_time_it_happened() -> N
             link.close()
 
 
-async def test_bytes_arriving_during_a_short_wait_are_stepped_before_it_ends() -> None:
-    """A deadline closer than SPIN_LIMIT is waited for on the port: a stray reply arriving
-    meanwhile reaches the engine at once (it restarts the idle time before the next
-    request is decided), not after the wait."""
+async def test_bytes_arriving_before_a_short_deadline_are_stepped_before_it() -> None:
+    """A sub-millisecond deadline is slept on the loop's precise timer, so the port is
+    watched meanwhile: a stray reply that arrived reaches the engine before the deadline's
+    step (it restarts the idle time before the next request is decided)."""
     loop = asyncio.get_running_loop()
     with pty_pair() as (master, path):
         link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
@@ -354,9 +358,12 @@ async def test_bytes_arriving_during_a_short_wait_are_stepped_before_it_ends() -
             os.write(master, SHORT_ACK.encode())
             fd = link.ser.fileno()
             assert select.select([fd], [], [], 5.0)[0]  # arrived, not read yet
-            engine.deadline = loop.time() + SPIN_LIMIT / 2
-            driver.poke()  # no await: the loop's reader had no chance
-            assert any(isinstance(e, FrameIn) for _, e in engine.events)
+            engine.deadline = due = loop.time() + 0.0005
+            driver.poke()  # no await: the loop's reader had no chance yet
+            await until(lambda: any(isinstance(e, FrameIn) for _, e in engine.events))
+            frame = next(i for i, (_, e) in enumerate(engine.events) if isinstance(e, FrameIn))
+            # no step for the deadline came before the reply was stepped
+            assert not [now for now, e in engine.events[:frame] if e is None and now >= due]
         finally:
             driver.stop()
             link.close()

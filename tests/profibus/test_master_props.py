@@ -281,3 +281,27 @@ def test_the_short_path_sends_and_reports_what_the_general_path_does(
     short, general = trace(Master), trace(GeneralPathOnly)
     assert short == general
     assert len(short[0]) > 50  # telegrams went out: the comparison compared something
+
+
+def _job_between_reply_and_tsyn(engine: type[Master]) -> tuple[list[tuple[float, bytes]], Any]:
+    """A DP-V1 read given while a steady reply's TSYN runs (the adapter's handling of the
+    inputs, before the next request is decided)."""
+    master = engine(FAST_BUS, [echo_params(3), echo_params(4)])
+    w = Wire(master, echo_line([3, 4]))
+    asked: list[int] = []
+
+    def adapter(action: object) -> None:
+        in_exchange = all(master.state_of(a) is SlaveState.DATA_EXCHANGE for a in (3, 4))
+        if isinstance(action, InputsReceived) and in_exchange and not asked:
+            asked.append(master.read_record(action.address, 0, 1, 4, w.now))
+
+    w.on_action = adapter
+    w.run(0.2)
+    assert asked
+    return w.sent, [a for a in w.actions if not isinstance(a, InputsReceived)]
+
+
+def test_a_job_given_during_a_steady_replys_tsyn_goes_the_general_way() -> None:
+    """The short path taken at the TSYN deadline after a steady reply defers to the general
+    path when a DP-V1 job came meanwhile: the job's request follows in the same turn."""
+    assert _job_between_reply_and_tsyn(Master) == _job_between_reply_and_tsyn(GeneralPathOnly)

@@ -81,6 +81,9 @@ class Master:
             self._acyclic.add_station(params.address)
         self._scheduler = Scheduler(bus, self._slaves, self._line, self._acyclic, now)
         self._stopped = False
+        # a steady reply was taken while the line was not free yet (TSYN): the next turn,
+        # once it is, is the steady one unless an event comes first (see _steady_turn)
+        self._steady_due = False
 
     @property
     def mode(self) -> LineMode:
@@ -175,6 +178,7 @@ class Master:
 
     def reset(self, now: float) -> list[Action]:
         """Start every slave up again (the port was reopened): nothing is outstanding."""
+        self._steady_due = False
         self._line.reset(now)
         for sl in self._slaves.values():
             sl.enter(SlaveState.WAIT_DIAG, now, "the serial port was reopened")
@@ -198,9 +202,12 @@ class Master:
         if self._stopped:
             return []
         if event is not None:
+            self._steady_due = False
             if type(event) is FrameIn and self._steady_reply(event.telegram, now):
                 return self._take()
             self._on_event(event, now)
+        elif self._steady_due and self._steady_turn(now):
+            return self._take()
         if self._jobs:
             self._acyclic.expire(now)
         line = self._line
@@ -310,10 +317,31 @@ class Master:
         line.idle_since = max(line.idle_since, now)
         sl.answered(p, now)
         sl.took_inputs(bytes(t.data))
+        if line.unwritten or now < line.busy_until or now < line.idle_since + line.tsyn:
+            # the line is not free yet (with TSYN > 0, always: its idle time starts at this
+            # reply), and the scheduler would send nothing: the step at that deadline takes
+            # the short path (_steady_turn)
+            self._steady_due = True
+            return True
         scheduler = self._scheduler
         if not scheduler.steady_next(now):
             scheduler.send_next(now)
         return True
+
+    def _steady_turn(self, now: float) -> bool:
+        """A step without an event after a steady reply, nothing else having happened but
+        time passing and commands: the next Data_Exchange on the short path if the line
+        is free now; False (the general path decides) else. A command that wants more
+        than the next turn (a DP-V1 job, a start-up timeout) sends it to the general path;
+        Global_Control and the line tasks are the scheduler's own checks."""
+        line = self._line
+        if self._jobs or self._timed or line.pending is not None or line.retry is not None:
+            self._steady_due = False
+            return False
+        if line.unwritten or now < line.busy_until or now < line.idle_since + line.tsyn:
+            return False  # not free yet: a later step tries again
+        self._steady_due = False
+        return self._scheduler.steady_next(now)
 
     def _steady_slave(self, p: Pending | None, t: object) -> Station | None:
         """The slave whose plain Data_Exchange reply ``t`` is, if nothing else waits."""

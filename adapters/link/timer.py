@@ -1,0 +1,206 @@
+"""A precise one-shot timer the event loop sleeps on: a Linux timerfd, read by ``add_reader``.
+
+asyncio's own timers wake the loop through ``epoll_wait``, whose timeout is whole
+milliseconds (rounded up): a wait of 66 us (Profibus TSYN at 500 kbit/s) would last 1 ms.
+A timerfd (timerfd_create(2)) is a file descriptor that becomes readable at a time given
+to the nanosecond; the loop waits on it like on any port, so it sleeps until then and
+wakes with the kernel's hrtimer precision (tens of microseconds on a loaded machine),
+without spinning. Python 3.11 has no ``os.timerfd_create`` (3.13 has), so the three libc
+calls go through ctypes.
+
+The timer is armed with an absolute ``CLOCK_MONOTONIC`` time (``TFD_TIMER_ABSTIME``): the
+clock of asyncio's ``loop.time()`` (``time.monotonic``), so a deadline the engine computed
+from ``loop.time()`` is given as is; the kernel never fires before it. Re-arming or
+disarming resets the expiration count, so a timer that expired and was re-armed before its
+callback ran reads nothing (``EAGAIN``) and its callback does not run: only the time last
+set ever fires.
+
+Where there is no timerfd (not Linux, no libc through ctypes), :func:`loop_timer` falls back
+to ``loop.call_at`` (:class:`CallAtTimer`): as correct (never early), up to a millisecond
+late.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import ctypes.util
+import logging
+import math
+import os
+import time
+from collections.abc import Callable
+from typing import Final, Protocol
+
+log = logging.getLogger(__name__)
+
+TFD_TIMER_ABSTIME: Final = 1  # timerfd_settime(2): the time is absolute
+TFD_NONBLOCK: Final = os.O_NONBLOCK  # timerfd_create(2): the flags are the open(2) ones
+TFD_CLOEXEC: Final = os.O_CLOEXEC
+NS: Final = 1_000_000_000
+
+
+class LoopTimer(Protocol):
+    """One callback at one time, set again or cancelled at will."""
+
+    @property
+    def at(self) -> float | None:
+        """The time armed (``loop.time()``'s clock), None when not armed."""
+        ...
+
+    def set(self, when: float) -> None:
+        """Call back at ``when`` (never before it), instead of any time set before."""
+        ...
+
+    def cancel(self) -> None: ...
+
+    def close(self) -> None:
+        """Cancel and release (the timer is not used again)."""
+        ...
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = (("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long))
+
+
+class _Itimerspec(ctypes.Structure):
+    _fields_ = (("it_interval", _Timespec), ("it_value", _Timespec))
+
+
+class _Libc:
+    """timerfd_create and timerfd_settime from the C library (glibc, musl)."""
+
+    def __init__(self) -> None:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+        self.create = libc.timerfd_create  # AttributeError where there is none
+        self.create.argtypes = (ctypes.c_int, ctypes.c_int)
+        self.create.restype = ctypes.c_int
+        self.settime = libc.timerfd_settime
+        self.settime.argtypes = (
+            ctypes.c_int,
+            ctypes.c_int,
+            ctypes.POINTER(_Itimerspec),
+            ctypes.POINTER(_Itimerspec),
+        )
+        self.settime.restype = ctypes.c_int
+
+
+_libc: _Libc | None = None
+_no_timerfd: str | None = None  # why timerfds are not used here (found out once)
+
+
+def _get_libc() -> _Libc:
+    global _libc
+    if _libc is None:
+        _libc = _Libc()
+    return _libc
+
+
+class TimerFd:
+    """A timerfd on the loop (see the module docstring)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, callback: Callable[[], None]) -> None:
+        self._libc = libc = _get_libc()
+        fd = libc.create(time.CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC)
+        if fd < 0:
+            err = ctypes.get_errno()
+            raise OSError(err, f"timerfd_create: {os.strerror(err)}")
+        self._fd = fd
+        self._loop = loop
+        self._callback = callback
+        self._spec = _Itimerspec()
+        self._value = self._spec.it_value  # a view into _spec: set in place
+        self._ref = ctypes.byref(self._spec)
+        self._at: float | None = None
+        try:
+            loop.add_reader(fd, self._fired)
+        except BaseException:
+            os.close(fd)
+            raise
+
+    @property
+    def at(self) -> float | None:
+        return self._at
+
+    def set(self, when: float) -> None:
+        if self._fd < 0:
+            return  # closed
+        ns = max(math.ceil(when * NS), 1)  # rounded up: never before `when`; 0 would disarm
+        self._value.tv_sec, self._value.tv_nsec = divmod(ns, NS)
+        self._settime()
+        self._at = when
+
+    def cancel(self) -> None:
+        if self._at is None or self._fd < 0:
+            return
+        self._value.tv_sec = self._value.tv_nsec = 0  # an all-zero value disarms
+        self._settime()
+        self._at = None
+
+    def close(self) -> None:
+        if self._fd < 0:
+            return
+        self._at = None
+        self._loop.remove_reader(self._fd)
+        os.close(self._fd)
+        self._fd = -1
+
+    def _settime(self) -> None:
+        if self._libc.settime(self._fd, TFD_TIMER_ABSTIME, self._ref, None) < 0:
+            err = ctypes.get_errno()
+            raise OSError(err, f"timerfd_settime: {os.strerror(err)}")
+
+    def _fired(self) -> None:
+        try:
+            os.read(self._fd, 8)  # the expiration count: clears the readiness
+        except (BlockingIOError, InterruptedError):
+            return  # re-armed or cancelled after it expired: not this time
+        self._at = None
+        self._callback()
+
+
+class CallAtTimer:
+    """The fallback: ``loop.call_at`` (up to a millisecond late, never early)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, callback: Callable[[], None]) -> None:
+        self._loop = loop
+        self._callback = callback
+        self._handle: asyncio.TimerHandle | None = None
+        self._at: float | None = None
+
+    @property
+    def at(self) -> float | None:
+        return self._at
+
+    def set(self, when: float) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+        self._at = when
+        self._handle = self._loop.call_at(when, self._fired)
+
+    def cancel(self) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+        self._handle = None
+        self._at = None
+
+    def close(self) -> None:
+        self.cancel()
+
+    def _fired(self) -> None:
+        self._handle = None
+        self._at = None
+        self._callback()
+
+
+def loop_timer(loop: asyncio.AbstractEventLoop, callback: Callable[[], None]) -> LoopTimer:
+    """A :class:`TimerFd` on ``loop``, else (no timerfd here) a :class:`CallAtTimer`."""
+    global _no_timerfd
+    if _no_timerfd is None:
+        try:
+            return TimerFd(loop, callback)
+        except (OSError, AttributeError, NotImplementedError) as exc:
+            # NotImplementedError: a loop without add_reader (Windows' proactor)
+            _no_timerfd = str(exc) or type(exc).__name__
+            log.warning("no timerfd (%s): waits use the loop's timers (up to 1 ms late)", exc)
+    return CallAtTimer(loop, callback)
