@@ -52,7 +52,13 @@ from adapters.canopen.master import (
     TxFailed,
 )
 from adapters.canopen.od import obj_name
-from adapters.canopen.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.canopen.options import (
+    BusOptions,
+    DriveOptions,
+    check_sync_period,
+    parse_bus,
+    parse_drive,
+)
 from adapters.canopen.plan import node_config
 from adapters.canopen.profile import readings, want
 from adapters.link.can import CanLinks, RxBad, RxError, RxFailed, RxFrame, SendResult
@@ -134,6 +140,11 @@ class CanOpenAdapter:
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
         return parse_drive(table, drive)
+
+    @classmethod
+    def check_bus(cls, table: Table, options: BusOptions, drives: list[DriveOptions]) -> None:
+        """The SYNC period against the bus time of one cycle of these drives."""
+        check_sync_period(table, options, drives)
 
     def __init__(
         self,
