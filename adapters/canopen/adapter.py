@@ -82,6 +82,7 @@ from gateway.schema import Table
 log = logging.getLogger(__name__)
 
 LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
+LEAVE_MARGIN = 0.1  # s: beyond the SDO timeout, the bound on the release writes on leaving
 
 
 @dataclass(slots=True)
@@ -239,15 +240,40 @@ class CanOpenAdapter:
     async def _leave(
         self, link: Link, engine: Master, driver: CanDriver[CanFrame, Event, Action]
     ) -> None:
+        """Leave the line cleanly (docs/devices.md, "Leaving the line"): each drive's
+        consumer of the gateway's heartbeat switched off by SDO, bounded by the SDO
+        timeout, while SYNC, RPDOs (the shutdown stop) and the heartbeat go on; then the
+        last RPDOs, a SYNC and NMT enter pre-operational."""
         if not link.is_open:
             return
         now = self.clock()
         self._refresh(now)  # the wish as the shutdown stop left it
         driver.discard()
-        with contextlib.suppress(AdapterError):
-            driver.act(now, engine.leave(now))
+        self._act_quietly(driver, now, engine.release(now))
+        driver.flush(now)
+        bound = now + self.options.sdo_timeout + LEAVE_MARGIN
+        while not engine.released and (now := self.clock()) < bound:
+            self._refresh(now)
+            deadline = engine.next_deadline()
+            wait = LEAVE_WAIT if deadline is None else deadline - now
+            events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
+            now = self.clock()
+            for event in events:
+                self._act_quietly(driver, now, engine.step(now, _event(event)))
+            self._act_quietly(driver, now, engine.step(now))
+            driver.flush(now)
+        now = self.clock()
+        self._refresh(now)
+        self._act_quietly(driver, now, engine.leave(now))
         driver.flush(now)
         await asyncio.sleep(LEAVE_WAIT)
+
+    @staticmethod
+    def _act_quietly(
+        driver: CanDriver[CanFrame, Event, Action], now: float, actions: list[Action]
+    ) -> None:
+        with contextlib.suppress(AdapterError):
+            driver.act(now, actions)
 
     def _stop_pending(self) -> None:
         for fut in self._pending.values():

@@ -83,6 +83,7 @@ class Master:
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
         self.figures = {"syncs_tx": 0, "bad_frames": 0, "bus_errors": 0, "tx_failures": 0}
         self._left = False
+        self._releasing = False
         self._kick = False  # a job was queued for an idle SDO channel
         self._due: float | None = 0.0  # a lower bound of the next deadline
 
@@ -106,6 +107,8 @@ class Master:
         node = self.nodes.get(node_id)
         if node is None:
             raise NodeUnavailable(f"node {node_id} is not configured on this line")
+        if self._releasing:
+            raise NodeUnavailable(f"node {node_id}: the gateway is leaving the line")
         if node.phase is not Phase.ONLINE:
             raise NodeUnavailable(f"node {node_id} is {node.phase.value}, not online")
         token = next(self._tokens)
@@ -115,6 +118,36 @@ class Master:
 
     def online(self, node_id: int) -> bool:
         return self.nodes[node_id].phase is Phase.ONLINE
+
+    def release(self, now: float) -> list[Action]:
+        """Start leaving the line cleanly: every node that may consume the gateway's
+        heartbeat (configuring, started or online) has its ``release`` writes made by SDO
+        (0x1016:1 = 0, CiA 301 §7.2.8.3.2.1: an entry with node id 0 and time 0 is not
+        used), before any other job, whose transfer under way is aborted; no node is
+        probed or configured any more. The cycle (SYNC, RPDOs) and the gateway's heartbeat
+        go on meanwhile; :attr:`released` tells when every write ended (answered, refused
+        or timed out), then :meth:`leave`."""
+        out: list[Action] = []
+        self._releasing = True
+        for node in self.nodes.values():
+            self._drop_jobs(node, "the gateway is leaving the line", out)
+            node.probe_at = None
+            if node.phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
+                for s in node.config.release:
+                    node.jobs.append(Job(Purpose.RELEASE, s.index, s.subindex, s.data))
+            if node.jobs:
+                self._start_job(node, now, out)
+        self._due = self._compute_due()
+        return out
+
+    @property
+    def released(self) -> bool:
+        """No release write is waiting or under way (see :meth:`release`)."""
+        return not any(
+            j.purpose is Purpose.RELEASE
+            for n in self.nodes.values()
+            for j in (*n.jobs, *((n.current,) if n.current is not None else ()))
+        )
 
     def leave(self, now: float) -> list[Action]:
         """Leaving the line (shutdown): each online node gets its last RPDO (the wish as
@@ -204,7 +237,7 @@ class Master:
             if node.phase_deadline is not None and now >= node.phase_deadline:
                 node.phase_deadline = None
                 self._phase_timeout(node, now, out)
-            if node.probe_at is not None and now >= node.probe_at:
+            if node.probe_at is not None and now >= node.probe_at and not self._releasing:
                 node.probe_at = None
                 node.jobs.appendleft(Job(Purpose.PROBE, 0x1000, 0))
         if self._next_cycle is not None and now >= self._next_cycle:
@@ -381,6 +414,7 @@ class Master:
             Purpose.VERIFY: self._verified,
             Purpose.REPORT: self._reported,
             Purpose.FAULT: self._fault_read,
+            Purpose.RELEASE: self._released_one,
         }.get(job.purpose)
         if handler is None:
             out.append(SdoDone(job.token, node.id, result))
@@ -474,6 +508,18 @@ class Master:
     ) -> None:
         node.reports[(job.index, job.subindex)] = result.data if result.ok else b""
         self._next_step(node, now, out)
+
+    def _released_one(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        if result.ok:
+            node.figures["released"] += 1
+            return
+        text = (
+            f"leaving: write of 0x{job.index:04X}:{job.subindex} failed: {result.message} "
+            "(the drive reacts per 0x6007 when the gateway's heartbeat stops)"
+        )
+        out.append(Report(node.id, text))
 
     def _fault_read(
         self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]

@@ -34,6 +34,7 @@ class Purpose(Enum):
     REPORT = "report"
     FAULT = "fault"
     USER = "user"  # a job of the adapter (parameter read or write)
+    RELEASE = "release"  # leaving the line: the node's consumer of our heartbeat off
 
 
 @dataclass(slots=True)
@@ -82,6 +83,7 @@ class Node:
             "sdo_timeouts": 0,
             "bad_pdos": 0,
             "lost": 0,
+            "released": 0,
         }
     )
     last_problem: str | None = None
