@@ -64,6 +64,7 @@ from adapters.canopen.master.events import (
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
 RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
+COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
 
@@ -86,6 +87,8 @@ class Master:
         self._releasing = False
         self._kick = False  # a job was queued for an idle SDO channel
         self._due: float | None = 0.0  # a lower bound of the next deadline
+        self._cobs: dict[int, frames.CobId | None] = {}
+        self._quiet = False  # the event stepped moved no deadline (a PDO)
 
     # ------------------------------------------------------------ the adapter's side
 
@@ -193,7 +196,7 @@ class Master:
         (``_due``, a lower bound of the next deadline, is kept so that a busy line costs
         O(1) per frame, not a pass over every node)."""
         out: list[Action] = []
-        self._kick = False
+        self._kick = self._quiet = False
         if self._left:
             return out
         touched: Node | None = None
@@ -209,6 +212,8 @@ class Master:
             return out
         if touched.current is None and touched.jobs:
             self._start_job(touched, now, out)
+        elif self._quiet:
+            return out
         mine = self._node_due(touched)
         if mine is not None and (due is None or mine < due):
             self._due = mine
@@ -264,8 +269,12 @@ class Master:
 
     def _rpdo(self, node: Node, now: float) -> CanFrame:
         want = node.want
+        resetting = now < node.reset_until
+        key = (node.state, want, resetting)
+        if key == node.rpdo_key and node.rpdo_frame is not None:
+            return node.rpdo_frame  # a pure function of these: built once per change
         cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
-        if now < node.reset_until:
+        if resetting:
             # transition 15 on the drive's 0 -> 1 edge; the other bits stay as they are,
             # so a reset asked of a drive that is not faulted changes nothing else
             cw |= Cw.FAULT_RESET_BIT
@@ -273,7 +282,9 @@ class Master:
         data = bytearray()
         for field_, value in zip(node.config.rpdo, values, strict=False):
             data += _pack(field_, value)
-        return CanFrame(frames.rpdo_id(1, node.id), bytes(data))
+        frame = CanFrame(frames.rpdo_id(1, node.id), bytes(data))
+        node.rpdo_key, node.rpdo_frame = key, frame
+        return frame
 
     def _phase_timeout(self, node: Node, now: float, out: list[Action]) -> None:
         if node.phase is Phase.RESET:
@@ -295,6 +306,7 @@ class Master:
         node.want = STOPPED
         node.reset_until = 0.0
         node.rpdo_sent, node.rpdo_at = None, 0.0
+        node.rpdo_key = node.rpdo_frame = None
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
@@ -550,10 +562,23 @@ class Master:
             self.figures["tx_failures"] += 1
         return None
 
-    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
+    def _classify(self, cob_id: int) -> frames.CobId | None:
+        """``frames.classify`` remembered per COB-ID (every frame received asks)."""
         try:
-            cob = frames.classify(frame.cob_id)
+            return self._cobs[cob_id]
+        except KeyError:
+            pass
+        try:
+            cob: frames.CobId | None = frames.classify(cob_id)
         except CanOpenDecodeError:
+            cob = None
+        if len(self._cobs) < COB_CACHE:
+            self._cobs[cob_id] = cob
+        return cob
+
+    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
+        cob = self._classify(frame.cob_id)
+        if cob is None:
             self.figures["bad_frames"] += 1
             return None
         node = self.nodes.get(cob.node_id)
@@ -561,6 +586,7 @@ class Master:
             return None  # another node, or a broadcast (SYNC, NMT of another master)
         kind = cob.kind
         if kind is Kind.TPDO:
+            self._quiet = True  # a PDO moves no deadline of its node
             if cob.pdo == 1 and node.phase is Phase.ONLINE:
                 self._on_tpdo(node, now, frame.data, out)
         elif kind is Kind.SDO_TX:

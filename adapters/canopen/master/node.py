@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 from adapters.canopen.cia402 import State
-from adapters.canopen.frames import NmtState, SdoClientTransfer
+from adapters.canopen.frames import CanFrame, NmtState, SdoClientTransfer
 from adapters.canopen.master.control import STOPPED, Want
 from adapters.canopen.master.events import NodeConfig
 
@@ -72,6 +72,9 @@ class Node:
     reset_until: float = 0.0
     rpdo_sent: bytes | None = None  # the last RPDO1 data sent, and when
     rpdo_at: float = 0.0
+    # RPDO1 as last built, and what it was built from (state, want, reset pulse on)
+    rpdo_key: tuple[State | None, Want, bool] | None = None
+    rpdo_frame: CanFrame | None = None
     figures: dict[str, int] = field(
         default_factory=lambda: {
             "tpdo_rx": 0,
