@@ -98,6 +98,8 @@ class _Drive:
     problem: str | None = None
     quick_stop_option: int | None = None
     input_key: object = None
+    want_from: object = None  # the desired command the engine's wish was made of
+    want_made: object = None  # that wish
 
     @property
     def id(self) -> str:
@@ -312,9 +314,15 @@ class CanOpenAdapter:
         for d in self.drives.values():
             if not d.online:
                 engine.set_want(d.node, want(_STOPPED_DESIRED, d.opts))
+                d.want_from = None
                 continue
             desired = hub.desired(d.id)
-            engine.set_want(d.node, want(desired, d.opts))
+            # the hub's commands are frozen: the same object is the same command, and the
+            # wish made of it is still the engine's (unless the engine replaced it)
+            if desired is not d.want_from or engine.wish(d.node) is not d.want_made:
+                d.want_made = want(desired, d.opts)
+                engine.set_want(d.node, d.want_made)
+                d.want_from = desired
             if desired.fault_reset_seq != d.reset_seen:
                 d.reset_seen = desired.fault_reset_seq
                 if engine.fault_reset(d.node, now):

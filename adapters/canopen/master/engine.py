@@ -95,6 +95,10 @@ class Master:
     def set_want(self, node_id: int, want: Want) -> None:
         self.nodes[node_id].want = want
 
+    def wish(self, node_id: int) -> Want:
+        """The node's wish as the engine holds it (STOPPED again once the node is lost)."""
+        return self.nodes[node_id].want
+
     def fault_reset(self, node_id: int, now: float) -> bool:
         """Start one fault reset pulse (bit 7 of the controlword); False when the node is
         not online (nothing is sent, nothing is kept for later) or a pulse is under way."""
