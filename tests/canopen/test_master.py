@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import pytest
 from hypothesis import given
@@ -174,7 +175,7 @@ class Line:
         self.actions: list[object] = []
         self.sent: list[f.CanFrame] = []
 
-    def _deliver(self, actions: list[object]) -> None:
+    def _deliver(self, actions: Sequence[object]) -> None:
         queue = list(actions)
         while queue:
             action = queue.pop(0)
@@ -537,10 +538,10 @@ def test_release_switches_the_consumer_off_by_sdo_while_the_cycle_goes_on() -> N
     line.run(0.05)
     token = line.master.submit(5, 0x605A, 0, None)  # a job queued: it ends, not the release
     node.silent = True  # the job's request goes unanswered...
-    line._deliver(line.master.step(line.now))
+    line._deliver(list(line.master.step(line.now)))
     node.silent = False
     sent = len(line.sent)
-    line._deliver(line.master.release(line.now))
+    line._deliver(list(line.master.release(line.now)))
     # ...and is aborted on the line, then the release: SDO download 0x1016:1 = 0 (golden)
     assert line.sent[sent] == f.CanFrame(0x605, bytes.fromhex("80 5A 60 00 00 00 00 08"))
     assert line.sent[sent + 1] == f.CanFrame(0x605, bytes.fromhex("23 16 10 01 00 00 00 00"))
@@ -562,7 +563,7 @@ def test_a_release_unanswered_ends_at_the_sdo_timeout_and_is_reported() -> None:
     line = Line(Master(config(), [node_config(release=RELEASE)]), node)
     line.run(0.5)
     node.silent = True
-    line._deliver(line.master.release(line.now))
+    line._deliver(list(line.master.release(line.now)))
     assert not line.master.released
     line.run(0.15, heartbeats=False, tpdo=False)
     assert line.master.released
