@@ -2,14 +2,19 @@
 loop of the canopen library, with the same simulated CiA 402 nodes, in the same run.
 
 Gateway: the CANopen adapter (master engine, shared CAN link and driver, CiA 402
-profile, hub updates) with N simulated nodes (1 and 32) in-process, SYNC every 1 ms (the
-shortest ``sync_period`` the configuration takes): every cycle is a SYNC and one RPDO1
-per node out, one TPDO1 per node back (the nodes' TPDO1 is synchronous after the
-gateway's bring-up). The figure: TPDO1s received per second divided by N (whole
-exchange cycles per second).
+profile, hub updates) with N simulated nodes (1 and 32) in-process, at 1 Mbit/s (the
+fastest CiA 301 bit rate) with SYNC at the physical minimum for that bit rate: the bus
+time of one cycle (SYNC + every node's RPDO1 and TPDO1 at their worst-case stuffed CAN
+2.0A lengths, ``adapters.canopen.options.min_sync_period``, rounded up to whole us), the
+shortest ``sync_period`` the configuration takes: 285 us for 1 node, 7,415 us for 32.
+Every cycle is a SYNC and one RPDO1 per node out (sent on change or every 100 ms; the
+drives hold the last one), one TPDO1 per node back (synchronous after the gateway's
+bring-up). The figure: TPDO1s received per second divided by N (whole exchange cycles
+per second); it cannot exceed 1 / sync_period (``line_ceiling`` in the note).
 Reference, same run, same simulator: the canopen library's own network as a bare
 closed loop, each cycle sending the same RPDO1 to every node and a SYNC, then waiting
-for every node's TPDO1 before the next cycle, as fast as the nodes answer.
+for every node's TPDO1 before the next cycle, as fast as the nodes answer. ``virtual``
+has no bit rate: the reference is bound by no line time, the gateway by its SYNC period.
 
 The simulator runs in the same process (it shares the interpreter with both), so the
 figures are the stack's cost beside a busy simulator, not line speed.
@@ -18,7 +23,7 @@ figures are the stack's cost beside a busy simulator, not line speed.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
+import math
 import struct
 import threading
 import time
@@ -28,24 +33,39 @@ from concurrent.futures import ThreadPoolExecutor
 import canopen
 
 from adapters.canopen.adapter import CanOpenAdapter
+from adapters.canopen.options import min_sync_period
 from adapters.canopen.sim import SimNodeConfig, SimRunner
 from adapters.canopen.sim.node import DEFAULT_EDS
 from adapters.canopen.sim.simulated import SimulatedBus
 from bench.common import Figure
-from gateway.config import parse
+from gateway.config import Config, parse
 from gateway.daemon import build_hub
 from gateway.model import CommState
 
 MEASURE = 2.0  # s measured per case
 SETTLE = 0.3  # s before measuring
-SYNC_PERIOD = 0.001  # s: the shortest sync_period the configuration takes
-UNFLOORED_SYNC = 0.0002  # s: below the floor, to find the stack's own ceiling
+BITRATE = 1_000_000  # bit/s: the fastest CiA 301 rate, the shortest SYNC period
 NODE_COUNTS = (1, 32)
 
 
-async def gateway_rate(nodes: int, sync_period: float = SYNC_PERIOD) -> float:
-    """Exchange cycles per second through the CANopen adapter; a ``sync_period`` under
-    the configuration's floor is set on the parsed options (the stack's own ceiling)."""
+def _config(bus: dict[str, object]) -> Config:
+    return parse(
+        {"zenoh": {"enabled": False}, "modbus": {"enabled": False}, "buses": {"co": bus}},
+        "bench",
+    )
+
+
+def physical_sync(bus: dict[str, object]) -> float:
+    """The shortest SYNC period the line carries for this bus's drives, in whole us."""
+    parsed = _config({**bus, "sync_period": 0.05}).buses[0]
+    shortest = min_sync_period(parsed.options.bitrate, [d.options for d in parsed.drives])
+    return math.ceil(round(shortest * 1e6, 6)) / 1e6
+
+
+async def gateway_rate(nodes: int) -> tuple[float, float, float]:
+    """Exchange cycles per second through the CANopen adapter at the physical minimum
+    SYNC period, that period, and the event loop thread's CPU time per cycle (the
+    gateway's: the simulator runs on the notifier thread)."""
     channel = f"bench-co-{uuid.uuid4().hex[:8]}"
     drives = [
         {
@@ -62,18 +82,13 @@ async def gateway_rate(nodes: int, sync_period: float = SYNC_PERIOD) -> float:
         "interface": "virtual",
         "channel": channel,
         "simulate": True,
-        "sync_period": max(sync_period, SYNC_PERIOD),
+        "bitrate": BITRATE,
         "drives": drives,
     }
-    config = parse(
-        {"zenoh": {"enabled": False}, "modbus": {"enabled": False}, "buses": {"co": bus}},
-        "bench",
-    )
+    sync_period = physical_sync(bus)
+    config = _config({**bus, "sync_period": sync_period})
     hub = build_hub(config)
     bus_config = config.buses[0]
-    if sync_period < SYNC_PERIOD:
-        options = dataclasses.replace(bus_config.options, sync_period=sync_period)
-        bus_config = dataclasses.replace(bus_config, options=options)
     line = SimulatedBus(bus_config)
     adapter = CanOpenAdapter(bus_config, links=line)
     task = asyncio.create_task(adapter.run(hub))
@@ -87,18 +102,20 @@ async def gateway_rate(nodes: int, sync_period: float = SYNC_PERIOD) -> float:
         if engine is None:
             raise RuntimeError("the CANopen adapter stopped")
         first = sum(n.figures["tpdo_rx"] for n in engine.nodes.values())
-        started = time.perf_counter()
+        started, cpu = time.perf_counter(), time.thread_time()
         await asyncio.sleep(MEASURE)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
-        spent = time.perf_counter() - started
+        spent, cpu = time.perf_counter() - started, time.thread_time() - cpu
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
-    return received / nodes / spent
+    cycles = max(received / nodes, 1.0)
+    return received / nodes / spent, sync_period, cpu / cycles
 
 
-async def library_rate(nodes: int) -> float:
-    """Exchange cycles per second of a bare canopen-library loop on the same nodes."""
+async def library_rate(nodes: int) -> tuple[float, float]:
+    """Exchange cycles per second of a bare canopen-library loop on the same nodes, and
+    its thread's CPU time per cycle."""
     channel = f"bench-lib-{uuid.uuid4().hex[:8]}"
     ids = list(range(1, nodes + 1))
     runner = SimRunner("virtual", channel, [SimNodeConfig(n) for n in ids])
@@ -116,7 +133,7 @@ async def library_rate(nodes: int) -> float:
             if len(seen) == nodes:
                 answered.set()
 
-    def loop() -> float:
+    def loop() -> tuple[float, float]:
         network.connect(interface="virtual", channel=channel)
         try:
             for n in ids:
@@ -129,9 +146,10 @@ async def library_rate(nodes: int) -> float:
             cycles = 0
             end = time.perf_counter() + SETTLE + MEASURE
             started = None
+            cpu = 0.0
             while (now := time.perf_counter()) < end:
                 if started is None and now >= end - MEASURE:
-                    started, cycles = now, 0
+                    started, cycles, cpu = now, 0, time.thread_time()
                 with lock:
                     seen.clear()
                     answered.clear()
@@ -140,7 +158,8 @@ async def library_rate(nodes: int) -> float:
                 network.sync.transmit()
                 if answered.wait(1.0):
                     cycles += 1
-            return cycles / (time.perf_counter() - (started or end))
+            cpu = time.thread_time() - cpu
+            return cycles / (time.perf_counter() - (started or end)), cpu / max(cycles, 1)
         finally:
             network.disconnect()
 
@@ -156,9 +175,9 @@ async def library_rate(nodes: int) -> float:
 async def _run() -> list[Figure]:
     figures: list[Figure] = []
     for nodes in NODE_COUNTS:
-        reference = await library_rate(nodes)
-        ours = await gateway_rate(nodes)
-        unfloored = await gateway_rate(nodes, UNFLOORED_SYNC)
+        reference, ref_cpu = await library_rate(nodes)
+        ours, sync_period, cpu = await gateway_rate(nodes)
+        ceiling = 1.0 / sync_period
         figures.append(
             Figure(
                 name=f"canopen_pdo_cycles_{nodes}_nodes",
@@ -167,22 +186,14 @@ async def _run() -> list[Figure]:
                 reference=round(reference, 1),
                 target="ratio >= 0.5",
                 note=(
-                    f"python-can virtual, simulated CiA 402 nodes in-process; gateway SYNC "
-                    f"every {SYNC_PERIOD * 1000:g} ms; reference: bare canopen-library closed "
-                    "loop (RPDO1 to every node + SYNC, wait for every TPDO1)"
-                ),
-            )
-        )
-        figures.append(
-            Figure(
-                name=f"canopen_pdo_cycles_{nodes}_nodes_sync_{UNFLOORED_SYNC * 1e6:g}us",
-                value=round(unfloored, 1),
-                unit="cycles/s",
-                reference=round(reference, 1),
-                note=(
-                    f"as above with SYNC every {UNFLOORED_SYNC * 1e6:g} us, under the "
-                    "configuration's 1 ms floor (set on the parsed options): the stack's "
-                    "own ceiling"
+                    f"python-can virtual, simulated CiA 402 nodes in-process; gateway at "
+                    f"{BITRATE // 1000} kbit/s with SYNC every {sync_period * 1e6:.0f} us, the "
+                    f"physical minimum (one cycle's bus time, worst-case stuffing): "
+                    f"line_ceiling {ceiling:.0f} cycles/s, ratio at most "
+                    f"{ceiling / reference:.2f}; reference: bare canopen-library closed loop "
+                    "(RPDO1 to every node + SYNC, wait for every TPDO1), no line time; CPU per "
+                    f"cycle: gateway's event loop thread {cpu * 1e6:.0f} us, reference's "
+                    f"thread {ref_cpu * 1e6:.0f} us"
                 ),
             )
         )

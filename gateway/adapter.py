@@ -190,7 +190,10 @@ class DriveAdapter(Protocol):
 
 
 class AdapterClass(Protocol):
-    """The class-level side of an adapter: its schema and its constructor."""
+    """The class-level side of an adapter: its schema and its constructor. An adapter may
+    also define ``check_bus(table, bus_options, drive_options)``, a classmethod raising a
+    ConfigError for a rule across the bus's drives (the config reader calls it once the
+    drives are read)."""
 
     devices: ClassVar[frozenset[Device]]
     address_range: ClassVar[tuple[int, int]]

@@ -249,6 +249,7 @@ def cmd_backup(args: argparse.Namespace) -> int:
                 remote.read,
                 gateway=str(described.get("gateway", "")),
                 progress=progress,
+                entries=pb.entries_from_json(described.get("writable_entries")),
             )
         )
         return _write_backup(args, backup)
@@ -381,7 +382,13 @@ def cmd_restore(args: argparse.Namespace) -> int:
             pb.read_all([p.key for p in backup.params], table, remote.read, progress)
         )
         current = {e.key: e for e in entries}
-        steps = pb.plan(backup, current, described.get("writable", []), args.drive)
+        steps = pb.plan(
+            backup,
+            current,
+            described.get("writable", []),
+            args.drive,
+            pb.entries_from_json(described.get("writable_entries")),
+        )
         if args.dry_run:
             return _report_restore(args, [_planned(step) for step in steps], dry_run=True)
         return _report_restore(args, _execute(remote, steps))

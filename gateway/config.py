@@ -415,6 +415,9 @@ def _bus(name: str, t: Table) -> BusConfig:
         _read(t, lambda t: None)  # a table the adapter gave up on was never read to the end
     owners = [(d.address, d.id) for d in drives]
     _check_unique(t, "drives", "address", owners)
+    check_bus = getattr(cls, "check_bus", None)  # optional: a rule across the bus's drives
+    if options is not None and callable(check_bus):
+        _read(t, lambda t: check_bus(t, options, [d.options for d in drives]), finish=False)
     # the adapter's options checked ``simulate`` (a key it does not know is refused above)
     simulate = t.data.get("simulate") is True
     return BusConfig(

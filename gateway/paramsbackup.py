@@ -285,16 +285,43 @@ def _one(text: str) -> tuple[int, int]:
     return number, subindex
 
 
-def choose(table: ParamTable, asked: Sequence[tuple[int, int]] | None) -> list[tuple[int, int]]:
-    """What to read: the given list, else every number of the drive's table."""
+def choose(
+    table: ParamTable,
+    asked: Sequence[tuple[int, int]] | None,
+    entries: Iterable[tuple[int, int]] = (),
+) -> list[tuple[int, int]]:
+    """What to read: the given list, else every number of the drive's table (subindex 0)
+    and the subindex entries of its ``writable_params`` (``"0x2000:4"``), in order."""
     if asked:
         return list(asked)
-    if not table:
+    extra = set(entries)
+    if not table and not extra:
         raise BackupError(
             "the drive has no parameter table (docs/devices.md): give the parameters, "
             "e.g. 1-20 or 100,101"
         )
-    return [(n, 0) for n in sorted(table)]
+    return sorted({(n, 0) for n in table} | extra)
+
+
+def entries_to_json(entries: Iterable[tuple[int, int]]) -> list[list[int]]:
+    """``writable_params``' subindex entries (``"0x2000:4"``) as ``[[8192, 4]]``, for the
+    ``params?describe`` answer (``writable_entries``)."""
+    return [[number, subindex] for number, subindex in sorted(entries)]
+
+
+def entries_from_json(value: Any) -> frozenset[tuple[int, int]]:
+    """The ``writable_entries`` of a ``params?describe`` answer (absent: none)."""
+    if value is None:
+        return frozenset()
+    if not isinstance(value, list):
+        raise BackupError(f"writable_entries: not a list: {value!r}")
+    out: set[tuple[int, int]] = set()
+    for i, pair in enumerate(value):
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise BackupError(f"writable_entries[{i}]: not a [number, subindex] pair: {pair!r}")
+        where = f"writable_entries[{i}]"
+        out.add((_int(pair[0], where, 0, 65535), _int(pair[1], where, 0, 255)))
+    return frozenset(out)
 
 
 # ---------------------------------------------------------------- reading
@@ -395,8 +422,11 @@ async def take(
     *,
     gateway: str = "",
     progress: Progress | None = None,
+    entries: Iterable[tuple[int, int]] = (),
 ) -> Backup:
-    numbers = choose(table, asked)
+    """Read the parameters (:func:`choose`; ``entries``: ``writable_params``' subindex
+    entries, read beside the table's numbers) into a backup document."""
+    numbers = choose(table, asked, entries)
     params = await read_all(numbers, table, read, progress)
     return Backup(drive=drive, params=params, taken=now_iso(), gateway=gateway)
 
@@ -508,10 +538,14 @@ def plan(
     current: Mapping[tuple[int, int], ParamEntry],
     writable: Iterable[int],
     drive_id: str,
+    entries: Iterable[tuple[int, int]] = (),
 ) -> list[Step]:
     """The restore, in number order: what differs and may be written is written; the rest
-    is left with the reason (docs/operations.md)."""
+    is left with the reason (docs/operations.md). ``writable``: whole numbers of
+    ``writable_params`` (every subindex); ``entries``: its ``"0x2000:4"`` entries (that
+    subindex only)."""
     allowed = frozenset(writable)
+    allowed_entries = frozenset(entries)
     steps = []
     for entry in sorted(backup.params, key=lambda e: e.key):
         now = current.get(entry.key)
@@ -522,7 +556,7 @@ def plan(
             steps.append(Step(entry, "skip", f"cannot be read from the drive: {why}", now))
         elif now.raw == entry.raw:
             steps.append(Step(entry, "same", "", now))
-        elif entry.number not in allowed:
+        elif entry.number not in allowed and entry.key not in allowed_entries:
             steps.append(Step(entry, "skip", f"not in writable_params of drive {drive_id}", now))
         else:
             steps.append(Step(entry, "write", "", now))

@@ -52,7 +52,13 @@ from adapters.canopen.master import (
     TxFailed,
 )
 from adapters.canopen.od import obj_name
-from adapters.canopen.options import BusOptions, DriveOptions, parse_bus, parse_drive
+from adapters.canopen.options import (
+    BusOptions,
+    DriveOptions,
+    check_sync_period,
+    parse_bus,
+    parse_drive,
+)
 from adapters.canopen.plan import node_config
 from adapters.canopen.profile import readings, want
 from adapters.link.can import CanLinks, RxBad, RxError, RxFailed, RxFrame, SendResult
@@ -76,6 +82,7 @@ from gateway.schema import Table
 log = logging.getLogger(__name__)
 
 LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
+LEAVE_MARGIN = 0.1  # s: beyond the SDO timeout, the bound on the release writes on leaving
 
 
 @dataclass(slots=True)
@@ -91,6 +98,8 @@ class _Drive:
     problem: str | None = None
     quick_stop_option: int | None = None
     input_key: object = None
+    want_from: object = None  # the desired command the engine's wish was made of
+    want_made: object = None  # that wish
 
     @property
     def id(self) -> str:
@@ -134,6 +143,11 @@ class CanOpenAdapter:
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
         return parse_drive(table, drive)
+
+    @classmethod
+    def check_bus(cls, table: Table, options: BusOptions, drives: list[DriveOptions]) -> None:
+        """The SYNC period against the bus time of one cycle of these drives."""
+        check_sync_period(table, options, drives)
 
     def __init__(
         self,
@@ -228,15 +242,40 @@ class CanOpenAdapter:
     async def _leave(
         self, link: Link, engine: Master, driver: CanDriver[CanFrame, Event, Action]
     ) -> None:
+        """Leave the line cleanly (docs/devices.md, "Leaving the line"): each drive's
+        consumer of the gateway's heartbeat switched off by SDO, bounded by the SDO
+        timeout, while SYNC, RPDOs (the shutdown stop) and the heartbeat go on; then the
+        last RPDOs, a SYNC and NMT enter pre-operational."""
         if not link.is_open:
             return
         now = self.clock()
         self._refresh(now)  # the wish as the shutdown stop left it
         driver.discard()
-        with contextlib.suppress(AdapterError):
-            driver.act(now, engine.leave(now))
+        self._act_quietly(driver, now, engine.release(now))
+        driver.flush(now)
+        bound = now + self.options.sdo_timeout + LEAVE_MARGIN
+        while not engine.released and (now := self.clock()) < bound:
+            self._refresh(now)
+            deadline = engine.next_deadline()
+            wait = LEAVE_WAIT if deadline is None else deadline - now
+            events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
+            now = self.clock()
+            for event in events:
+                self._act_quietly(driver, now, engine.step(now, _event(event)))
+            self._act_quietly(driver, now, engine.step(now))
+            driver.flush(now)
+        now = self.clock()
+        self._refresh(now)
+        self._act_quietly(driver, now, engine.leave(now))
         driver.flush(now)
         await asyncio.sleep(LEAVE_WAIT)
+
+    @staticmethod
+    def _act_quietly(
+        driver: CanDriver[CanFrame, Event, Action], now: float, actions: list[Action]
+    ) -> None:
+        with contextlib.suppress(AdapterError):
+            driver.act(now, actions)
 
     def _stop_pending(self) -> None:
         for fut in self._pending.values():
@@ -275,9 +314,15 @@ class CanOpenAdapter:
         for d in self.drives.values():
             if not d.online:
                 engine.set_want(d.node, want(_STOPPED_DESIRED, d.opts))
+                d.want_from = None
                 continue
             desired = hub.desired(d.id)
-            engine.set_want(d.node, want(desired, d.opts))
+            # the hub's commands are frozen: the same object is the same command, and the
+            # wish made of it is still the engine's (unless the engine replaced it)
+            if desired is not d.want_from or engine.wish(d.node) is not d.want_made:
+                d.want_made = want(desired, d.opts)
+                engine.set_want(d.node, d.want_made)
+                d.want_from = desired
             if desired.fault_reset_seq != d.reset_seen:
                 d.reset_seen = desired.fault_reset_seq
                 if engine.fault_reset(d.node, now):

@@ -68,7 +68,11 @@ class CanFrame:
             raise InvalidCobId(f"identifier {arbitration_id!r} is not 11-bit", raw)
         if len(raw) > MAX_DATA_LENGTH:
             raise InvalidCobId(f"{len(raw)} data bytes (at most 8)", raw)
-        return cls(arbitration_id, raw)
+        # checked above: built without __post_init__'s second check (every frame received)
+        frame = object.__new__(cls)
+        object.__setattr__(frame, "cob_id", arbitration_id)
+        object.__setattr__(frame, "data", raw)
+        return frame
 
 
 # --- COB-IDs (CiA 301 §7.3.3, pre-defined connection set) ------------------------------

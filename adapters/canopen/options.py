@@ -25,6 +25,9 @@ from gateway.config import DriveConfig, shipped_file
 from gateway.schema import Table
 
 BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)  # CiA 301
+# The shortest SYNC period taken whatever the line: CiA 301 0x1006 (communication cycle
+# period) counts in us, and a loop of the gateway's needs some 100 us per pass.
+SYNC_FLOOR = 100e-6  # s
 
 
 class Mode(Enum):
@@ -105,6 +108,17 @@ class DriveOptions:
     has_consumer_heartbeat: bool  # 0x1016:1
     sim: SimOptions = SimOptions()
 
+    @property
+    def rpdo1_bytes(self) -> int:
+        """RPDO1's data length: controlword and target."""
+        return (self.controlword.bits + self.target.bits) // 8
+
+    @property
+    def tpdo1_bytes(self) -> int:
+        """TPDO1's data length: statusword, actual velocity and the extras mapped."""
+        bits = self.statusword.bits + self.actual.bits + sum(v.bits for v in self.extras)
+        return bits // 8
+
 
 def parse_bus(t: Table) -> BusOptions:
     d = BusOptions()
@@ -121,8 +135,10 @@ def parse_bus(t: Table) -> BusOptions:
             f"needs interface = 'virtual' (simulated drives run in-process), not {interface!r}",
         )
     sync_period = t.number("sync_period", d.sync_period, minimum=0.0, maximum=10.0)
-    if 0 < sync_period < 0.001:
-        raise t.error("sync_period", "must be 0 (no SYNC) or at least 0.001 s")
+    if 0 < sync_period < SYNC_FLOOR:
+        raise t.error(
+            "sync_period", f"must be 0 (no SYNC) or at least {SYNC_FLOOR * 1e6:g} us (0.0001 s)"
+        )
     heartbeat_factor = t.number("heartbeat_factor", d.heartbeat_factor, minimum=1.5, maximum=20.0)
     return BusOptions(
         interface=interface,
@@ -289,3 +305,46 @@ def _eds_max_rpm(eds: Dictionary) -> float | None:
         return None
     default = eds.variable(0x6046, 2).default
     return float(default) if isinstance(default, int | float) and default > 0 else None
+
+
+# ---------------------------------------------------------------- bus time
+
+
+def frame_bits(data_bytes: int) -> int:
+    """The worst-case length in bits of a CAN 2.0A (11-bit identifier) data frame with
+    ``data_bytes`` bytes, the 3-bit intermission included (ISO 11898-1): of its 47 + 8n
+    bits, the 34 + 8n from SOF to the CRC are stuffed, at worst one stuff bit per 4 after
+    the first (Davis, Burns, Bril, Lukkien 2007): 47 + 8n + floor((34 + 8n - 1) / 4)."""
+    stuffed = 34 + 8 * data_bytes  # SOF, id 11, RTR, IDE, r0, DLC 4, data, CRC 15
+    return stuffed + 13 + (stuffed - 1) // 4  # CRC delimiter, ACK 2, EOF 7, intermission 3
+
+
+def cycle_bits(drives: list[DriveOptions] | tuple[DriveOptions, ...]) -> int:
+    """The bits one SYNC cycle puts on the line: SYNC (no data) and every drive's RPDO1
+    and TPDO1, each at its worst-case stuffed length."""
+    return frame_bits(0) + sum(
+        frame_bits(d.rpdo1_bytes) + frame_bits(d.tpdo1_bytes) for d in drives
+    )
+
+
+def min_sync_period(bitrate: int, drives: list[DriveOptions] | tuple[DriveOptions, ...]) -> float:
+    """The shortest SYNC period (s) the line carries at ``bitrate``: one cycle's bus time,
+    and never under :data:`SYNC_FLOOR`."""
+    return max(SYNC_FLOOR, cycle_bits(drives) / bitrate)
+
+
+def check_sync_period(t: Table, bus: BusOptions, drives: list[DriveOptions]) -> None:
+    """A SYNC period shorter than one cycle's bus time is a configuration error: the
+    frames of one cycle would not fit between two SYNCs."""
+    if bus.sync_period <= 0 or not drives:
+        return
+    bits = cycle_bits(drives)
+    shortest = bits / bus.bitrate
+    if bus.sync_period < shortest:
+        raise t.error(
+            "sync_period",
+            f"{bus.sync_period * 1e6:g} us is shorter than one cycle on the line: at "
+            f"{bus.bitrate} bit/s the SYNC and the RPDO1 and TPDO1 of {len(drives)} "
+            f"drive(s) take {bits} bits, at least {shortest * 1e6:.0f} us "
+            f"(worst-case bit stuffing)",
+        )

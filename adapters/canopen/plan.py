@@ -89,7 +89,11 @@ def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig
         read_back=False,
     )
     steps = [stop, _write(eds, 0x1017, 0, opts.heartbeat_ms, "producer heartbeat time 0x1017")]
+    release: tuple[SdoStep, ...] = ()
     if bus.heartbeat > 0 and opts.has_consumer_heartbeat:
+        # a clean leave switches the consumer off first (node id 0, time 0: the entry is
+        # not used, CiA 301 §7.2.8.3.2.1), so only a real loss of the gateway trips 0x6007
+        release = (_write(eds, 0x1016, 1, 0, "consumer heartbeat time 0x1016:1 off (leaving)"),)
         consumer_ms = min(0xFFFF, math.ceil(bus.heartbeat * bus.heartbeat_factor))
         steps.append(
             _write(
@@ -164,4 +168,5 @@ def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig
         fault_reads=fault_reads,
         reset_if_operational=opts.reset_if_operational,
         mode_bits=VL_OPERATION_BITS if opts.mode is Mode.VELOCITY else 0,
+        release=release,
     )

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import pytest
 from hypothesis import given
@@ -29,6 +30,7 @@ from adapters.canopen.master import (
     NodeUp,
     PdoField,
     Phase,
+    Report,
     SdoDone,
     SdoStep,
     Send,
@@ -173,7 +175,7 @@ class Line:
         self.actions: list[object] = []
         self.sent: list[f.CanFrame] = []
 
-    def _deliver(self, actions: list[object]) -> None:
+    def _deliver(self, actions: Sequence[object]) -> None:
         queue = list(actions)
         while queue:
             action = queue.pop(0)
@@ -523,6 +525,65 @@ def test_leave_sends_the_last_rpdo_and_pre_operational() -> None:
     assert frames_[2].data == bytes((f.NmtCommand.ENTER_PRE_OPERATIONAL, 5))
     assert line.master.step(line.now + 1) == []
     assert Phase.ONLINE is line.master.nodes[5].phase
+
+
+RELEASE = (SdoStep(0x1016, 1, bytes(4), "consumer heartbeat time 0x1016:1 off (leaving)"),)
+
+
+def test_release_switches_the_consumer_off_by_sdo_while_the_cycle_goes_on() -> None:
+    node = FakeNode()
+    line = Line(Master(config(), [node_config(release=RELEASE)]), node)
+    line.run(0.5)
+    line.master.set_want(5, Want(run=True, target=10))
+    line.run(0.05)
+    token = line.master.submit(5, 0x605A, 0, None)  # a job queued: it ends, not the release
+    node.silent = True  # the job's request goes unanswered...
+    line._deliver(list(line.master.step(line.now)))
+    node.silent = False
+    sent = len(line.sent)
+    line._deliver(list(line.master.release(line.now)))
+    # ...and is aborted on the line, then the release: SDO download 0x1016:1 = 0 (golden)
+    assert line.sent[sent] == f.CanFrame(0x605, bytes.fromhex("80 5A 60 00 00 00 00 08"))
+    assert line.sent[sent + 1] == f.CanFrame(0x605, bytes.fromhex("23 16 10 01 00 00 00 00"))
+    assert node.od[(0x1016, 1)] == bytes(4)
+    assert line.master.released
+    done = [a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token]
+    assert len(done) == 1 and done[0].error == "the gateway is leaving the line"
+    with pytest.raises(NodeUnavailable, match="leaving the line"):
+        line.master.submit(5, 0x605A, 0, None)
+    assert line.master.nodes[5].figures["released"] == 1
+    before = len([fr for fr in line.sent if fr.cob_id == 0x080])
+    line.run(0.05)
+    assert len([fr for fr in line.sent if fr.cob_id == 0x080]) > before  # SYNC goes on
+    assert line.master.nodes[5].phase is Phase.ONLINE
+
+
+def test_a_release_unanswered_ends_at_the_sdo_timeout_and_is_reported() -> None:
+    node = FakeNode()
+    line = Line(Master(config(), [node_config(release=RELEASE)]), node)
+    line.run(0.5)
+    node.silent = True
+    line._deliver(list(line.master.release(line.now)))
+    assert not line.master.released
+    line.run(0.15, heartbeats=False, tpdo=False)
+    assert line.master.released
+    reports = [a.text for a in line.of(Report) if isinstance(a, Report)]
+    assert any(t.startswith("leaving: write of 0x1016:1 failed: 0x05040000") for t in reports)
+
+
+def test_nothing_to_release_without_a_consumer_or_a_node_up() -> None:
+    line, _node = up()
+    assert [a for a in line.master.release(line.now) if isinstance(a, Send)] == []
+    assert line.master.released
+    quiet = Master(config(), [node_config(release=RELEASE)])  # never heard: nothing sent
+    assert quiet.release(0.0) == [] and quiet.released
+    probes = [
+        a
+        for t in (5.0, 6.0)
+        for a in quiet.step(t)
+        if isinstance(a, Send) and a.frame.cob_id == 0x605
+    ]
+    assert probes == []  # no node is probed once the gateway leaves
 
 
 def test_an_unchanged_rpdo_is_sent_on_change_and_refreshed() -> None:

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from adapters.canopen.options import BusOptions, Mode
+from adapters.canopen.options import BusOptions, Mode, cycle_bits, frame_bits, min_sync_period
 from adapters.canopen.plan import node_config
 from gateway.config import parse, shipped_file
 from gateway.errors import ConfigErrors
@@ -135,3 +135,32 @@ def test_node_ids() -> None:
 
 def test_simulate_needs_virtual() -> None:
     assert "needs interface = 'virtual'" in error_of({}, simulate=True, interface="socketcan")
+
+
+def test_worst_case_frame_lengths() -> None:
+    # CAN 2.0A with worst-case stuffing and the intermission: the textbook 55 bits of an
+    # empty frame and 135 of an 8-byte one (47 + 8n + floor((34 + 8n - 1) / 4))
+    assert [frame_bits(n) for n in (0, 4, 8)] == [55, 95, 135]
+
+
+def test_sync_period_shorter_than_a_cycle_on_the_line() -> None:
+    # one vl drive of the demo EDS: SYNC 55 + RPDO1 (4 bytes) 95 + TPDO1 (8 bytes) 135 bits
+    opts = config({}, bitrate=500_000).buses[0].drives[0].options
+    assert (opts.rpdo1_bytes, opts.tpdo1_bytes) == (4, 8)
+    assert cycle_bits([opts]) == 285
+    assert min_sync_period(500_000, [opts]) == pytest.approx(570e-6)
+    assert min_sync_period(1_000_000, [opts] * 32) == pytest.approx(7415e-6)
+    text = error_of({}, bitrate=500_000, sync_period=0.0005)
+    assert "site.toml" in text and "sync_period" in text
+    assert "500 us is shorter than one cycle" in text and "at least 570 us" in text
+    assert "500000 bit/s" in text and "1 drive(s) take 285 bits" in text
+    assert config({}, bitrate=500_000, sync_period=0.00057).buses[0].options.sync_period == (
+        pytest.approx(0.00057)
+    )
+    assert config({}, bitrate=1_000_000, sync_period=0.0003).buses[0].options.sync_period
+
+
+def test_sync_period_absolute_floor_and_none() -> None:
+    text = error_of({}, bitrate=1_000_000, sync_period=0.00005)
+    assert "sync_period" in text and "at least 100 us" in text
+    assert config({}, sync_period=0, bitrate=10_000).buses[0].options.sync_period == 0

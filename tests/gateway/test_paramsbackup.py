@@ -181,3 +181,55 @@ def test_progress_is_a_bar_on_a_terminal_and_lines_otherwise(
     plain = io.StringIO()
     ProgressOut("backup cfw11", plain)(1, 2, p100)
     assert plain.getvalue() == "backup cfw11 1/2 P0100 Acceleration time = 2.0 s\n"
+
+
+async def test_subindex_entries_of_writable_params_are_backed_up_and_restored() -> None:
+    """``writable_params = ["0x6083", "0x2000:4"]``: 0x2000:4 is read beside the table's
+    numbers (subindex 0) and restored; 0x2000:1, not listed, is only compared."""
+    table = param_table([ParamInfo(0x2000, "Manufacturer record"), ParamInfo(0x6083, "Accel")])
+    entries = pb.entries_from_json(pb.entries_to_json([(0x2000, 4)]))
+    assert entries == {(0x2000, 4)}
+    assert pb.choose(table, None, entries) == [(0x2000, 0), (0x2000, 4), (0x6083, 0)]
+    assert pb.choose(param_table([]), None, entries) == [(0x2000, 4)]
+    assert pb.choose(table, [(0x2000, 1)], entries) == [(0x2000, 1)]  # asked: only that
+
+    values = {(0x2000, 0): 4, (0x2000, 4): 1800, (0x6083, 0): 500}
+
+    async def read(number: int, subindex: int) -> ParamValue:
+        return values[(number, subindex)]
+
+    backup = await pb.take(DRIVE, table, None, read, entries=entries)
+    assert [(e.key, e.raw, e.label) for e in backup.params] == [
+        ((0x2000, 0), 4, "P8192"),
+        ((0x2000, 4), 1800, "P8192.4"),
+        ((0x6083, 0), 500, "P24707"),
+    ]
+    again = pb.Backup.from_json(json.loads(json.dumps(backup.to_json())))
+    now = {
+        (0x2000, 0): pb.ParamEntry(0x2000, 0, raw=4),
+        (0x2000, 1): pb.ParamEntry(0x2000, 1, raw=7),
+        (0x2000, 4): pb.ParamEntry(0x2000, 4, raw=1500),
+        (0x6083, 0): pb.ParamEntry(0x6083, 0, raw=400),
+    }
+    stale = pb.Backup(DRIVE, (*again.params, pb.ParamEntry(0x2000, 1, raw=9)))
+    steps = {s.entry.key: s for s in pb.plan(stale, now, [0x6083], "co", entries)}
+    assert steps[(0x2000, 4)].action == "write"
+    assert steps[(0x6083, 0)].action == "write"
+    assert steps[(0x2000, 0)].action == "same"
+    assert steps[(0x2000, 1)].action == "skip"
+    assert "writable_params of drive co" in steps[(0x2000, 1)].reason
+    # without the entries (an older gateway's describe) 0x2000:4 is skipped, as before
+    old = {s.entry.key: s for s in pb.plan(stale, now, [0x6083], "co")}
+    assert old[(0x2000, 4)].action == "skip"
+
+
+def test_writable_entries_from_a_describe_answer() -> None:
+    assert pb.entries_from_json(None) == frozenset()
+    assert pb.entries_from_json([[8192, 4], [24707, 0]]) == {(8192, 4), (24707, 0)}
+    for bad, why in [
+        ("x", "not a list"),
+        ([[1]], r"writable_entries\[0\]: not a \[number, subindex\] pair"),
+        ([[1, 2], [70000, 1]], r"writable_entries\[1\]"),
+    ]:
+        with pytest.raises(pb.BackupError, match=why):
+            pb.entries_from_json(bad)

@@ -64,6 +64,7 @@ from adapters.canopen.master.events import (
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
 RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
+COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
 
@@ -83,13 +84,20 @@ class Master:
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
         self.figures = {"syncs_tx": 0, "bad_frames": 0, "bus_errors": 0, "tx_failures": 0}
         self._left = False
+        self._releasing = False
         self._kick = False  # a job was queued for an idle SDO channel
         self._due: float | None = 0.0  # a lower bound of the next deadline
+        self._cobs: dict[int, frames.CobId | None] = {}
+        self._quiet = False  # the event stepped moved no deadline (a PDO)
 
     # ------------------------------------------------------------ the adapter's side
 
     def set_want(self, node_id: int, want: Want) -> None:
         self.nodes[node_id].want = want
+
+    def wish(self, node_id: int) -> Want:
+        """The node's wish as the engine holds it (STOPPED again once the node is lost)."""
+        return self.nodes[node_id].want
 
     def fault_reset(self, node_id: int, now: float) -> bool:
         """Start one fault reset pulse (bit 7 of the controlword); False when the node is
@@ -106,6 +114,8 @@ class Master:
         node = self.nodes.get(node_id)
         if node is None:
             raise NodeUnavailable(f"node {node_id} is not configured on this line")
+        if self._releasing:
+            raise NodeUnavailable(f"node {node_id}: the gateway is leaving the line")
         if node.phase is not Phase.ONLINE:
             raise NodeUnavailable(f"node {node_id} is {node.phase.value}, not online")
         token = next(self._tokens)
@@ -115,6 +125,36 @@ class Master:
 
     def online(self, node_id: int) -> bool:
         return self.nodes[node_id].phase is Phase.ONLINE
+
+    def release(self, now: float) -> list[Action]:
+        """Start leaving the line cleanly: every node that may consume the gateway's
+        heartbeat (configuring, started or online) has its ``release`` writes made by SDO
+        (0x1016:1 = 0, CiA 301 §7.2.8.3.2.1: an entry with node id 0 and time 0 is not
+        used), before any other job, whose transfer under way is aborted; no node is
+        probed or configured any more. The cycle (SYNC, RPDOs) and the gateway's heartbeat
+        go on meanwhile; :attr:`released` tells when every write ended (answered, refused
+        or timed out), then :meth:`leave`."""
+        out: list[Action] = []
+        self._releasing = True
+        for node in self.nodes.values():
+            self._drop_jobs(node, "the gateway is leaving the line", out)
+            node.probe_at = None
+            if node.phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
+                for s in node.config.release:
+                    node.jobs.append(Job(Purpose.RELEASE, s.index, s.subindex, s.data))
+            if node.jobs:
+                self._start_job(node, now, out)
+        self._due = self._compute_due()
+        return out
+
+    @property
+    def released(self) -> bool:
+        """No release write is waiting or under way (see :meth:`release`)."""
+        return not any(
+            j.purpose is Purpose.RELEASE
+            for n in self.nodes.values()
+            for j in (*n.jobs, *((n.current,) if n.current is not None else ()))
+        )
 
     def leave(self, now: float) -> list[Action]:
         """Leaving the line (shutdown): each online node gets its last RPDO (the wish as
@@ -160,7 +200,7 @@ class Master:
         (``_due``, a lower bound of the next deadline, is kept so that a busy line costs
         O(1) per frame, not a pass over every node)."""
         out: list[Action] = []
-        self._kick = False
+        self._kick = self._quiet = False
         if self._left:
             return out
         touched: Node | None = None
@@ -176,6 +216,8 @@ class Master:
             return out
         if touched.current is None and touched.jobs:
             self._start_job(touched, now, out)
+        elif self._quiet:
+            return out
         mine = self._node_due(touched)
         if mine is not None and (due is None or mine < due):
             self._due = mine
@@ -204,7 +246,7 @@ class Master:
             if node.phase_deadline is not None and now >= node.phase_deadline:
                 node.phase_deadline = None
                 self._phase_timeout(node, now, out)
-            if node.probe_at is not None and now >= node.probe_at:
+            if node.probe_at is not None and now >= node.probe_at and not self._releasing:
                 node.probe_at = None
                 node.jobs.appendleft(Job(Purpose.PROBE, 0x1000, 0))
         if self._next_cycle is not None and now >= self._next_cycle:
@@ -231,8 +273,12 @@ class Master:
 
     def _rpdo(self, node: Node, now: float) -> CanFrame:
         want = node.want
+        resetting = now < node.reset_until
+        key = (node.state, want, resetting)
+        if key == node.rpdo_key and node.rpdo_frame is not None:
+            return node.rpdo_frame  # a pure function of these: built once per change
         cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
-        if now < node.reset_until:
+        if resetting:
             # transition 15 on the drive's 0 -> 1 edge; the other bits stay as they are,
             # so a reset asked of a drive that is not faulted changes nothing else
             cw |= Cw.FAULT_RESET_BIT
@@ -240,7 +286,9 @@ class Master:
         data = bytearray()
         for field_, value in zip(node.config.rpdo, values, strict=False):
             data += _pack(field_, value)
-        return CanFrame(frames.rpdo_id(1, node.id), bytes(data))
+        frame = CanFrame(frames.rpdo_id(1, node.id), bytes(data))
+        node.rpdo_key, node.rpdo_frame = key, frame
+        return frame
 
     def _phase_timeout(self, node: Node, now: float, out: list[Action]) -> None:
         if node.phase is Phase.RESET:
@@ -262,6 +310,7 @@ class Master:
         node.want = STOPPED
         node.reset_until = 0.0
         node.rpdo_sent, node.rpdo_at = None, 0.0
+        node.rpdo_key = node.rpdo_frame = None
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
@@ -381,6 +430,7 @@ class Master:
             Purpose.VERIFY: self._verified,
             Purpose.REPORT: self._reported,
             Purpose.FAULT: self._fault_read,
+            Purpose.RELEASE: self._released_one,
         }.get(job.purpose)
         if handler is None:
             out.append(SdoDone(job.token, node.id, result))
@@ -475,6 +525,18 @@ class Master:
         node.reports[(job.index, job.subindex)] = result.data if result.ok else b""
         self._next_step(node, now, out)
 
+    def _released_one(
+        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
+    ) -> None:
+        if result.ok:
+            node.figures["released"] += 1
+            return
+        text = (
+            f"leaving: write of 0x{job.index:04X}:{job.subindex} failed: {result.message} "
+            "(the drive reacts per 0x6007 when the gateway's heartbeat stops)"
+        )
+        out.append(Report(node.id, text))
+
     def _fault_read(
         self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
     ) -> None:
@@ -504,10 +566,23 @@ class Master:
             self.figures["tx_failures"] += 1
         return None
 
-    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
+    def _classify(self, cob_id: int) -> frames.CobId | None:
+        """``frames.classify`` remembered per COB-ID (every frame received asks)."""
         try:
-            cob = frames.classify(frame.cob_id)
+            return self._cobs[cob_id]
+        except KeyError:
+            pass
+        try:
+            cob: frames.CobId | None = frames.classify(cob_id)
         except CanOpenDecodeError:
+            cob = None
+        if len(self._cobs) < COB_CACHE:
+            self._cobs[cob_id] = cob
+        return cob
+
+    def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
+        cob = self._classify(frame.cob_id)
+        if cob is None:
             self.figures["bad_frames"] += 1
             return None
         node = self.nodes.get(cob.node_id)
@@ -515,6 +590,7 @@ class Master:
             return None  # another node, or a broadcast (SYNC, NMT of another master)
         kind = cob.kind
         if kind is Kind.TPDO:
+            self._quiet = True  # a PDO moves no deadline of its node
             if cob.pdo == 1 and node.phase is Phase.ONLINE:
                 self._on_tpdo(node, now, frame.data, out)
         elif kind is Kind.SDO_TX:

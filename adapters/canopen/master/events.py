@@ -65,6 +65,7 @@ class NodeConfig:
     reset_if_operational: bool = False
     device_profile: int | None = 402
     mode_bits: int = 0
+    release: tuple[SdoStep, ...] = ()  # written on a clean leave (the heartbeat consumer off)
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 from adapters.canopen.cia402 import State
-from adapters.canopen.frames import NmtState, SdoClientTransfer
+from adapters.canopen.frames import CanFrame, NmtState, SdoClientTransfer
 from adapters.canopen.master.control import STOPPED, Want
 from adapters.canopen.master.events import NodeConfig
 
@@ -34,6 +34,7 @@ class Purpose(Enum):
     REPORT = "report"
     FAULT = "fault"
     USER = "user"  # a job of the adapter (parameter read or write)
+    RELEASE = "release"  # leaving the line: the node's consumer of our heartbeat off
 
 
 @dataclass(slots=True)
@@ -71,6 +72,9 @@ class Node:
     reset_until: float = 0.0
     rpdo_sent: bytes | None = None  # the last RPDO1 data sent, and when
     rpdo_at: float = 0.0
+    # RPDO1 as last built, and what it was built from (state, want, reset pulse on)
+    rpdo_key: tuple[State | None, Want, bool] | None = None
+    rpdo_frame: CanFrame | None = None
     figures: dict[str, int] = field(
         default_factory=lambda: {
             "tpdo_rx": 0,
@@ -82,6 +86,7 @@ class Node:
             "sdo_timeouts": 0,
             "bad_pdos": 0,
             "lost": 0,
+            "released": 0,
         }
     )
     last_problem: str | None = None

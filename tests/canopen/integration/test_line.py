@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -166,6 +167,65 @@ async def test_leaving_the_line_stops_and_pre_operational() -> None:
         await r.until(lambda: node.nmt_state is NmtState.PRE_OPERATIONAL)
         assert node.drive.state is not State.OPERATION_ENABLED
         assert r.hub.state("d5").comm is CommState.OFFLINE
+
+
+# the rig's consumer time of the gateway's heartbeat: heartbeat x heartbeat_factor (3)
+CONSUMER_S = 3 * round(scaled(100)) / 1000.0
+
+
+async def _run_then_leave(r: Any, *, clean: bool) -> None:
+    r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+    await r.until(lambda: r.sim.node(5).drive.state is State.OPERATION_ENABLED)
+    r.hub.apply_shutdown()
+    if not clean:  # a killed master: nothing more goes out, not even its leave
+
+        async def killed(*_: object) -> None:
+            return None
+
+        r.adapter._leave = killed
+    r.task.cancel()
+    await asyncio.gather(r.task, return_exceptions=True)
+
+
+async def test_a_clean_leave_switches_the_heartbeat_consumer_off_first() -> None:
+    """comm_loss_option = 1: after a clean shutdown the drive is stopped, in
+    pre-operational, its consumer of the gateway's heartbeat (0x1016:1) off, and not
+    faulted however long the gateway stays away."""
+    async with rig([drive(5, comm_loss_option=1)]) as r:
+        await r.wait("d5", online)
+        node = r.sim.node(5)
+        assert node._value(0x1016, 1) >> 16 == 127  # the bring-up armed it
+        await _run_then_leave(r, clean=True)
+        await r.until(lambda: node.nmt_state is NmtState.PRE_OPERATIONAL)
+        assert node._value(0x1016, 1) == 0
+        left = node.now
+        await r.until(lambda: node.now > left + 3 * CONSUMER_S)
+        assert node.drive.state not in (State.FAULT, State.OPERATION_ENABLED)
+        assert node.drive.state is State.SWITCH_ON_DISABLED or node.drive.state in (
+            State.READY_TO_SWITCH_ON,
+            State.SWITCHED_ON,
+        )
+
+
+async def test_a_killed_master_still_trips_the_drive_per_0x6007() -> None:
+    async with rig([drive(5, comm_loss_option=1)]) as r:
+        await r.wait("d5", online)
+        node = r.sim.node(5)
+        await _run_then_leave(r, clean=False)
+        await r.until(lambda: node.drive.state is State.FAULT)
+        assert node._value(0x603F, 0) == 0x8130  # heartbeat error (CiA 301)
+        assert node._value(0x1016, 1) >> 16 == 127
+
+
+async def test_a_pulled_cable_still_trips_the_drive_per_0x6007() -> None:
+    async with rig([drive(5, comm_loss_option=1)]) as r:
+        await r.wait("d5", online)
+        node = r.sim.node(5)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+        await r.until(lambda: node.drive.state is State.OPERATION_ENABLED)
+        node.silence(True)
+        await r.until(lambda: node.drive.state is State.FAULT)
+        assert node._value(0x603F, 0) == 0x8130
 
 
 async def test_a_drive_found_running_is_stopped_before_it_is_configured() -> None:
