@@ -715,10 +715,18 @@ class ZenohFrontEnd:
                     "state": state,
                     "table": paramsbackup.table_to_json(table),
                     "writable": sorted(hub.policy(drive_id).writable_params),
+                    "writable_entries": paramsbackup.entries_to_json(
+                        hub.policy(drive_id).writable_entries
+                    ),
                 }
             else:
                 backup = await paramsbackup.take(
-                    drive, table, request.numbers, read, gateway=gateway
+                    drive,
+                    table,
+                    request.numbers,
+                    read,
+                    gateway=gateway,
+                    entries=hub.policy(drive_id).writable_entries,
                 )
                 body = backup.to_json()
         except asyncio.CancelledError:

@@ -1,7 +1,8 @@
 """``drive-gateway params`` backup, diff and restore, and the ``<prefix>/drives/<id>/params``
 queryable, against a gateway process with one simulated drive of each family: WEG CFW-11
-and CFW320 over DP-V1, the MCD 600 in parameter mode (one Profibus line on a pty) and the
-CFW-08 over DeviceNet explicit messages (python-can ``virtual``)."""
+and CFW320 over DP-V1, the MCD 600 in parameter mode (one Profibus line on a pty), the
+CFW-08 over DeviceNet explicit messages and a CiA 402 drive over CANopen SDO (python-can
+``virtual``)."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ PREFIX = "paramtest"
 WEG_STARTUP = "{ P0220 = 10, P0222 = 11, P0226 = 9, P0227 = 4, P0228 = 5, P0105 = 5, P0313 = 1 }"
 
 
-def config(channel: str) -> str:
+def config(channel: str, co_channel: str) -> str:
     return f"""
 [gateway]
 name = "params-test"
@@ -93,17 +94,35 @@ assembly = 21
 connection = "polled"
 max_rpm = 1800
 writable_params = [100, 101, 313]
+
+[buses.co]
+adapter = "canopen"
+interface = "virtual"
+channel = "{co_channel}"
+simulate = true
+bitrate = 500000
+sync_period = 0.05
+heartbeat = 100
+
+[[buses.co.drives]]
+id = "co"
+device = "CiA 402"
+address = 10
+eds = "eds/cia402-drive.eds"
+max_rpm = 1800
+heartbeat = 100
+writable_params = ["0x6083", "0x2000:4"]
 """
 
 
-DRIVES = ("cfw11", "cfw320", "mcd600", "cfw08")
+DRIVES = ("cfw11", "cfw320", "mcd600", "cfw08", "co")
 
 
 @pytest.fixture(scope="module")
 def gw(tmp_path_factory: pytest.TempPathFactory) -> Iterator[GatewayProcess]:
     tmp = tmp_path_factory.mktemp("params")
     cfg = tmp / "gateway.toml"
-    cfg.write_text(config(f"params-{uuid.uuid4().hex[:8]}"))
+    cfg.write_text(config(f"params-{uuid.uuid4().hex[:8]}", f"params-co-{uuid.uuid4().hex[:8]}"))
     gateway = GatewayProcess(cfg, zenoh_endpoint())
     try:
         gateway.wait_for_line(READY_LINE, timeout=scaled(30))
@@ -263,6 +282,32 @@ def test_restore_over_devicenet_explicit_messages(gw: GatewayProcess, tmp_path: 
     (result,) = json.loads(done.stdout)["results"]
     assert result["result"] == "written" and result["drive"] == str(new)
     assert tool(gw, "param", "cfw08", "read", "313").stdout.endswith(f"= {old}\n")
+
+
+def test_restore_a_canopen_subindex_entry_of_writable_params(
+    gw: GatewayProcess, tmp_path: Path
+) -> None:
+    """``writable_params = ["0x6083", "0x2000:4"]``: the describe answer lists the entry,
+    the backup reads 0x2000:4 and a restore writes that subindex back over SDO."""
+    client = Client(gw.endpoint)
+    try:
+        (described,) = client.query(f"{PREFIX}/drives/co/params?describe", timeout=scaled(30))
+        assert described.json()["writable_entries"] == [[0x2000, 4]]
+    finally:
+        client.close()
+    doc = backup(gw, tmp_path, "co")
+    entries = {(p["number"], p.get("subindex", 0)): p for p in doc["params"]}
+    old = entries[(0x2000, 4)]["raw"]
+    new = old + 100
+    wrote = tool(gw, "param", "co", "write", "0x2000:4", str(new))
+    assert wrote.returncode == 0, wrote.stderr
+    done = tool(gw, "params", "restore", str(tmp_path / "co.json"), "co", "--json")
+    assert done.returncode == 0, done.stderr
+    results = {r["parameter"]: r for r in json.loads(done.stdout)["results"]}
+    (mine,) = [r for r in results.values() if r["result"] == "written"]
+    assert mine["drive"] == str(new)
+    back = tool(gw, "param", "co", "read", "0x2000:4")
+    assert back.returncode == 0 and back.stdout.rstrip().endswith(f"= {old}"), back.stdout
 
 
 def test_the_params_queryable_answers_the_whole_document(gw: GatewayProcess) -> None:
