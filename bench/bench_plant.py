@@ -306,6 +306,20 @@ def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
         time.sleep(0.1)
 
 
+def _wait_online(plant: Plant, tmp: Path, record: Path, drives: int) -> None:
+    """Every drive online within STARTUP_BOUND; else an error with the count on each bus."""
+
+    def all_online() -> bool:
+        doc = _read_json(record)
+        return bool(doc) and doc["online"] == drives
+
+    try:
+        _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
+    except RuntimeError as exc:
+        by_bus = (_read_json(record) or {}).get("online_by_bus")
+        raise RuntimeError(f"{exc}; online by bus: {by_bus}") from None
+
+
 def _stop_all(plant: Plant) -> None:
     """SIGTERM every process started, by pid; SIGKILL what has not ended in STOP_BOUND."""
     for proc in plant.procs.values():
@@ -498,11 +512,7 @@ def measure(plant: Plant) -> list[Figure]:
         _start(plant, "gateway", [*gateway, "--", "run", "--config", str(config)], tmp)
         drives = plant.profibus + plant.devicenet + plant.canopen
 
-        def all_online() -> bool:
-            doc = _read_json(record)
-            return bool(doc) and doc["online"] == drives
-
-        _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
+        _wait_online(plant, tmp, record, drives)
         load_before = os.getloadavg()
         client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
         if plant.modbus_clients:

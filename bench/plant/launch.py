@@ -98,8 +98,14 @@ def _hook_cycles() -> None:
     Master._cycle = master_cycle  # type: ignore[method-assign]
 
 
-def _write(path: str, online: int, total: int, final: bool) -> None:
-    doc: dict[str, Any] = {"online": online, "drives": total, "final": final, "pid": os.getpid()}
+def _write(path: str, online: dict[str, int], total: int, final: bool) -> None:
+    doc: dict[str, Any] = {
+        "online": sum(online.values()),
+        "online_by_bus": online,
+        "drives": total,
+        "final": final,
+        "pid": os.getpid(),
+    }
     if final:
         doc["cycles"] = CYCLES
         doc["gc"] = GC_PAUSES
@@ -117,8 +123,12 @@ async def _daemon(config_path: str, record: str | None) -> int:
     daemon = Daemon(load(config_path))
     total = len(daemon.config.drives)
 
-    def online() -> int:
-        return sum(1 for s in daemon.hub.states() if s.comm is CommState.ONLINE)
+    def online() -> dict[str, int]:
+        by_bus = {bus.name: 0 for bus in daemon.config.buses}
+        for s in daemon.hub.states():
+            if s.comm is CommState.ONLINE:
+                by_bus[s.bus] = by_bus.get(s.bus, 0) + 1
+        return by_bus
 
     async def report() -> None:
         while record is not None:
