@@ -36,7 +36,7 @@ Figures, over the measured window (after every drive is online and a settling ti
 - line diagnostics: the master's turnaround seen from the Profibus line (reply written ->
   next request read, against TSYN), how late the paced simulators and the CAN broker were.
 
-``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--profile F]``;
+``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--canopen N] [--profile F]``;
 ``make bench`` runs it with :data:`MEASURE` seconds (``BENCH_PLANT_SECONDS`` overrides, the
 ``--short`` flag of ``python -m bench`` gives :data:`SHORT_MEASURE`). Start-up is bounded
 by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -81,7 +82,7 @@ MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
 MEASURE: Final = 30.0  # s measured (make bench)
 SHORT_MEASURE: Final = 8.0  # s measured with --short
 SETTLE: Final = 3.0  # s of full load before the window opens
-STARTUP_BOUND: Final = 60.0  # s for every drive to come online
+STARTUP_BOUND: Final = 150.0  # s for every drive to come online (three lines on a loaded host)
 STOP_BOUND: Final = 15.0  # s for a process to end after SIGTERM (then SIGKILL)
 PY: Final = sys.executable
 HERE: Final = Path(__file__).resolve().parent.parent
@@ -294,6 +295,10 @@ def _start(plant: Plant, name: str, argv: list[str], tmp: Path, **kw: Any) -> No
     )
 
 
+class WaitTimeout(RuntimeError):
+    """What was waited for did not come within its bound."""
+
+
 def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
     end = time.monotonic() + bound
     while not ready():
@@ -302,7 +307,7 @@ def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
                 text = (tmp / f"{name}.log").read_text(errors="replace")[-2000:]
                 raise RuntimeError(f"{name} ended ({proc.returncode}) before {what}:\n{text}")
         if time.monotonic() > end:
-            raise RuntimeError(f"no {what} within {bound:g} s")
+            raise WaitTimeout(f"no {what} within {bound:g} s")
         time.sleep(0.1)
 
 
@@ -315,9 +320,9 @@ def _wait_online(plant: Plant, tmp: Path, record: Path, drives: int) -> None:
 
     try:
         _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
-    except RuntimeError as exc:
+    except WaitTimeout as exc:
         by_bus = (_read_json(record) or {}).get("online_by_bus")
-        raise RuntimeError(f"{exc}; online by bus: {by_bus}") from None
+        raise StartupFailed(f"{exc}; online by bus: {by_bus}") from None
 
 
 def _stop_all(plant: Plant) -> None:
@@ -726,13 +731,41 @@ def _figures(
     return figures
 
 
+class StartupFailed(RuntimeError):
+    """Not every drive came online within STARTUP_BOUND (the count on each bus is said)."""
+
+
 def run() -> list[Figure]:
+    """The whole plant; if it does not come up within :data:`STARTUP_BOUND` (on a small or
+    shared host the gateway's one core cannot carry the bring-up of three lines at once),
+    that is a figure of its own, and the plant is measured in two parts, each with the
+    clients: Profibus + DeviceNet (``plant_pbdn_*``) and the CANopen line (``plant_co_*``)."""
     seconds = float(
         os.environ.get(
             "BENCH_PLANT_SECONDS", SHORT_MEASURE if os.environ.get("BENCH_SHORT") else MEASURE
         )
     )
-    return measure(Plant(seconds=seconds))
+    try:
+        return measure(Plant(seconds=seconds))
+    except StartupFailed as exc:
+        figures = [
+            Figure(
+                "plant_drives_online",
+                math.nan,
+                "drives",
+                reference=PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES,
+                note=f"the whole plant did not come up: {exc}; measured in two parts",
+            )
+        ]
+    for tag, part in (
+        ("pbdn", Plant(canopen=0, seconds=seconds)),
+        ("co", Plant(profibus=0, devicenet=0, seconds=seconds)),
+    ):
+        figures += [
+            dataclasses.replace(f, name=f.name.replace("plant_", f"plant_{tag}_", 1))
+            for f in measure(part)
+        ]
+    return figures
 
 
 def main() -> int:
