@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.profile import WegProfile
 from adapters.profibus.weg.spec import DataProfile
-from gateway.model import DesiredCommand, Device
+from gateway.model import DesiredCommand, Device, Readings
 from tests.profibus.weg.helpers import profile
 
 STATUS = (0x1700, 0x1200, 0x1310, 0x9280, 0x1780, 0x3200, 0x0237, 0x02B7, 0x0008, 0x0040)
@@ -116,12 +116,19 @@ def test_a_repeated_telegram_is_not_decoded_again() -> None:
     p = profile(Device.CFW700, OPTIONS[1])
     telegram = struct.pack(">6H", 0x1700, 2048, 47, 0, 0, 1200)
     first = p.inputs(telegram, 0.0)
-    calls = []
+    calls: list[bytes] = []
     decode = p._decode_inputs
-    p._decode_inputs = lambda data: calls.append(data) or decode(data)  # type: ignore[method-assign]
+
+    def counted(data: bytes) -> Readings:
+        calls.append(data)
+        return decode(data)
+
+    p._decode_inputs = counted  # type: ignore[method-assign]
     again = p.inputs(telegram, 0.01)
     assert again == first and calls == []
-    again["values"]["P0002"] = 0  # a caller's copy: the next readings are not changed by it
+    values = again["values"]
+    assert isinstance(values, dict)
+    values["P0002"] = 0  # a caller's copy: the next readings are not changed by it
     assert p.inputs(telegram, 0.02) == first and calls == []
     p.outputs(DesiredCommand(run=True, speed_rpm=450.0), 0.03)  # what was asked changed
     assert p.inputs(telegram, 0.04) != first and calls == [telegram]
