@@ -748,24 +748,31 @@ def run() -> list[Figure]:
     try:
         return measure(Plant(seconds=seconds))
     except StartupFailed as exc:
-        figures = [
-            Figure(
-                "plant_drives_online",
-                math.nan,
-                "drives",
-                reference=PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES,
-                note=f"the whole plant did not come up: {exc}; measured in two parts",
-            )
-        ]
+        figures = [_not_up("plant", PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES, exc)]
     for tag, part in (
         ("pbdn", Plant(canopen=0, seconds=seconds)),
         ("co", Plant(profibus=0, devicenet=0, seconds=seconds)),
     ):
-        figures += [
-            dataclasses.replace(f, name=f.name.replace("plant_", f"plant_{tag}_", 1))
-            for f in measure(part)
-        ]
+        try:
+            figures += [
+                dataclasses.replace(f, name=f.name.replace("plant_", f"plant_{tag}_", 1))
+                for f in measure(part)
+            ]
+        except StartupFailed as exc:
+            figures.append(
+                _not_up(f"plant_{tag}", part.profibus + part.devicenet + part.canopen, exc)
+            )
     return figures
+
+
+def _not_up(prefix: str, drives: int, exc: StartupFailed) -> Figure:
+    return Figure(
+        f"{prefix}_drives_online",
+        math.nan,
+        "drives",
+        reference=drives,
+        note=f"did not come up: {exc}",
+    )
 
 
 def main() -> int:
