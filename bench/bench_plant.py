@@ -322,7 +322,10 @@ def _wait_online(plant: Plant, tmp: Path, record: Path, drives: int) -> None:
         _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
     except WaitTimeout as exc:
         by_bus = (_read_json(record) or {}).get("online_by_bus")
-        raise StartupFailed(f"{exc}; online by bus: {by_bus}") from None
+        log = (tmp / "gateway.log").read_text(errors="replace")[-1500:]
+        raise StartupFailed(
+            f"{exc}; online by bus: {by_bus}; the gateway's log ends:\n{log}"
+        ) from None
 
 
 def _stop_all(plant: Plant) -> None:
