@@ -12,8 +12,9 @@ Processes (all on 127.0.0.1, each started and killed by pid):
   ``drive-gateway sim devicenet`` in its own process, on the bench CAN bus
   (:mod:`bench.plant.canbus`: a broker process that arbitrates and paces every frame at its
   bit time); the scanner's poll interval is its minimum (1 ms): cycles back to back;
-- CANopen: :data:`CANOPEN_NODES` CiA 402 drives once the ``canopen`` adapter exists
-  (see :func:`canopen_line`, a marked hook);
+- CANopen: :data:`CANOPEN_NODES` CiA 402 drives (velocity mode, the shipped EDS) at
+  500 kbit/s: ``drive-gateway sim canopen`` in its own process, on a second bench CAN
+  broker; the master's SYNC period is the line's physical minimum (:func:`canopen_line`);
 - :data:`MODBUS_CLIENTS` Modbus TCP clients each polling every drive's status block at
   :data:`MODBUS_RATE` Hz, and one Zenoh subscriber to every drive's state
   (:mod:`bench.plant.clients`, one process each).
@@ -35,7 +36,7 @@ Figures, over the measured window (after every drive is online and a settling ti
 - line diagnostics: the master's turnaround seen from the Profibus line (reply written ->
   next request read, against TSYN), how late the paced simulators and the CAN broker were.
 
-``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--profile F]``;
+``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--canopen N] [--profile F]``;
 ``make bench`` runs it with :data:`MEASURE` seconds (``BENCH_PLANT_SECONDS`` overrides, the
 ``--short`` flag of ``python -m bench`` gives :data:`SHORT_MEASURE`). Start-up is bounded
 by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
@@ -45,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -71,13 +73,16 @@ PROFIBUS_WORDS: Final = 4  # CFW700 I/O words (P0922 = 3), in and out
 MASTER_ADDRESS: Final = 0
 DEVICENET_NODES: Final = 63
 CAN_BITRATE: Final = 500_000
-CANOPEN_NODES: Final = 32  # used once the canopen adapter exists (canopen_line)
+CANOPEN_NODES: Final = 32
+CANOPEN_RPDO1_BYTES: Final = 4  # controlword + vl target velocity (INTEGER16 each)
+CANOPEN_TPDO1_BYTES: Final = 8  # statusword + vl velocity actual + current + torque
+CANOPEN_MIN_SYNC: Final = 0.001  # s: the shortest sync_period the configuration takes
 MODBUS_CLIENTS: Final = 10
 MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
 MEASURE: Final = 30.0  # s measured (make bench)
 SHORT_MEASURE: Final = 8.0  # s measured with --short
 SETTLE: Final = 3.0  # s of full load before the window opens
-STARTUP_BOUND: Final = 60.0  # s for every drive to come online
+STARTUP_BOUND: Final = 150.0  # s for every drive to come online (three lines on a loaded host)
 STOP_BOUND: Final = 15.0  # s for a process to end after SIGTERM (then SIGKILL)
 PY: Final = sys.executable
 HERE: Final = Path(__file__).resolve().parent.parent
@@ -89,7 +94,7 @@ class Plant:
 
     profibus: int = PROFIBUS_SLAVES
     devicenet: int = DEVICENET_NODES
-    canopen: int = 0  # TODO(canopen): CANOPEN_NODES once the adapter is merged
+    canopen: int = CANOPEN_NODES
     modbus_clients: int = MODBUS_CLIENTS
     modbus_rate: float = MODBUS_RATE
     seconds: float = MEASURE
@@ -207,30 +212,55 @@ def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> s
     return "\n".join(lines) + "\n"
 
 
+def canopen_cycle(nodes: int) -> float:
+    """The physical minimum of one SYNC cycle of the CANopen line, seconds: the bit-time
+    sum of the SYNC and of every node's RPDO1 and TPDO1 (CiA 301 §7.2.2, §7.2.5), stuff
+    bits counted exactly (:func:`bench.plant.canbus.frame_bits`) on the drives at
+    standstill (every data byte 0). The frames' sizes are those the master maps for a
+    CiA 402 drive of the shipped EDS in velocity mode: :data:`CANOPEN_RPDO1_BYTES`
+    (controlword, vl target) and :data:`CANOPEN_TPDO1_BYTES` (statusword, vl actual,
+    current, torque)."""
+    from adapters.canopen import frames
+
+    bits = canbus.frame_bits(frames.COB_SYNC, b"")
+    for node in range(1, nodes + 1):
+        bits += canbus.frame_bits(frames.rpdo_id(1, node), bytes(CANOPEN_RPDO1_BYTES))
+        bits += canbus.frame_bits(frames.tpdo_id(1, node), bytes(CANOPEN_TPDO1_BYTES))
+    return bits / CAN_BITRATE
+
+
+def canopen_sync_period(nodes: int) -> float:
+    """The line's ``sync_period``: its physical minimum (:func:`canopen_cycle`), rounded up
+    to the microsecond, and never under the 1 ms the configuration takes."""
+    return max(CANOPEN_MIN_SYNC, math.ceil(canopen_cycle(nodes) * 1e6) / 1e6)
+
+
 def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
-    """TODO(canopen): the CANopen line, once ``adapters/canopen`` is merged here.
-
-    What main has (read there, 2026-11-27): bus keys ``interface``, ``channel``,
-    ``bitrate``, ``sync_period``, ``pdo_period``, ``heartbeat``... (adapters/canopen/
-    options.py), drives with ``device`` a CiA 402 model and ``eds``; the simulator is
-    ``drive-gateway sim canopen --interface I --channel C --node N [--node N ...]``
-    (adapters/canopen/cli.py); the master is SYNC-driven (``Master._cycle`` at each SYNC,
-    adapters/canopen/master/engine.py), so its cycle is ``sync_period``, not back to back.
-
-    To fill in: a ``[buses.canopen]`` table (``adapter = "canopen"``, ``interface =
-    canbus.INTERFACE``, ``channel = tmp / "canopen.sock"``, ``bitrate = 500000``, a
-    ``sync_period`` a little above the bit-time sum of one SYNC cycle's frames: SYNC +
-    32 RPDOs + 32 TPDOs of 4 bytes, about 5,500 bit times: 11 ms) with ``plant.canopen``
-    drives, units from ``first_unit``; in :func:`_start_lines` a second broker on that socket and ``sim
-    canopen`` through :mod:`bench.plant.launch` with ``--node 1 ... --node 32``; a hook in
-    ``launch._hook_cycles`` recording the time between two ``Master._cycle`` calls; in
-    :func:`_figures` the "canopen" cycles against ``sync_period`` (its jitter) and the
-    bit-time sum of the frames per SYNC cycle from its broker's log (must fit in it), as
-    for DeviceNet. Then ``Plant.canopen = CANOPEN_NODES`` by default.
-    """
-    if plant.canopen:
-        raise NotImplementedError("the CANopen line of the plant bench is not there yet")
-    return []
+    """The CANopen line: ``plant.canopen`` CiA 402 drives (node ids 1..n, the shipped EDS,
+    velocity mode) on their own bench CAN broker at :data:`CAN_BITRATE`, SYNC-driven
+    (``Master._cycle`` at every SYNC: the line's cycle is ``sync_period``, set to the line's
+    physical minimum, :func:`canopen_sync_period`); units from ``first_unit``."""
+    if not plant.canopen:
+        return []
+    lines = [
+        "[buses.canopen]",
+        'adapter = "canopen"',
+        f'interface = "{canbus.INTERFACE}"',
+        f'channel = "{tmp / "canopen.sock"}"',
+        f"bitrate = {CAN_BITRATE}",
+        f"sync_period = {canopen_sync_period(plant.canopen)!r}",
+    ]
+    for node in range(1, plant.canopen + 1):
+        lines += [
+            "[[buses.canopen.drives]]",
+            f'id = "co{node}"',
+            'device = "CiA 402"',
+            f"address = {node}",
+            f"modbus_unit = {first_unit + node - 1}",
+            'eds = "eds/cia402-drive.eds"',
+            "max_rpm = 1800",
+        ]
+    return lines
 
 
 # ---------------------------------------------------------------------- processes
@@ -265,6 +295,10 @@ def _start(plant: Plant, name: str, argv: list[str], tmp: Path, **kw: Any) -> No
     )
 
 
+class WaitTimeout(RuntimeError):
+    """What was waited for did not come within its bound."""
+
+
 def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
     end = time.monotonic() + bound
     while not ready():
@@ -273,8 +307,25 @@ def _wait(what: str, ready: Any, bound: float, plant: Plant, tmp: Path) -> None:
                 text = (tmp / f"{name}.log").read_text(errors="replace")[-2000:]
                 raise RuntimeError(f"{name} ended ({proc.returncode}) before {what}:\n{text}")
         if time.monotonic() > end:
-            raise RuntimeError(f"no {what} within {bound:g} s")
+            raise WaitTimeout(f"no {what} within {bound:g} s")
         time.sleep(0.1)
+
+
+def _wait_online(plant: Plant, tmp: Path, record: Path, drives: int) -> None:
+    """Every drive online within STARTUP_BOUND; else an error with the count on each bus."""
+
+    def all_online() -> bool:
+        doc = _read_json(record)
+        return bool(doc) and doc["online"] == drives
+
+    try:
+        _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
+    except WaitTimeout as exc:
+        by_bus = (_read_json(record) or {}).get("online_by_bus")
+        log = (tmp / "gateway.log").read_text(errors="replace")[-1500:]
+        raise StartupFailed(
+            f"{exc}; online by bus: {by_bus}; the gateway's log ends:\n{log}"
+        ) from None
 
 
 def _stop_all(plant: Plant) -> None:
@@ -322,6 +373,12 @@ def _read_json(path: Path) -> Any:
         return None
 
 
+def _broker_log(tmp: Path, name: str) -> tuple[Any, Any]:
+    """A CAN broker's frame log (or None) and its figures (or None)."""
+    log = canbus.load_log(str(tmp / name)) if (tmp / f"{name}.ends").exists() else None
+    return log, _read_json(tmp / f"{name}.json")
+
+
 @contextlib.contextmanager
 def _plant(plant: Plant) -> Iterator[Path]:
     with tempfile.TemporaryDirectory(prefix="plant-") as name:
@@ -353,6 +410,28 @@ def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
                 *(*launch, "--", "sim", "devicenet", "--interface", canbus.INTERFACE),
                 *("--channel", str(sock), "--nodes", nodes, "--assembly", "21"),
                 *("--log-level", "WARNING"),
+            ],
+            tmp,
+        )
+    if plant.canopen:
+        sock = tmp / "canopen.sock"
+        _start(
+            plant,
+            "canopen-bus",
+            [
+                *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
+                *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / "canopen-bus")),
+            ],
+            tmp,
+        )
+        _wait("the CANopen broker", sock.exists, 20, plant, tmp)
+        node_args = [a for n in range(1, plant.canopen + 1) for a in ("--node", str(n))]
+        _start(
+            plant,
+            "canopen-sim",
+            [
+                *(*launch, "--", "sim", "canopen", "--interface", canbus.INTERFACE),
+                *("--channel", str(sock), *node_args, "--log-level", "WARNING"),
             ],
             tmp,
         )
@@ -441,11 +520,7 @@ def measure(plant: Plant) -> list[Figure]:
         _start(plant, "gateway", [*gateway, "--", "run", "--config", str(config)], tmp)
         drives = plant.profibus + plant.devicenet + plant.canopen
 
-        def all_online() -> bool:
-            doc = _read_json(record)
-            return bool(doc) and doc["online"] == drives
-
-        _wait(f"all {drives} drives online", all_online, STARTUP_BOUND, plant, tmp)
+        _wait_online(plant, tmp, record, drives)
         load_before = os.getloadavg()
         client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
         if plant.modbus_clients:
@@ -502,13 +577,11 @@ def measure(plant: Plant) -> list[Figure]:
         # the end: SIGTERM; the launcher writes the cycles, the simulators their figures
         _stop_all(plant)
         doc = _read_json(record) or {}
-        cycles = doc.get("cycles", {"profibus": [], "devicenet": []})
+        cycles = doc.get("cycles", {"profibus": [], "devicenet": [], "canopen": []})
         gc_pauses = [p for p in doc.get("gc", []) if t0 <= p[0] < t1]
         pbsim = _read_json(tmp / "profibus-sim.json")
-        canlog = None
-        if plant.devicenet and (tmp / "canbus.ends").exists():
-            canlog = canbus.load_log(str(tmp / "canbus"))
-        broker = _read_json(tmp / "canbus.json")
+        canlog, broker = _broker_log(tmp, "canbus")
+        colog, cobroker = _broker_log(tmp, "canopen-bus")
     return _figures(
         plant,
         t0=t0,
@@ -519,6 +592,8 @@ def measure(plant: Plant) -> list[Figure]:
         pbsim=pbsim,
         canlog=canlog,
         broker=broker,
+        colog=colog,
+        cobroker=cobroker,
         clients=clients,
         load=(load_before, load_after),
         others=others,
@@ -537,6 +612,8 @@ def _figures(
     pbsim: Any,
     canlog: Any,
     broker: Any,
+    colog: Any,
+    cobroker: Any,
     clients: dict[str, Any],
     load: tuple[tuple[float, ...], tuple[float, ...]],
     others: dict[str, float],
@@ -602,6 +679,28 @@ def _figures(
             "bit-time sum of the frames carried per cycle (stuffing exact)",
             extra,
         )
+    if plant.canopen:
+        co = _cycles_in(cycles.get("canopen", []), t0, t1)
+        extra = f"; sync_period {canopen_sync_period(plant.canopen) * 1e3:.3f} ms"
+        if colog is not None and co:
+            ends, bits = colog
+            carried = canbus.bits_between(ends, bits, t0, t1)
+            extra += (
+                f"; carried {carried / len(co):.0f} bit times per cycle (SYNC, TPDO1s, RPDO1s "
+                f"on change, heartbeats); bus load {carried / CAN_BITRATE / (t1 - t0):.3f}"
+            )
+        if cobroker:
+            late = cobroker["lateness_us"]
+            extra += f"; broker lateness p50 {late['p50']} us p99 {late['p99']} us"
+        extra += f"; {len(co) / (t1 - t0):.1f} SYNC cycles/s"
+        figures += _line_figures(
+            f"canopen_{plant.canopen}_nodes_500k",
+            co,
+            canopen_cycle(plant.canopen),
+            f"bit-time sum of SYNC + {plant.canopen} RPDO1 ({CANOPEN_RPDO1_BYTES} bytes) + "
+            f"{plant.canopen} TPDO1 ({CANOPEN_TPDO1_BYTES} bytes), stuffing exact on zero data",
+            extra,
+        )
     mb = clients.get("modbus-clients", {})
     if mb:
         figures.append(
@@ -635,13 +734,48 @@ def _figures(
     return figures
 
 
+class StartupFailed(RuntimeError):
+    """Not every drive came online within STARTUP_BOUND (the count on each bus is said)."""
+
+
 def run() -> list[Figure]:
+    """The whole plant; if it does not come up within :data:`STARTUP_BOUND` (on a small or
+    shared host the gateway's one core cannot carry the bring-up of three lines at once),
+    that is a figure of its own, and the plant is measured in two parts, each with the
+    clients: Profibus + DeviceNet (``plant_pbdn_*``) and the CANopen line (``plant_co_*``)."""
     seconds = float(
         os.environ.get(
             "BENCH_PLANT_SECONDS", SHORT_MEASURE if os.environ.get("BENCH_SHORT") else MEASURE
         )
     )
-    return measure(Plant(seconds=seconds))
+    try:
+        return measure(Plant(seconds=seconds))
+    except StartupFailed as exc:
+        figures = [_not_up("plant", PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES, exc)]
+    for tag, part in (
+        ("pbdn", Plant(canopen=0, seconds=seconds)),
+        ("co", Plant(profibus=0, devicenet=0, seconds=seconds)),
+    ):
+        try:
+            figures += [
+                dataclasses.replace(f, name=f.name.replace("plant_", f"plant_{tag}_", 1))
+                for f in measure(part)
+            ]
+        except StartupFailed as exc:
+            figures.append(
+                _not_up(f"plant_{tag}", part.profibus + part.devicenet + part.canopen, exc)
+            )
+    return figures
+
+
+def _not_up(prefix: str, drives: int, exc: StartupFailed) -> Figure:
+    return Figure(
+        f"{prefix}_drives_online",
+        math.nan,
+        "drives",
+        reference=drives,
+        note=f"did not come up: {exc}",
+    )
 
 
 def main() -> int:
@@ -649,6 +783,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=MEASURE)
     parser.add_argument("--profibus", type=int, default=PROFIBUS_SLAVES)
     parser.add_argument("--devicenet", type=int, default=DEVICENET_NODES)
+    parser.add_argument("--canopen", type=int, default=CANOPEN_NODES)
     parser.add_argument("--modbus-clients", type=int, default=MODBUS_CLIENTS)
     parser.add_argument("--modbus-rate", type=float, default=MODBUS_RATE)
     parser.add_argument("--profile", help="write the gateway's cProfile stats here")
@@ -661,6 +796,7 @@ def main() -> int:
     plant = Plant(
         profibus=args.profibus,
         devicenet=args.devicenet,
+        canopen=args.canopen,
         modbus_clients=args.modbus_clients,
         modbus_rate=args.modbus_rate,
         seconds=args.seconds,

@@ -8,7 +8,8 @@
   ``sim devicenet ...``);
 - ``--record``, for ``run`` only: every bus cycle of each line (Profibus master: first
   request to end of the cycle, :class:`~adapters.profibus.figures.LineFigures`.cycle;
-  DeviceNet scanner: poll cycle), as (monotonic end time, seconds) pairs, and twice a
+  DeviceNet scanner: poll cycle; CANopen master: time between two SYNC cycles,
+  ``Master._cycle``), as (monotonic end time, seconds) pairs, and twice a
   second the number of drives online; written at ``--record`` (the status part every
   0.5 s, the cycles when the daemon ends), and every garbage collection's pause. The
   recording is a list append per cycle and per collection;
@@ -26,6 +27,7 @@ import cProfile
 import gc
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -33,7 +35,7 @@ from typing import Any
 
 from bench.plant import canbus, pin_from_env
 
-CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": []}
+CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": [], "canopen": []}
 GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
 
 
@@ -80,9 +82,30 @@ def _hook_cycles() -> None:
 
     Scheduler._cycle_done = cycle_done  # type: ignore[method-assign]
 
+    from adapters.canopen.master.engine import Master
 
-def _write(path: str, online: int, total: int, final: bool) -> None:
-    doc: dict[str, Any] = {"online": online, "drives": total, "final": final, "pid": os.getpid()}
+    canopen = CYCLES["canopen"]
+    last = [math.nan]
+    sync_cycle = Master._cycle
+
+    def master_cycle(self: Master, now: float, out: list[Any]) -> None:
+        sync_cycle(self, now, out)
+        at = time.monotonic()
+        if not math.isnan(last[0]):
+            canopen.append((at, at - last[0]))
+        last[0] = at
+
+    Master._cycle = master_cycle  # type: ignore[method-assign]
+
+
+def _write(path: str, online: dict[str, int], total: int, final: bool) -> None:
+    doc: dict[str, Any] = {
+        "online": sum(online.values()),
+        "online_by_bus": online,
+        "drives": total,
+        "final": final,
+        "pid": os.getpid(),
+    }
     if final:
         doc["cycles"] = CYCLES
         doc["gc"] = GC_PAUSES
@@ -100,8 +123,12 @@ async def _daemon(config_path: str, record: str | None) -> int:
     daemon = Daemon(load(config_path))
     total = len(daemon.config.drives)
 
-    def online() -> int:
-        return sum(1 for s in daemon.hub.states() if s.comm is CommState.ONLINE)
+    def online() -> dict[str, int]:
+        by_bus = {bus.name: 0 for bus in daemon.config.buses}
+        for s in daemon.hub.states():
+            if s.comm is CommState.ONLINE:
+                by_bus[s.bus] = by_bus.get(s.bus, 0) + 1
+        return by_bus
 
     async def report() -> None:
         while record is not None:

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 
 from bench import bench_plant
 from bench.plant import canbus
+from gateway.config import parse
 
 
 @given(st.integers(0, 0x7FF), st.binary(max_size=8))
@@ -44,6 +45,25 @@ def test_felser_cycle_of_the_plant_line() -> None:
     per_slave = (request + reply + bus.min_tsdr + 33) / bus.baudrate
     assert bench_plant.felser_cycle(125) > 125 * per_slave
     assert bench_plant.felser_cycle(125) < 1.02 * 125 * per_slave  # Global_Control: ~1 %
+
+
+def test_canopen_minimum_counts_the_frames_the_master_maps() -> None:
+    drives = [
+        {"id": "d1", "device": "CiA 402", "address": 1, "eds": "eds/cia402-drive.eds"},
+    ]
+    bus = {"adapter": "canopen", "interface": "virtual", "channel": "x", "drives": drives}
+    config = parse(
+        {"zenoh": {"enabled": False}, "modbus": {"enabled": False}, "buses": {"co": bus}}, "t"
+    )
+    opts = config.buses[0].drives[0].options
+    rpdo = (opts.controlword.bits + opts.target.bits) // 8
+    tpdo = (opts.statusword.bits + opts.actual.bits + sum(v.bits for v in opts.extras)) // 8
+    assert (rpdo, tpdo) == (bench_plant.CANOPEN_RPDO1_BYTES, bench_plant.CANOPEN_TPDO1_BYTES)
+    # SYNC (0 bytes) + 32 x (RPDO1 + TPDO1): about 13.7 ms at 500 kbit/s
+    plain = 47 + 32 * (47 + 8 * rpdo + 47 + 8 * tpdo)
+    assert plain / 500_000 < bench_plant.canopen_cycle(32) < 1.25 * plain / 500_000
+    assert bench_plant.canopen_sync_period(32) >= bench_plant.canopen_cycle(32)
+    assert bench_plant.canopen_sync_period(1) == bench_plant.CANOPEN_MIN_SYNC
 
 
 def test_the_bench_bus_carries_frames_between_processes_paced(tmp_path: Path) -> None:
@@ -83,16 +103,22 @@ def test_the_bench_bus_carries_frames_between_processes_paced(tmp_path: Path) ->
 
 def test_a_tiny_plant_runs_and_stops() -> None:
     plant = bench_plant.Plant(
-        profibus=2, devicenet=2, modbus_clients=2, modbus_rate=5.0, seconds=2.5, settle=0.5
+        profibus=2,
+        devicenet=2,
+        canopen=2,
+        modbus_clients=2,
+        modbus_rate=5.0,
+        seconds=2.5,
+        settle=0.5,
     )
     figures = {f.name: f for f in bench_plant.measure(plant)}
     assert all(proc.poll() is not None for proc in plant.procs.values())
     assert figures["plant_gateway_cpu"].value > 0
     assert figures["plant_gateway_rss"].value > 0
-    for line in ("profibus_2_slaves_1500k", "devicenet_2_nodes_500k"):
+    for line in ("profibus_2_slaves_1500k", "devicenet_2_nodes_500k", "canopen_2_nodes_500k"):
         cycle = figures[f"plant_{line}_cycle"]
         assert not math.isnan(cycle.value)
         assert cycle.reference is not None and cycle.reference > 0
     modbus = figures["plant_modbus_poll_rate"]
     assert modbus.value > 0 and "0 exceptions" in modbus.note
-    assert "4 of 4 drives seen" in figures["plant_zenoh_states"].note
+    assert "6 of 6 drives seen" in figures["plant_zenoh_states"].note

@@ -119,6 +119,15 @@ class _Sent:
     remote: bool = True
 
 
+def _copy_readings(readings: Readings) -> Readings:
+    """A copy the caller may keep or change (``values`` is the one nested dict)."""
+    copy = readings.copy()
+    values = readings.get("values")
+    if values is not None:
+        copy["values"] = dict(values)
+    return copy
+
+
 class WegProfile(DpProfileBase):
     """DpProfile of a WEG drive on Profibus DP (see the module docstring)."""
 
@@ -186,6 +195,8 @@ class WegProfile(DpProfileBase):
         self._event: EventSink | None = None
         self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
         self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
+        # inputs' fast path: (key, the memory the call left, its readings)
+        self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
 
     # ------------------------------------------------------------------ setup
 
@@ -528,6 +539,41 @@ class WegProfile(DpProfileBase):
     # ------------------------------------------------------------------ inputs
 
     def inputs(self, data: bytes, now: float) -> Readings:
+        """The readings of one input telegram.
+
+        Fast path: a drive at rest sends the same telegram cycle after cycle, and the
+        readings are a function of the telegram, of what the last outputs asked for
+        (``_sent``), of the speed base, ratings and P0202, and of the codes polled by DP-V1.
+        When all of those equal the last call's, and the profile's own memory is still what
+        that call left (nothing else wrote it since), the decode would give the same
+        readings and leave the same memory: they are returned again (a fresh dict) without
+        decoding (``tests/profibus/test_weg_inputs_fast_path.py`` checks both paths).
+        """
+        key = (data, self._sent_key(), self.base, self.ratings, self.control_type)
+        memo = self._inputs_memo
+        if memo is not None and memo[0] == key and memo[1] == self._inputs_memory():
+            return _copy_readings(memo[2])
+        changes = self._decode_inputs(data)
+        self._inputs_memo = (key, self._inputs_memory(), _copy_readings(changes))
+        return changes
+
+    def _sent_key(self) -> tuple[bool, bool, int, bool]:
+        s = self._sent
+        return (s.run, s.forward, s.reference, s.remote)
+
+    def _inputs_memory(self) -> tuple[object, ...]:
+        """What :meth:`_decode_inputs` reads or writes of the profile's own state."""
+        return (
+            self._faulted,
+            self._alarm,
+            self._zsw,
+            self._polled_fault,
+            self._polled_alarm,
+            dict(self._status_values),
+        )
+
+    def _decode_inputs(self, data: bytes) -> Readings:
+        """The general path of :meth:`inputs`: the telegram decoded word by word."""
         n = self.options.words
         if len(data) != 2 * n:
             raise ProfibusDecodeError(
