@@ -32,6 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import math
 import os
 import signal
@@ -77,6 +78,17 @@ class Case:
     t1: float
     cycles: int
     host_busy: float  # fraction of all CPUs busy during the window (everything on the machine)
+    online: int = 0  # drives online at the end of the window (gateway)
+    warnings: int = 0  # the adapter's warnings in the window (a drive lost, a bring-up)
+
+
+class _Count(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.count = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.count += 1
 
 
 @dataclass
@@ -285,11 +297,17 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
             raise RuntimeError("the CANopen adapter stopped")
         first = sum(n.figures["tpdo_rx"] for n in engine.nodes.values())
         host = _host_busy()
+        counter = _Count()
+        logging.getLogger("adapters").addHandler(counter)
         t0, cpu = time.monotonic(), time.process_time()
-        await asyncio.sleep(MEASURE)
+        try:
+            await asyncio.sleep(MEASURE)
+        finally:
+            logging.getLogger("adapters").removeHandler(counter)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
         t1, cpu = time.monotonic(), time.process_time() - cpu
         busy = _busy_since(host)
+        online = sum(1 for s in hub.states() if s.comm is CommState.ONLINE)
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
@@ -301,6 +319,8 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         t1=t1,
         cycles=int(cycles),
         host_busy=busy,
+        online=online,
+        warnings=counter.count,
     )
     return case, sync_period
 
@@ -377,7 +397,8 @@ def measure(nodes: int) -> Figure:
             f"process, the same one for both cases; line_max {line_max:.0f} cycles/s "
             f"(SYNC + RPDO1 + TPDO1 per node, worst-case stuffing); gateway: SYNC every "
             f"{sync_period * 1e6:.0f} us, TPDO1s for {ours.rate * sync_period:.0%} of the "
-            f"SYNCs, line busy {our_busy:.0%} "
+            f"SYNCs, {ours.online}/{nodes} drive(s) online at the end, {ours.warnings} "
+            f"warning(s) in the window, line busy {our_busy:.0%} "
             f"({our_bits / max(ours.cycles, 1):.0f} bits per cycle), "
             f"{ours.cpu * 1e6:.0f} us CPU per cycle, the simulator's "
             f"{our_sim / max(ours.cycles, 1) * 1e6:.0f} us; reference (bare canopen-library "
