@@ -32,7 +32,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import logging
 import math
 import os
 import signal
@@ -79,16 +78,7 @@ class Case:
     cycles: int
     host_busy: float  # fraction of all CPUs busy during the window (everything on the machine)
     online: int = 0  # drives online at the end of the window (gateway)
-    warnings: int = 0  # the adapter's warnings in the window (a drive lost, a bring-up)
-
-
-class _Count(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.count = 0
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.count += 1
+    offline: tuple[str, ...] = ()  # the gateway's "drive offline" events in the window
 
 
 @dataclass
@@ -297,13 +287,10 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
             raise RuntimeError("the CANopen adapter stopped")
         first = sum(n.figures["tpdo_rx"] for n in engine.nodes.values())
         host = _host_busy()
-        counter = _Count()
-        logging.getLogger("adapters").addHandler(counter)
         t0, cpu = time.monotonic(), time.process_time()
-        try:
+        with hub.subscribe_events() as events:
             await asyncio.sleep(MEASURE)
-        finally:
-            logging.getLogger("adapters").removeHandler(counter)
+            offline = tuple(e.text for e in events.drain() if "offline" in e.text)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
         t1, cpu = time.monotonic(), time.process_time() - cpu
         busy = _busy_since(host)
@@ -320,7 +307,7 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         cycles=int(cycles),
         host_busy=busy,
         online=online,
-        warnings=counter.count,
+        offline=offline,
     )
     return case, sync_period
 
@@ -384,6 +371,7 @@ def measure(nodes: int) -> Figure:
     ref_busy = ref_bits / (BITRATE * (ref.t1 - ref.t0))
     our_busy = our_bits / (BITRATE * (ours.t1 - ours.t0))
     late = summary.get("lateness_us", {})
+    lost = sorted(set(ours.offline))
     load = os.getloadavg()[0]
     return Figure(
         name=f"canopen_pdo_cycles_{nodes}_nodes",
@@ -397,8 +385,8 @@ def measure(nodes: int) -> Figure:
             f"process, the same one for both cases; line_max {line_max:.0f} cycles/s "
             f"(SYNC + RPDO1 + TPDO1 per node, worst-case stuffing); gateway: SYNC every "
             f"{sync_period * 1e6:.0f} us, TPDO1s for {ours.rate * sync_period:.0%} of the "
-            f"SYNCs, {ours.online}/{nodes} drive(s) online at the end, {ours.warnings} "
-            f"warning(s) in the window, line busy {our_busy:.0%} "
+            f"SYNCs, {ours.online}/{nodes} drive(s) online at the end, {len(ours.offline)} "
+            f"offline event(s) in the window {lost[:2]}, line busy {our_busy:.0%} "
             f"({our_bits / max(ours.cycles, 1):.0f} bits per cycle), "
             f"{ours.cpu * 1e6:.0f} us CPU per cycle, the simulator's "
             f"{our_sim / max(ours.cycles, 1) * 1e6:.0f} us; reference (bare canopen-library "
