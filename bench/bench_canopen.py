@@ -94,6 +94,7 @@ class Case:
     host_busy: float  # fraction of all CPUs busy during the window (everything on the machine)
     online: int = 0  # drives online at the end of the window (gateway)
     offline: tuple[str, ...] = ()  # the gateway's "drive offline" events in the window
+    syncs: int = 0  # SYNCs the gateway sent in the window
 
 
 @dataclass
@@ -310,12 +311,14 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         if engine is None:
             raise RuntimeError("the CANopen adapter stopped")
         first = sum(n.figures["tpdo_rx"] for n in engine.nodes.values())
+        syncs = engine.figures["syncs_tx"]
         host = _host_busy()
         t0, cpu = time.monotonic(), time.process_time()
         with hub.subscribe_events() as events:
             await asyncio.sleep(MEASURE)
             offline = tuple(e.text for e in events.drain() if "offline" in e.text)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
+        syncs = engine.figures["syncs_tx"] - syncs
         t1, cpu = time.monotonic(), time.process_time() - cpu
         busy = _busy_since(host)
         online = sum(1 for s in hub.states() if s.comm is CommState.ONLINE)
@@ -332,6 +335,7 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         host_busy=busy,
         online=online,
         offline=offline,
+        syncs=syncs,
     )
     return case, sync_period
 
@@ -408,8 +412,9 @@ def measure(nodes: int) -> Figure:
             f"{BITRATE // 1000} kbit/s, {nodes} simulated CiA 402 node(s) in their own "
             f"process, the same one for both cases; line_max {line_max:.0f} cycles/s "
             f"(SYNC + RPDO1 + TPDO1 per node, worst-case stuffing); gateway: SYNC every "
-            f"{sync_period * 1e6:.0f} us, TPDO1s for {ours.rate * sync_period:.0%} of the "
-            f"SYNCs, {ours.online}/{nodes} drive(s) online at the end, {len(ours.offline)} "
+            f"{sync_period * 1e6:.0f} us, {ours.syncs / (ours.t1 - ours.t0):.0f} SYNCs/s "
+            f"sent, TPDO1s for {ours.cycles / max(ours.syncs, 1):.0%} of them (frames queued "
+            f"before the window can land in it), {ours.online}/{nodes} drive(s) online at the end, {len(ours.offline)} "
             f"offline event(s) in the window {lost[:2]}, line busy {our_busy:.0%} "
             f"({our_bits / max(ours.cycles, 1):.0f} bits per cycle), "
             f"{ours.cpu * 1e6:.0f} us CPU per cycle, the simulator's "
