@@ -95,6 +95,7 @@ class Case:
     online: int = 0  # drives online at the end of the window (gateway)
     offline: tuple[str, ...] = ()  # the gateway's "drive offline" events in the window
     syncs: int = 0  # SYNCs the gateway sent in the window
+    sim_cpu: float = 0.0  # the simulator process's CPU time in the window, s
 
 
 @dataclass
@@ -238,7 +239,7 @@ def _start_sim(procs: Procs, tmp: Path, nodes: int) -> None:
 # ---------------------------------------------------------------------- the two cases
 
 
-def reference(network: canopen.Network, nodes: int) -> Case:
+def reference(network: canopen.Network, nodes: int, sim_pid: int) -> Case:
     """The bare canopen-library closed loop (see the module docstring)."""
     ids = list(range(1, nodes + 1))
     lock = threading.Lock()
@@ -262,11 +263,12 @@ def reference(network: canopen.Network, nodes: int) -> Case:
     cycles = 0
     end = time.monotonic() + SETTLE + MEASURE
     started: float | None = None
-    cpu = 0.0
+    cpu = sim_cpu = 0.0
     host = _host_busy()
     while (now := time.monotonic()) < end:
         if started is None and now >= end - MEASURE:
             started, cycles, cpu, host = now, 0, time.process_time(), _host_busy()
+            sim_cpu = _cpu_seconds(sim_pid)
         with lock:
             seen.clear()
             answered.clear()
@@ -277,6 +279,7 @@ def reference(network: canopen.Network, nodes: int) -> Case:
             cycles += 1
     stopped = time.monotonic()
     cpu = time.process_time() - cpu
+    sim_cpu = _cpu_seconds(sim_pid) - sim_cpu
     t0 = started if started is not None else stopped
     return Case(
         rate=cycles / max(stopped - t0, 1e-9),
@@ -285,10 +288,11 @@ def reference(network: canopen.Network, nodes: int) -> Case:
         t1=stopped,
         cycles=cycles,
         host_busy=_busy_since(host),
+        sim_cpu=sim_cpu,
     )
 
 
-async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
+async def gateway(channel: str, nodes: int, sim_pid: int) -> tuple[Case, float]:
     """The CANopen adapter at the physical minimum SYNC period; and that period."""
     bus = _bus(channel, nodes)
     sync_period = physical_sync(bus)
@@ -313,13 +317,14 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         first = sum(n.figures["tpdo_rx"] for n in engine.nodes.values())
         syncs = engine.figures["syncs_tx"]
         host = _host_busy()
-        t0, cpu = time.monotonic(), time.process_time()
+        t0, cpu, sim_cpu = time.monotonic(), time.process_time(), _cpu_seconds(sim_pid)
         with hub.subscribe_events() as events:
             await asyncio.sleep(MEASURE)
             offline = tuple(e.text for e in events.drain() if "offline" in e.text)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
         syncs = engine.figures["syncs_tx"] - syncs
         t1, cpu = time.monotonic(), time.process_time() - cpu
+        sim_cpu = _cpu_seconds(sim_pid) - sim_cpu
         busy = _busy_since(host)
         online = sum(1 for s in hub.states() if s.comm is CommState.ONLINE)
     finally:
@@ -336,6 +341,7 @@ async def gateway(channel: str, nodes: int) -> tuple[Case, float]:
         online=online,
         offline=offline,
         syncs=syncs,
+        sim_cpu=sim_cpu,
     )
     return case, sync_period
 
@@ -382,14 +388,10 @@ def measure(nodes: int) -> Figure:
         try:
             _wait_boot(network, nodes, procs, tmp)
             sim_pid = procs.procs["canopen-sim"].pid
-            sim_cpu = _cpu_seconds(sim_pid)
-            ref = reference(network, nodes)
-            ref_sim = _cpu_seconds(sim_pid) - sim_cpu
+            ref = reference(network, nodes, sim_pid)
         finally:
             network.disconnect()
-        sim_cpu = _cpu_seconds(sim_pid)
-        ours, sync_period = asyncio.run(gateway(channel, nodes))
-        our_sim = _cpu_seconds(sim_pid) - sim_cpu
+        ours, sync_period = asyncio.run(gateway(channel, nodes, sim_pid))
         _stop_all(procs)
         ends, bits = canbus.load_log(str(tmp / "canbus"))
         summary = _read_summary(tmp / "canbus.json")
@@ -414,15 +416,16 @@ def measure(nodes: int) -> Figure:
             f"(SYNC + RPDO1 + TPDO1 per node, worst-case stuffing); gateway: SYNC every "
             f"{sync_period * 1e6:.0f} us, {ours.syncs / (ours.t1 - ours.t0):.0f} SYNCs/s "
             f"sent, TPDO1s for {ours.cycles / max(ours.syncs, 1):.0%} of them (frames queued "
-            f"before the window can land in it), {ours.online}/{nodes} drive(s) online at the end, {len(ours.offline)} "
-            f"offline event(s) in the window {lost[:2]}, line busy {our_busy:.0%} "
+            f"before the window can land in it), {ours.online}/{nodes} drive(s) online "
+            f"at the end, {len(ours.offline)} offline event(s) in the window {lost[:2]}, "
+            f"line busy {our_busy:.0%} "
             f"({our_bits / max(ours.cycles, 1):.0f} bits per cycle), "
             f"{ours.cpu * 1e6:.0f} us CPU per cycle, the simulator's "
-            f"{our_sim / max(ours.cycles, 1) * 1e6:.0f} us; reference (bare canopen-library "
+            f"{ours.sim_cpu / max(ours.cycles, 1) * 1e6:.0f} us; reference (bare canopen-library "
             f"closed loop, RPDO1 to every node + SYNC, wait for every TPDO1): line busy "
             f"{ref_busy:.0%} ({ref_bits / max(ref.cycles, 1):.0f} bits per cycle), "
             f"{ref.cpu * 1e6:.0f} us CPU per cycle, the simulator's "
-            f"{ref_sim / max(ref.cycles, 1) * 1e6:.0f} us; broker delivery lateness "
+            f"{ref.sim_cpu / max(ref.cycles, 1) * 1e6:.0f} us; broker delivery lateness "
             f"p50 {late.get('p50', 'n/a')} us p99 {late.get('p99', 'n/a')} us; machine: "
             f"CPUs busy {ref.host_busy:.0%} (reference) {ours.host_busy:.0%} (gateway), "
             f"load average {load:.1f}; TPDO2 off in both cases (not in the line's "
