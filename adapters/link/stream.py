@@ -41,6 +41,7 @@ from adapters.link.timer import loop_timer
 log = logging.getLogger(__name__)
 
 MAX_DUE_STEPS: Final = 8  # steps at once for deadlines already come, then the loop's turn
+SLEEP_LIMIT: Final = 0.0001  # s: idle times this short are slept in the step (see _step)
 NEAR: Final = 0.002  # s: a deadline this close has a timer of its own (see _arm)
 LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
 MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
@@ -164,9 +165,22 @@ class StreamDriver(Generic[EventT]):
             self._drain()
             deadline = self.engine.next_deadline()
             due = 0
-            # a deadline already come (12 Mbit/s TSYN is 2.75 us: over before the step
-            # ends) is stepped at once: a timer would cost a sleep and a wake-up for nothing
-            while deadline is not None and due < MAX_DUE_STEPS and deadline <= self.loop.time():
+            slept = 0.0
+            # A deadline already come (12 Mbit/s TSYN is 2.75 us: over before the step
+            # ends) is stepped at once: a timer would cost a sleep and a wake-up for nothing.
+            # An idle time ending within SLEEP_LIMIT (500 kbit/s TSYN after a reply: 66 us)
+            # is slept here, in a select on the port: cheaper than the loop turn a timer
+            # costs, and bytes that come meanwhile are stepped first, as on the timer's
+            # path. The loop is held that long at most (plus the kernel's wake-up); never
+            # a reply wait (docs/decisions.md, "Line timing without busy-waiting").
+            while deadline is not None and due < MAX_DUE_STEPS:
+                wait = deadline - self.loop.time()
+                if wait > 0:
+                    if slept + wait > SLEEP_LIMIT or self.engine.awaiting_reply():
+                        break
+                    slept += wait
+                    if self.link.wait_readable(wait):
+                        self.link.read_now()  # queued: stepped before the deadline's step
                 due += 1
                 self._queued.append(None)
                 self._drain()
