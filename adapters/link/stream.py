@@ -36,7 +36,7 @@ from typing import Any, Final, Generic, Protocol, TypeVar
 
 from adapters.link.engine import Engine
 from adapters.link.serial import SerialLink
-from adapters.link.timer import loop_timer
+from adapters.link.timer import loop_timer, precise_sleeps
 
 log = logging.getLogger(__name__)
 
@@ -135,6 +135,7 @@ class StreamDriver(Generic[EventT]):
         self.postponed = 0  # reply deadlines judged later because their timer ran late
         self._stopped = False
         link.on_data = self._on_data
+        precise_sleeps()  # the short idle times slept in _step end on time (1 us slack)
 
     def start(self) -> None:
         self.poke()
