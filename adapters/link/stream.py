@@ -1,6 +1,7 @@
 """The driver loop of a byte-stream engine on a :class:`~adapters.link.serial.SerialLink`.
 
-Everything happens in loop callbacks, never in a blocking call: bytes from the link go
+Everything happens in loop callbacks, which block only for an idle time under
+:data:`SLEEP_LIMIT` (below): bytes from the link go
 through the protocol's stream codec (:class:`StreamProtocol`) into ``engine.step(now,
 event)``; each resulting transmission (:meth:`StreamProtocol.transmission`) is written once
 its ``not_before`` has come and confirmed to the engine with
@@ -12,13 +13,16 @@ steps the engine at ``engine.next_deadline()``. Before each request the codec is
 line was idle (:meth:`StreamProtocol.idle`), so a reply cut short by noise cannot swallow
 the next one.
 
-Every wait is slept on a precise timer the loop waits on like on a port
+Every other wait is slept on a precise timer the loop waits on like on a port
 (:func:`adapters.link.timer.loop_timer`: a timerfd, armed at an absolute time of the
 loop's clock): one for the engine's next deadline, one for the write whose ``not_before``
-has not come. Nothing spins: a wait of 66 us (Profibus TSYN at 500 kbit/s) is a sleep of
-66 us and the wake-up that follows, not a millisecond (the loop's own timers) nor a busy
-loop. A write never goes before its ``not_before`` (the kernel never fires a timer early;
-the driver checks the clock once more), and writes go in the order the engine gave them.
+has not come. Nothing spins. An idle time ending within :data:`SLEEP_LIMIT` (Profibus TSYN
+after a reply at 500 kbit/s: 66 us) is slept in the step itself, in a select on the port
+(bytes that come meanwhile are stepped first): cheaper than the loop turn a timer costs,
+holding the loop that long; a longer wait is a sleep on the timer and the wake-up that
+follows, not a millisecond (the loop's own timers) nor a busy loop. A write never goes
+before its ``not_before`` (the kernel never fires a timer early; the driver checks the
+clock once more), and writes go in the order the engine gave them.
 Bytes that arrived before a timer expired are read first (the loop's poller reports them
 first); a reply deadline's timer reads the port once more before the engine judges it.
 
