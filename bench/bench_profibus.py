@@ -449,7 +449,7 @@ async def run_master(
     return MasterRun(
         measured.best_rate(),
         measured.least_cpu(),
-        statistics.median(turnarounds),
+        statistics.median(turnarounds) if turnarounds else math.nan,  # a stalled host
         cpu / done if done else math.nan,
         lateness,
         done,
