@@ -354,7 +354,8 @@ def _figures(slaves: int, rounds: dict[str, list[Round]]) -> list[Figure]:
         cond += f"; rounds without an exchange (left out of the CPU medians): {empty}"
     timing = {
         "ours_untimed": "line timing off (12 Mbit/s setting)",
-        "ours_timed": "500 kbit/s line timing kept (TSYN, line time, timerfd)",
+        "ours_timed": "500 kbit/s line timing kept (TSYN, line time: slept in the step "
+        "under 100 us, else on a timerfd)",
     }
     figures: list[Figure] = []
     for mode in ("ours_untimed", "ours_timed"):

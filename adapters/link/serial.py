@@ -48,6 +48,7 @@ import socket
 import stat
 import termios
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
@@ -371,6 +372,18 @@ class SerialLink:
             return bool(select.select([self._fd], [], [], 0)[0])
         except (OSError, ValueError):
             return True  # a descriptor that cannot be polled is no good either
+
+    def wait_readable(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s until bytes can be read (True) or the time is over
+        (False, never before it). The stream driver sleeps an idle time shorter than its
+        ``SLEEP_LIMIT`` in this, holding the loop; anything longer is a loop timer."""
+        if self._fd is None:  # a URL port without a descriptor: sleep, then poll
+            time.sleep(timeout)
+            return True
+        try:
+            return bool(select.select([self._fd], [], [], timeout)[0])
+        except (OSError, ValueError):
+            return True  # the reader reports what is wrong with the port
 
     def read_now(self) -> None:
         """Read what has arrived now (as the reader callback would) and hand it on (a

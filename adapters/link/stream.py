@@ -1,6 +1,7 @@
 """The driver loop of a byte-stream engine on a :class:`~adapters.link.serial.SerialLink`.
 
-Everything happens in loop callbacks, never in a blocking call: bytes from the link go
+Everything happens in loop callbacks, which block only for an idle time under
+:data:`SLEEP_LIMIT` (below): bytes from the link go
 through the protocol's stream codec (:class:`StreamProtocol`) into ``engine.step(now,
 event)``; each resulting transmission (:meth:`StreamProtocol.transmission`) is written once
 its ``not_before`` has come and confirmed to the engine with
@@ -12,13 +13,16 @@ steps the engine at ``engine.next_deadline()``. Before each request the codec is
 line was idle (:meth:`StreamProtocol.idle`), so a reply cut short by noise cannot swallow
 the next one.
 
-Every wait is slept on a precise timer the loop waits on like on a port
+Every other wait is slept on a precise timer the loop waits on like on a port
 (:func:`adapters.link.timer.loop_timer`: a timerfd, armed at an absolute time of the
 loop's clock): one for the engine's next deadline, one for the write whose ``not_before``
-has not come. Nothing spins: a wait of 66 us (Profibus TSYN at 500 kbit/s) is a sleep of
-66 us and the wake-up that follows, not a millisecond (the loop's own timers) nor a busy
-loop. A write never goes before its ``not_before`` (the kernel never fires a timer early;
-the driver checks the clock once more), and writes go in the order the engine gave them.
+has not come. Nothing spins. An idle time ending within :data:`SLEEP_LIMIT` (Profibus TSYN
+after a reply at 500 kbit/s: 66 us) is slept in the step itself, in a select on the port
+(bytes that come meanwhile are stepped first): cheaper than the loop turn a timer costs,
+holding the loop that long; a longer wait is a sleep on the timer and the wake-up that
+follows, not a millisecond (the loop's own timers) nor a busy loop. A write never goes
+before its ``not_before`` (the kernel never fires a timer early; the driver checks the
+clock once more), and writes go in the order the engine gave them.
 Bytes that arrived before a timer expired are read first (the loop's poller reports them
 first); a reply deadline's timer reads the port once more before the engine judges it.
 
@@ -36,11 +40,12 @@ from typing import Any, Final, Generic, Protocol, TypeVar
 
 from adapters.link.engine import Engine
 from adapters.link.serial import SerialLink
-from adapters.link.timer import loop_timer
+from adapters.link.timer import loop_timer, precise_sleeps
 
 log = logging.getLogger(__name__)
 
 MAX_DUE_STEPS: Final = 8  # steps at once for deadlines already come, then the loop's turn
+SLEEP_LIMIT: Final = 0.0001  # s: idle times this short are slept in the step (see _step)
 NEAR: Final = 0.002  # s: a deadline this close has a timer of its own (see _arm)
 LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
 MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
@@ -134,6 +139,7 @@ class StreamDriver(Generic[EventT]):
         self.postponed = 0  # reply deadlines judged later because their timer ran late
         self._stopped = False
         link.on_data = self._on_data
+        precise_sleeps()  # the short idle times slept in _step end on time (1 us slack)
 
     def start(self) -> None:
         self.poke()
@@ -164,9 +170,22 @@ class StreamDriver(Generic[EventT]):
             self._drain()
             deadline = self.engine.next_deadline()
             due = 0
-            # a deadline already come (12 Mbit/s TSYN is 2.75 us: over before the step
-            # ends) is stepped at once: a timer would cost a sleep and a wake-up for nothing
-            while deadline is not None and due < MAX_DUE_STEPS and deadline <= self.loop.time():
+            slept = 0.0
+            # A deadline already come (12 Mbit/s TSYN is 2.75 us: over before the step
+            # ends) is stepped at once: a timer would cost a sleep and a wake-up for nothing.
+            # An idle time ending within SLEEP_LIMIT (500 kbit/s TSYN after a reply: 66 us)
+            # is slept here, in a select on the port: cheaper than the loop turn a timer
+            # costs, and bytes that come meanwhile are stepped first, as on the timer's
+            # path. The loop is held that long at most (plus the kernel's wake-up); never
+            # a reply wait (docs/decisions.md, "Line timing without busy-waiting").
+            while deadline is not None and due < MAX_DUE_STEPS:
+                wait = deadline - self.loop.time()
+                if wait > 0:
+                    if slept + wait > SLEEP_LIMIT or self.engine.awaiting_reply():
+                        break
+                    slept += wait
+                    if self.link.wait_readable(wait):
+                        self.link.read_now()  # queued: stepped before the deadline's step
                 due += 1
                 self._queued.append(None)
                 self._drain()

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import ctypes
+import sys
+import threading
 from collections.abc import Callable
 
 import pytest
@@ -109,3 +112,22 @@ async def test_a_closed_timer_ignores_set() -> None:
     timer.close()
     timer.set(loop.time())  # a step after the driver stopped: nothing happens, no error
     assert timer.at is None
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl(2) is Linux's")
+def test_precise_sleeps_sets_the_calling_threads_timer_slack() -> None:
+    """prctl(2) PR_GET_TIMERSLACK in a thread of its own (the test process keeps its own)."""
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    prctl.argtypes = (ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong)
+    got: list[int] = []
+
+    def work() -> None:
+        prctl(timer_module.PR_SET_TIMERSLACK, 50_000, 0, 0, 0)  # the kernel's default
+        got.append(prctl(30, 0, 0, 0, 0))  # PR_GET_TIMERSLACK
+        timer_module.precise_sleeps()
+        got.append(prctl(30, 0, 0, 0, 0))
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join()
+    assert got == [50_000, timer_module.TIMER_SLACK]

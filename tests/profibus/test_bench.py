@@ -127,12 +127,16 @@ def test_percentile_is_the_nearest_rank() -> None:
 
 
 def test_one_short_timing_round_keeps_every_not_before(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Both settings exchange, and no request went before its not_before (500 kbit/s)."""
+    """Every setting exchanges, and no request went before its not_before (500 kbit/s)."""
     monkeypatch.setattr(bench, "TIMING_MEASURE", 0.1)
     monkeypatch.setattr(bench, "TIMING_ROUNDS", 1)
     monkeypatch.setattr(bench, "SETTLE", 0.01)
     case = bench.measure_timing(2)
     assert case.timed.cycles_per_s > 0 and case.untimed.cycles_per_s > 0
     assert case.lateness and min(case.lateness) >= 0
+    # against slaves paced like the line, TSYN after a reply is slept in the step
+    assert case.paced.cycles_per_s > 0 and case.paced_untimed.cycles_per_s > 0
+    assert case.paced_lateness and min(case.paced_lateness) >= 0
     figures = {f.name: f for f in bench._timing_figures(2, case)}
     assert figures["profibus_timed_cpu_per_exchange_2_slaves"].ratio is not None
+    assert figures["profibus_paced_timed_cpu_per_exchange_2_slaves"].ratio is not None

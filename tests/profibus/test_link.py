@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import os
 import select
 import socket
@@ -15,6 +16,7 @@ from typing import Any
 import pytest
 import serial
 
+from adapters.link.stream import SLEEP_LIMIT
 from adapters.profibus.driver import LineDriver
 from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
@@ -363,6 +365,63 @@ async def test_bytes_arriving_before_a_short_deadline_are_stepped_before_it() ->
             await until(lambda: any(isinstance(e, FrameIn) for _, e in engine.events))
             frame = next(i for i, (_, e) in enumerate(engine.events) if isinstance(e, FrameIn))
             # no step for the deadline came before the reply was stepped
+            assert not [now for now, e in engine.events[:frame] if e is None and now >= due]
+        finally:
+            driver.stop()
+            link.close()
+
+
+SHORT_IDLE = 0.00005  # s: an idle time the driver sleeps in the step (500 kbit/s TSYN: 66 us)
+
+
+class _Idle(_Recorder):
+    """Sends one request once its idle time is over (as the master after a reply)."""
+
+    def __init__(self, due: float) -> None:
+        super().__init__()
+        self.deadline = self.due = due
+
+    def step(self, now: float, event: Any = None) -> list[Any]:
+        if self.deadline == self.due and now >= self.due:
+            self.deadline = None
+            self.queue.append(Transmit(b"\x01", self.due))
+        return super().step(now, event)
+
+
+async def test_an_idle_time_under_the_sleep_limit_is_slept_in_the_step() -> None:
+    """500 kbit/s TSYN after a reply (66 us) costs no loop turn: the request goes in the
+    step that took the reply, never before its time."""
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (_, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        assert SHORT_IDLE < SLEEP_LIMIT
+        engine = _Idle(math.inf)
+        driver = LineDriver(engine, link)
+        try:
+            engine.deadline = engine.due = loop.time() + SHORT_IDLE
+            driver.poke()  # no await: written in this call
+            assert link.bytes_out == 1
+            assert engine.written()[0] >= engine.due
+            assert [now >= engine.due for now, e in engine.events if e is None][-1]
+        finally:
+            driver.stop()
+            link.close()
+
+
+async def test_bytes_arriving_during_a_slept_idle_time_are_stepped_before_it() -> None:
+    """The short idle time is slept watching the port: bytes on the line meanwhile reach
+    the engine before the step at the idle time's end (they restart the idle time)."""
+    loop = asyncio.get_running_loop()
+    with pty_pair() as (master, path):
+        link = await open_link(path, 500000, loop, lambda d, n: None, lambda e: None)
+        engine = _Recorder()
+        driver = LineDriver(engine, link)
+        try:
+            os.write(master, SHORT_ACK.encode())
+            assert select.select([link.ser.fileno()], [], [], 5.0)[0]  # arrived, not read
+            engine.deadline = due = loop.time() + SHORT_IDLE
+            driver.poke()  # no await: the loop's reader had no chance
+            frame = next(i for i, (_, e) in enumerate(engine.events) if isinstance(e, FrameIn))
             assert not [now for now, e in engine.events[:frame] if e is None and now >= due]
         finally:
             driver.stop()
