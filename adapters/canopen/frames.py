@@ -593,6 +593,14 @@ class SdoClientTransfer:
     client's abort when the response breaks the protocol) or None. When ``result`` is
     set the transfer is over. Timeouts are the caller's (abort with 0x05040000 via
     :meth:`timeout`).
+
+    A response that cannot answer the request outstanding is not this transfer's and is
+    ignored (``ignored`` counts them; ``on_response`` returns None, ``result`` stays
+    None): before the initiate response, one naming another index/sub-index (CiA 301
+    §7.2.4.3.3-6: an initiate response names the object), one of the other direction, a
+    segment response; at any time, an abort naming another object. Such a frame is the
+    late answer of a transfer the client already ended on its timeout (and aborted): taken
+    as this transfer's, it would end it with 0x05040001 (command specifier not valid).
     """
 
     def __init__(self, index: int, subindex: int, write: bytes | None = None) -> None:
@@ -605,6 +613,7 @@ class SdoClientTransfer:
         self._received = bytearray()
         self._size: int | None = None
         self.result: SdoResult | None = None
+        self.ignored = 0  # responses not this transfer's (see the class docstring)
 
     @property
     def is_upload(self) -> bool:
@@ -634,6 +643,9 @@ class SdoClientTransfer:
             response = decode_sdo_response(data)
         except SdoDecodeError:
             return self._client_abort(codes.ABORT_COMMAND)
+        if not self._is_ours(response):
+            self.ignored += 1
+            return None
         if isinstance(response, Abort):
             self.result = SdoResult(abort_code=response.code, by_server=True)
             return None
@@ -641,6 +653,22 @@ class SdoClientTransfer:
             return self._next(response)
         except SdoProtocolError as error:
             return self._client_abort(error.abort_code)
+
+    def _is_ours(self, response: SdoResponse) -> bool:
+        """False for a frame that cannot answer the request outstanding (a late answer
+        of an earlier transfer); a protocol error of the server is still ours."""
+        if isinstance(response, Abort):
+            # a server that names no object (0x0000) is taken at its word
+            mux = (response.index, response.subindex)
+            return response.index == 0 or mux == (self.index, self.subindex)
+        if self._offset != 0 or self._received:
+            return True  # segments under way: checked by the protocol
+        if self.write is None:
+            if not isinstance(response, InitiateUploadResponse):
+                return False
+        elif not isinstance(response, InitiateDownloadResponse):
+            return False
+        return (response.index, response.subindex) == (self.index, self.subindex)
 
     def _expect_mux(self, index: int, subindex: int) -> None:
         if (index, subindex) != (self.index, self.subindex):

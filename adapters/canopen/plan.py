@@ -10,6 +10,12 @@ then the transmission type, then enable the PDO. Each write is read back (a COB-
 its valid bit and 11-bit id only). Then the heartbeats (0x1017 producer; 0x1016:1
 consumer of the gateway's heartbeat), the drive's reaction to a lost connection (0x6007),
 the quick stop option (0x605A), the mode (0x6060) and the ``startup_sdo`` writes.
+
+Every other PDO the EDS has (0x1401-0x15FF, 0x1801-0x19FF with a sub-index 1) is
+switched off: its COB-ID written with bit 31 set (PDO not valid, CiA 301 §7.5.2.35/36),
+read back on that bit. The gateway owns the PDO configuration: a PDO it does not use
+would load the line beyond what the SYNC period floor counts. A node that refuses it
+(a read-only COB-ID) is reported and still brought up (``SdoStep.optional``).
 """
 
 from __future__ import annotations
@@ -75,6 +81,43 @@ def _pdo_steps(
     return steps
 
 
+PDO_VALID_MASK = frames.PDO_COB_INVALID  # an unused PDO's read-back: its valid bit only
+UNUSED_RPDOS = range(0x1401, 0x1600)  # RPDO2-512 communication parameters
+UNUSED_TPDOS = range(0x1801, 0x1A00)  # TPDO2-512
+
+
+def _unused_pdo_steps(eds: Dictionary, node_id: int) -> list[SdoStep]:
+    """Bit 31 of sub 1 set for every RPDO/TPDO but the first that the EDS has; the rest
+    of the COB-ID as the EDS gives it (its default for this node), else the predefined
+    connection set's id (PDOs 2-4, CiA 301 §7.3.5), else 0."""
+    steps: list[SdoStep] = []
+    for comm in (*UNUSED_RPDOS, *UNUSED_TPDOS):
+        if not eds.has(comm, 1):
+            continue
+        var = eds.variable(comm, 1)
+        rx = comm < 0x1800
+        number = (comm & 0x1FF) + 1
+        name = ("RPDO" if rx else "TPDO") + str(number)
+        default = var.default
+        if isinstance(default, int) and not isinstance(default, bool):
+            cob = default & ~frames.PDO_COB_INVALID
+        elif number <= 4:
+            cob = (frames.rpdo_id if rx else frames.tpdo_id)(number, node_id)
+        else:
+            cob = 0
+        steps.append(
+            SdoStep(
+                comm,
+                1,
+                var.encode(frames.PDO_COB_INVALID | (cob & 0xFFFFFFFF)),
+                f"{name} switched off (not used): 0x{comm:04X}:1 bit 31",
+                PDO_VALID_MASK,
+                optional=True,
+            )
+        )
+    return steps
+
+
 def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig:
     """The engine's view of one drive (see the module docstring)."""
     eds = opts.eds
@@ -125,6 +168,7 @@ def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig
         transmission=TRANSMISSION_SYNC if sync else TRANSMISSION_EVENT,
         event_timer_ms=timer,
     )
+    steps += _unused_pdo_steps(eds, node_id)
     if opts.comm_loss_option is not None:
         value = opts.comm_loss_option
         text = cia402.abort_connection_option_text(value)

@@ -324,11 +324,47 @@ def test_client_server_abort_and_toggle_error() -> None:
     assert transfer.result == f.SdoResult(abort_code=codes.ABORT_TOGGLE)
 
 
-def test_client_wrong_object_and_timeout() -> None:
+def test_client_ignores_answers_that_are_not_its_own() -> None:
+    """CiA 301 §7.2.4.3: an initiate response names the object; a late answer of a
+    transfer the client ended on its timeout is not this transfer's: ignored, no abort
+    of its own (that was the 0x05040001 of a bring-up write under overload)."""
     transfer = f.SdoClientTransfer(0x6041, 0)
     transfer.first()
+    stale = [
+        h("4B 40 60 00 37 02 00 00"),  # upload response for 0x6040: another object
+        h("4B 41 60 01 37 02 00 00"),  # 0x6041 sub 1: another sub-index
+        h("60 41 60 00 00 00 00 00"),  # download response for 0x6041: the other direction
+        h("00 30 31 32 33 34 35 36"),  # upload segment: no segment asked
+        h("20 00 00 00 00 00 00 00"),  # download segment response
+        h("80 17 10 00 00 00 09 06"),  # abort naming 0x1017: an earlier transfer's
+    ]
+    for data in stale:
+        assert transfer.on_response(data) is None
+        assert transfer.result is None
+    assert transfer.ignored == len(stale)
+    assert transfer.on_response(h("4B 41 60 00 37 02 00 00")) is None
+    assert transfer.result == f.SdoResult(h("37 02"))
+    # a download: the late upload answer of its own object is not its answer either
+    transfer = f.SdoClientTransfer(0x6040, 0, h("06 00"))
+    assert transfer.first() == h("2B 40 60 00 06 00 00 00")
+    assert transfer.on_response(h("4B 40 60 00 0F 00 00 00")) is None
+    assert transfer.on_response(h("60 40 60 00 00 00 00 00")) is None
+    assert transfer.result == f.SdoResult()
+    # an abort naming no object (a server that does not say) is taken as this one's
+    transfer = f.SdoClientTransfer(0x6040, 0, h("06 00"))
+    transfer.first()
+    transfer.on_response(h("80 00 00 00 01 00 04 05"))
+    assert transfer.result == f.SdoResult(abort_code=codes.ABORT_COMMAND, by_server=True)
+
+
+def test_client_wrong_object_in_segments_and_timeout() -> None:
+    # segments under way: a response of the wrong kind is a protocol error, aborted
+    transfer = f.SdoClientTransfer(0x1008, 0)
+    transfer.first()
+    assert transfer.on_response(h("41 08 10 00 10 00 00 00")) == h("60 00 00 00 00 00 00 00")
     abort = transfer.on_response(h("4B 40 60 00 37 02 00 00"))
-    assert abort == h("80 41 60 00 01 00 04 05")
+    assert abort == h("80 08 10 00 01 00 04 05")
+    assert transfer.result == f.SdoResult(abort_code=codes.ABORT_COMMAND)
     transfer = f.SdoClientTransfer(0x6041, 0)
     assert transfer.timeout() == h("80 41 60 00 00 00 04 05")
     assert transfer.result is not None and transfer.result.abort_code == codes.ABORT_TIMEOUT

@@ -688,3 +688,126 @@ def test_a_transfer_under_way_when_the_node_is_lost_is_aborted() -> None:
     assert done.error is not None and done.error.startswith("node lost: no heartbeat")
     abort = f.encode_sdo_request(f.Abort(0x605A, 0, codes.ABORT_GENERAL))
     assert f.CanFrame(0x605, abort) in line.sent
+
+
+# ---------------------------------------------------------------- unused PDOs switched off
+
+TPDO2_OFF = SdoStep(
+    0x1801,
+    1,
+    (0x80000285).to_bytes(4, "little"),
+    "TPDO2 switched off (not used): 0x1801:1 bit 31",
+    0x80000000,
+    optional=True,
+)
+
+
+def pdo_node() -> FakeNode:
+    node = FakeNode()
+    node.od[(0x1801, 1)] = (0x285).to_bytes(4, "little")  # TPDO2 valid, as the EDS has it
+    return node
+
+
+def pdo_config() -> NodeConfig:
+    base = node_config()
+    return node_config(steps=(base.steps[0], TPDO2_OFF, *base.steps[1:]))
+
+
+def test_an_unused_pdo_is_switched_off_and_read_back_before_start() -> None:
+    node = pdo_node()
+    line = Line(Master(config(), [pdo_config()]), node)
+    line.run(0.5)
+    assert line.master.online(5) and not line.of(Report)
+    # CiA 301 §7.5.2.36: 0x1801:1 with bit 31 set (PDO not valid), the id kept
+    write = f.CanFrame(0x605, bytes.fromhex("23 01 18 01 85 02 00 80"))
+    read = f.CanFrame(0x605, bytes.fromhex("40 01 18 01 00 00 00 00"))
+    start = f.encode_nmt(f.NmtCommand.START, 5)
+    assert line.sent.index(write) < line.sent.index(read) < line.sent.index(start)
+    assert node.od[(0x1801, 1)] == (0x80000285).to_bytes(4, "little")
+
+
+def test_an_unused_pdo_the_node_will_not_switch_off_is_reported_and_the_node_goes_on() -> None:
+    node = pdo_node()
+    node.refuse[(0x1801, 1)] = 0x06010002  # attempt to write a read only object
+    line = Line(Master(config(), [pdo_config()]), node)
+    line.run(0.5)
+    (report,) = line.of(Report)
+    assert isinstance(report, Report) and report.text == (
+        "TPDO2 switched off (not used): 0x1801:1 bit 31: write of 0x1801:1 = 0x80000285 "
+        "refused: 0x06010002 attempt to write a read only object (the bring-up goes on)"
+    )
+    assert not line.of(NodeProblem)
+    assert line.master.online(5) and f.NmtCommand.START in node.nmt_seen
+    asked = {
+        (r.index, r.subindex)
+        for r in node.sdo_requests
+        if isinstance(r, f.InitiateUpload | f.InitiateDownload)
+    }
+    assert (0x6060, 0) in asked  # the next step
+
+
+def test_an_unused_pdo_that_stays_valid_is_reported_and_the_node_goes_on() -> None:
+    class Fixed(FakeNode):  # takes the write, keeps its COB-ID as it was
+        def _sdo(self, data: bytes) -> bytes:
+            reply = super()._sdo(data)
+            self.od[(0x1801, 1)] = (0x285).to_bytes(4, "little")
+            return reply
+
+    node = Fixed()
+    line = Line(Master(config(), [pdo_config()]), node)
+    line.run(0.5)
+    (report,) = line.of(Report)
+    assert isinstance(report, Report) and report.text == (
+        "TPDO2 switched off (not used): 0x1801:1 bit 31: 0x1801:1 reads back 0x0 after "
+        "writing 0x80000000 (the bring-up goes on)"
+    )
+    assert line.master.online(5)
+
+
+def test_an_unused_pdo_write_unanswered_stops_the_bring_up() -> None:
+    class Deaf(FakeNode):  # no answer to 0x1801 (a timeout is no refusal)
+        def receive(self, frame: f.CanFrame) -> list[f.CanFrame]:
+            if frame.cob_id == 0x605 and frame.data[1:4] == bytes.fromhex("01 18 01"):
+                return []
+            return super().receive(frame)
+
+    node = Deaf()
+    line = Line(Master(config(), [pdo_config()]), node)
+    line.run(0.5)
+    problem = line.of(NodeProblem)[0]
+    assert isinstance(problem, NodeProblem) and problem.abort_code == codes.ABORT_TIMEOUT
+    assert not line.master.online(5) and f.NmtCommand.START not in node.nmt_seen
+
+
+# ---------------------------------------------------------------- late SDO answers
+
+
+def test_a_late_answer_of_a_timed_out_transfer_is_not_the_next_ones() -> None:
+    """Under overload: the probe 0x1000 times out (the client aborts it, CiA 301
+    §7.2.4.3.17, 0x05040000), the retry is answered, the bring-up's first write goes out,
+    and then the first probe's late answer arrives. It names 0x1000 and is an upload
+    response: not the write's answer. It is ignored; taken as the write's it ended the
+    write with 0x05040001 (command specifier not valid) and failed the bring-up."""
+    master = Master(config(), [node_config()])
+    probe = f.CanFrame(0x605, bytes.fromhex("40 00 10 00 00 00 00 00"))
+    answer = f.CanFrame(0x585, bytes.fromhex("43 00 10 00 92 01 02 00"))
+    assert Send(probe) in master.step(0.0)
+    abort = f.CanFrame(0x605, bytes.fromhex("80 00 10 00 00 00 04 05"))
+    assert Send(abort) in master.step(0.1)  # sdo_timeout: the client aborts
+    assert Send(probe) in master.step(0.6)  # retry
+    out = master.step(0.61, FrameIn(answer))
+    write = f.CanFrame(0x605, bytes.fromhex("2B 17 10 00 64 00 00 00"))
+    assert out[-1] == Send(write)
+
+    def sdo(actions: Sequence[object]) -> list[object]:
+        return [a for a in actions if isinstance(a, Send) and a.frame.cob_id == 0x605]
+
+    assert sdo(master.step(0.62, FrameIn(answer))) == []  # the late answer: no abort
+    node = master.nodes[5]
+    assert node.current is not None and node.current.index == 0x1017
+    assert node.figures["sdo_stale"] == 1
+    assert node.sdo_deadline == pytest.approx(0.71)  # the write's own, not moved
+    done = f.CanFrame(0x585, bytes.fromhex("60 17 10 00 00 00 00 00"))
+    read_back = f.CanFrame(0x605, bytes.fromhex("40 17 10 00 00 00 00 00"))
+    assert sdo(master.step(0.63, FrameIn(done))) == [Send(read_back)]
+    assert node.phase is Phase.CONFIGURE and node.last_problem is None

@@ -70,7 +70,33 @@ def test_the_demo_eds_gives_a_full_plan() -> None:
     assert tpdo[1] == (0x1A00, 0, b"\x00")
     assert tpdo[2] == (0x1A00, 1, (0x60410010).to_bytes(4, "little"))
     assert tpdo[-1] == (0x1800, 1, (0x185).to_bytes(4, "little"))
-    assert plan.fault_reads == ((0x1001, 0), (0x603F, 0))
+    # every other PDO of the EDS switched off (CiA 301 §7.5.2.35/36: bit 31), before 0x6060
+    off = [(s.index, s.subindex, s.data, s.mask, s.optional) for s in plan.steps if s.optional]
+    assert off == [
+        (0x1401, 1, bytes.fromhex("05 03 00 80"), 0x80000000, True),
+        (0x1801, 1, bytes.fromhex("85 02 00 80"), 0x80000000, True),
+    ]
+    assert whats.index("TPDO2 switched off (not used): 0x1801:1 bit 31") < len(whats) - 1
+    assert whats.index("TPDO1 enabled") < whats.index(
+        "RPDO2 switched off (not used): 0x1401:1 bit 31"
+    )
+
+
+def test_unused_pdos_of_a_wider_eds(tmp_path: Path) -> None:
+    text = EDS.read_text()
+    start = text.index("[1801]")
+    # a TPDO3 beside TPDO2: its COB-ID from the EDS, bit 31 set
+    tpdo3 = text[start : text.index("[", text.index("[1801sub6]") + 1)]
+    tpdo3 = tpdo3.replace("[1801", "[1802").replace("$NODEID+0x280", "$NODEID+0x380")
+    wider = tmp_path / "wider.eds"
+    wider.write_text(text[:start] + tpdo3 + text[start:])
+    opts = config({"eds": str(wider)}).buses[0]
+    plan = node_config(5, opts.drives[0].options, opts.options)
+    assert [(s.index, s.data) for s in plan.steps if s.optional] == [
+        (0x1401, bytes.fromhex("05 03 00 80")),
+        (0x1801, bytes.fromhex("85 02 00 80")),
+        (0x1802, bytes.fromhex("85 03 00 80")),
+    ]
 
 
 def test_bus_defaults() -> None:

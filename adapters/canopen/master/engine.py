@@ -9,9 +9,11 @@ Per node (CiA 301 §7.3.2, CiA 402-2 §6.2):
    is reset (NMT reset node, then its boot-up awaited) when its config says so, else put
    in pre-operational.
 2. CONFIGURE: the bring-up SDO writes (0x1017 heartbeat, RPDO1/TPDO1 communication
-   and mapping, 0x1016 consumer, 0x6007, 0x605A, 0x6060, startup SDOs), each read back
-   and compared; then the report reads (0x605A as the drive has it). A refusal or a
-   different read-back stops the bring-up: the node is not started (NodeProblem).
+   and mapping, the other PDOs switched off, 0x1016 consumer, 0x6007, 0x605A, 0x6060,
+   startup SDOs), each read back and compared; then the report reads (0x605A as the
+   drive has it). A refusal or a different read-back stops the bring-up: the node is
+   not started (NodeProblem); an optional step's (an unused PDO switched off) is
+   reported (Report) and the bring-up goes on.
 3. START: NMT start node; ONLINE on its first operational heartbeat.
 4. ONLINE: RPDO1 (controlword, target) every cycle, after the SYNC when the gateway
    produces it; TPDO1 in (statusword and actual values); EMCY in; on entering FAULT
@@ -406,10 +408,16 @@ class Master:
         transfer = node.transfer
         if transfer is None:
             return  # late answer to a transfer that timed out
+        ignored = transfer.ignored
         reply = transfer.on_response(data)
         if reply is not None:
             out.append(Send(CanFrame(frames.sdo_rx_id(node.id), reply)))
         if transfer.result is None:
+            if transfer.ignored != ignored:
+                # a late answer of a transfer ended on its timeout: not this one's, and
+                # its deadline stays as it is (CiA 301 §7.2.4.3)
+                node.figures["sdo_stale"] += 1
+                return
             node.sdo_deadline = now + self.config.sdo_timeout
             return
         self._sdo_end(node, now, out)
@@ -488,6 +496,9 @@ class Master:
                 f"{s.what}: write of 0x{s.index:04X}:{s.subindex} = 0x{s.data[::-1].hex()} "
                 f"{who}: {result.message}"
             )
+            if s.optional and result.by_server:
+                self._pass_over(node, now, text, out)
+                return
             self._fail(node, now, text, result.abort_code, out)
             return
         if s.index == 0x1017 and s.subindex == 0:
@@ -505,6 +516,9 @@ class Master:
         s = node.config.steps[job.step]
         if not result.ok:
             text = f"{s.what}: read-back of 0x{s.index:04X}:{s.subindex} failed: {result.message}"
+            if s.optional and result.by_server:
+                self._pass_over(node, now, text, out)
+                return
             self._fail(node, now, text, result.abort_code, out)
             return
         wrote = int.from_bytes(s.data, "little") & s.mask
@@ -514,8 +528,18 @@ class Master:
                 f"{s.what}: 0x{s.index:04X}:{s.subindex} reads back 0x{read:X} after "
                 f"writing 0x{wrote:X}"
             )
+            if s.optional:
+                self._pass_over(node, now, text, out)
+                return
             self._fail(node, now, text, None, out)
             return
+        node.step += 1
+        self._next_step(node, now, out)
+
+    def _pass_over(self, node: Node, now: float, text: str, out: list[Action]) -> None:
+        """An optional step the node refused (an unused PDO it will not switch off):
+        reported, and the bring-up goes on with the next step."""
+        out.append(Report(node.id, f"{text} (the bring-up goes on)"))
         node.step += 1
         self._next_step(node, now, out)
 

@@ -28,6 +28,9 @@ class SdoStep:
     what: str
     mask: int = 0xFFFFFFFFFFFFFFFF
     read_back: bool = True
+    # a refusal or a different read-back is reported (Report) and the bring-up goes on
+    # (an unused PDO switched off); a write that is not answered still stops it
+    optional: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -84,6 +84,7 @@ class Node:
             "sdo_transfers": 0,
             "sdo_aborts": 0,
             "sdo_timeouts": 0,
+            "sdo_stale": 0,  # late answers of timed-out transfers, ignored
             "bad_pdos": 0,
             "lost": 0,
             "released": 0,

@@ -6,6 +6,7 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
 from adapters.canopen.cia402 import State
@@ -291,3 +292,63 @@ async def test_reset_if_operational_resets_a_self_started_node() -> None:
         ev = await r.event(lambda e: "NMT reset node sent" in e.text)
         assert ev.text == "node sends no heartbeat: NMT reset node sent"
         await r.wait("d5", online)
+
+
+async def _frames_after(channel: str, wanted: int, count: int) -> list[int]:
+    """The COB-IDs heard on the line by a listener of its own until ``count`` frames of
+    COB-ID ``wanted`` came."""
+    bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    reader = can.AsyncBufferedReader()
+    notifier = can.Notifier(bus, [reader], loop=asyncio.get_running_loop())
+    heard: list[int] = []
+    try:
+        while heard.count(wanted) < count:
+            msg = await asyncio.wait_for(reader.get_message(), scaled(5))
+            heard.append(msg.arbitration_id)
+    finally:
+        notifier.stop()
+        bus.shutdown()
+    return heard
+
+
+async def test_the_pdos_the_gateway_does_not_use_are_switched_off() -> None:
+    """The shipped EDS enables TPDO2 synchronous: after the bring-up the line carries
+    SYNC, RPDO1 and TPDO1 only (CiA 301 §7.5.2.36: 0x1801:1 bit 31, PDO not valid)."""
+    async with rig([drive(5)]) as r:
+        await r.wait("d5", online)
+        # read from the drive by SDO: bit 31 set, the id as the EDS gives it
+        assert await r.hub.read_param("d5", 0x1801, 1) == 0x80000285
+        assert await r.hub.read_param("d5", 0x1401, 1) == 0x80000305
+        heard = await _frames_after(r.adapter.options.channel, 0x185, 10)
+        assert 0x285 not in heard and 0x185 in heard and 0x80 in heard
+        assert not any(
+            "switched off" in e.text for e in r.seen if hasattr(e, "text")
+        )  # nothing refused
+
+
+@pytest.fixture
+def fixed_pdo_eds(tmp_path: Path) -> Path:
+    """The drive's own dictionary: TPDO2's COB-ID is read-only (a fixed PDO)."""
+    text = Path(EDS).read_text()
+    section = text.index("[1801sub1]")
+    end = text.index("[", section + 1)
+    path = tmp_path / "fixed.eds"
+    path.write_text(
+        text[:section] + text[section:end].replace("AccessType=rw", "AccessType=ro") + text[end:]
+    )
+    return path
+
+
+async def test_a_pdo_the_drive_will_not_switch_off_is_reported_and_it_runs(
+    fixed_pdo_eds: Path,
+) -> None:
+    sims = [SimNodeConfig(node_id=5, eds=fixed_pdo_eds, ramp_time=0.2)]
+    async with rig([drive(5)], sims=sims) as r:
+        ev = await r.event(lambda e: e.text.startswith("TPDO2 switched off"))
+        assert ev.text == (
+            "TPDO2 switched off (not used): 0x1801:1 bit 31: write of 0x1801:1 = 0x80000285 "
+            "refused: 0x06010002 attempt to write a read only object (the bring-up goes on)"
+        )
+        await r.wait("d5", online)
+        r.hub.submit("d5", Source.MODBUS, DriveCommand(run=True, speed_rpm=600.0))
+        await r.wait("d5", lambda s: s.running)
