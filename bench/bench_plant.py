@@ -76,7 +76,6 @@ CAN_BITRATE: Final = 500_000
 CANOPEN_NODES: Final = 32
 CANOPEN_RPDO1_BYTES: Final = 4  # controlword + vl target velocity (INTEGER16 each)
 CANOPEN_TPDO1_BYTES: Final = 8  # statusword + vl velocity actual + current + torque
-CANOPEN_MIN_SYNC: Final = 0.001  # s: the shortest sync_period the configuration takes
 MODBUS_CLIENTS: Final = 10
 MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
 MEASURE: Final = 30.0  # s measured (make bench)
@@ -230,9 +229,16 @@ def canopen_cycle(nodes: int) -> float:
 
 
 def canopen_sync_period(nodes: int) -> float:
-    """The line's ``sync_period``: its physical minimum (:func:`canopen_cycle`), rounded up
-    to the microsecond, and never under the 1 ms the configuration takes."""
-    return max(CANOPEN_MIN_SYNC, math.ceil(canopen_cycle(nodes) * 1e6) / 1e6)
+    """The line's ``sync_period``: the shortest the configuration takes for these drives
+    (``adapters.canopen.options.min_sync_period``: the same frames at worst-case bit
+    stuffing, a little longer than :func:`canopen_cycle`'s exact count at standstill),
+    rounded up to the microsecond."""
+    from adapters.canopen.options import SYNC_FLOOR, frame_bits
+
+    bits = frame_bits(0) + nodes * (
+        frame_bits(CANOPEN_RPDO1_BYTES) + frame_bits(CANOPEN_TPDO1_BYTES)
+    )
+    return max(SYNC_FLOOR, math.ceil(round(bits / CAN_BITRATE * 1e6, 6)) / 1e6)
 
 
 def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
