@@ -102,9 +102,12 @@ def test_the_bench_bus_carries_frames_between_processes_paced(tmp_path: Path) ->
         for client in broker.clients:
             client.close()
     assert len(broker.ends) == len(sent)
-    # back to back on the bus: each frame ends its own bit time after the one before
+    # paced: a frame ends no sooner than its own bit time after the one before (back to back
+    # when the sender's frames reached the broker while the bus was busy; later when a loaded
+    # machine delivered one after the bus fell idle)
     gaps = [b - a for a, b in zip(broker.ends[1:-1], broker.ends[2:], strict=True)]
-    assert gaps == pytest.approx([bits / 500_000 for bits in broker.bits[2:]], rel=1e-6)
+    times = [bits / 500_000 for bits in broker.bits[2:]]
+    assert all(gap >= t * (1 - 1e-6) for gap, t in zip(gaps, times, strict=True)), (gaps, times)
 
 
 def test_a_tiny_plant_runs_and_stops() -> None:
