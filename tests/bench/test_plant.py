@@ -10,7 +10,6 @@ import threading
 from pathlib import Path
 
 import can
-import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
