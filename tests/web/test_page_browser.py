@@ -120,7 +120,7 @@ async def test_the_page_shows_the_demo_live(page: Page) -> None:
             "#buses .bus",
             "bs => bs.map(b => [b.dataset.bus, b.querySelectorAll('.station').length])",
         )
-        assert stations == [["profibus", 4], ["devicenet", 1]]
+        assert stations == [["profibus", 4], ["devicenet", 1], ["canopen", 2]]
         await page.wait_for_function(
             "document.querySelector('#health').textContent.includes('profibus')", timeout=WAIT_MS
         )
