@@ -55,7 +55,7 @@ METRICS: dict[str, str] = {
     f"{NS}_drive_current_flc_ratio": "Motor current / full-load current (soft starters).",
     f"{NS}_drive_state_age_seconds": "Seconds since the drive's state last changed.",
     f"{NS}_bus_cycle_seconds": "Bus cycle time, by statistic (last, median, avg, max).",
-    f"{NS}_bus_cycles": "Bus cycles (Profibus polling cycles, DeviceNet poll cycles).",
+    f"{NS}_bus_cycles": "Bus cycles (Profibus polling, DeviceNet poll, CANopen SYNC cycles).",
     f"{NS}_bus_retries": "Requests repeated on the bus.",
     f"{NS}_bus_timeouts": "Requests that ended without a valid reply.",
     f"{NS}_bus_errors": "Bus error counters, by the adapter's own kind.",

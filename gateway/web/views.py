@@ -40,14 +40,15 @@ BUS_FIGURES: tuple[Figure, ...] = (
     Figure("cycle_median_ms", (("cycle_ms", "median"),), "ms"),
     Figure("cycle_avg_ms", (("cycle_time_avg_ms",),), "ms"),
     Figure("cycle_max_ms", (("cycle_ms", "max"), ("cycle_time_max_ms",)), "ms"),
-    Figure("cycles", (("cycles",), ("poll_cycles",))),
+    Figure("cycles", (("cycles",), ("poll_cycles",), ("syncs_tx",))),
     Figure("retries", (("retries",),)),
     Figure("timeouts", (("timeouts",),)),
     Figure("frames_tx", (("telegrams",), ("frames_tx",))),
     Figure("frames_rx", (("frames_rx",),)),
 )
 """Line-level figures (Profibus master: adapters/profibus/figures.py; DeviceNet scanner:
-adapters/devicenet/scanner/engine.py ``line_diagnostics``)."""
+adapters/devicenet/scanner/engine.py ``line_diagnostics``; CANopen master: a cycle is a
+SYNC, adapters/canopen/master/engine.py ``figures``)."""
 
 BUS_ERRORS: tuple[str, ...] = (
     "fcs_errors",

@@ -127,3 +127,10 @@ async def test_a_stuck_page_is_disconnected_and_the_hub_never_waits(
         await asyncio.wait_for(writer, 5.0)
         assert request.transport.aborted and feed.counters.clients_stuck == 1
         feed.remove(client)
+
+
+def test_a_canopen_line_counts_its_syncs_as_cycles() -> None:
+    from gateway.web.views import BUS_FIGURES, figures
+
+    diag = {"sync_period": 0.05, "syncs_tx": 42, "bad_frames": 0, "drives": {}}
+    assert figures(diag, BUS_FIGURES)["cycles"] == 42

@@ -121,6 +121,9 @@ async def test_the_page_shows_the_demo_live(page: Page) -> None:
             "bs => bs.map(b => [b.dataset.bus, b.querySelectorAll('.station').length])",
         )
         assert stations == [["profibus", 4], ["devicenet", 1], ["canopen", 2]]
+        await page.wait_for_selector(  # the CANopen line's cycles are its SYNCs
+            '#buses .bus[data-bus="canopen"] [data-fig="cycles"]', timeout=WAIT_MS
+        )
         await page.wait_for_function(
             "document.querySelector('#health').textContent.includes('profibus')", timeout=WAIT_MS
         )
