@@ -66,6 +66,7 @@ from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, Res
 from adapters.profibus.timing import BITS_PER_CHAR, BusParams
 from bench.common import Figure
 from bench.plant import PIN_ENV, canbus
+from tests.support.net import free_port
 
 PROFIBUS_SLAVES: Final = 125
 PROFIBUS_BAUD: Final = 1_500_000
@@ -270,14 +271,6 @@ def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
 
 
 # ---------------------------------------------------------------------- processes
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def placement() -> tuple[frozenset[int], frozenset[int]] | None:
@@ -515,7 +508,7 @@ def _line_figures(
 def measure(plant: Plant) -> list[Figure]:
     """Run the plant; the figures (module docstring)."""
     with _plant(plant) as tmp:
-        modbus_port, zenoh_port = _free_port(), _free_port()
+        modbus_port, zenoh_port = free_port(), free_port()
         config = tmp / "plant.toml"
         config.write_text(config_text(plant, tmp, modbus_port, zenoh_port))
         _start_lines(plant, tmp, config)
