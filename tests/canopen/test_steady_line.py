@@ -42,7 +42,7 @@ class _Wire(canopen.Network):  # type: ignore[misc]
 
 
 class SteadyLine:
-    def __init__(self, nodes: int = NODES) -> None:
+    def __init__(self, nodes: int = NODES, bitrate: int = 500_000) -> None:
         drives = [
             {
                 "id": f"d{n}",
@@ -57,8 +57,8 @@ class SteadyLine:
             "adapter": "canopen",
             "interface": "virtual",
             "channel": "steady",
-            "bitrate": 500_000,
-            "sync_period": SYNC_PERIOD,
+            "bitrate": bitrate,
+            "sync_period": SYNC_PERIOD if nodes <= NODES else 0.015,
             "drives": drives,
         }
         config = parse(
