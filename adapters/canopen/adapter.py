@@ -301,6 +301,16 @@ class CanOpenAdapter:
             self._refresh(now)
             self._next_refresh = now + self.options.cycle
 
+    def _after_step(self) -> None:
+        """The next refresh comes with the engine's next cycle (SYNC and RPDOs): the
+        wishes are made just before the cycle that sends them, in the same pass of the
+        driver, so the refresh costs no wake-up of its own."""
+        engine = self.engine
+        if engine is not None:
+            cycle_at = engine.next_cycle
+            if cycle_at is not None and cycle_at < self._next_refresh:
+                self._next_refresh = cycle_at
+
     def _wake_at(self) -> float:
         return self._next_refresh
 
@@ -602,6 +612,9 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
 
     def before_step(self, now: float) -> None:
         self.adapter._before_step(now)
+
+    def after_step(self, now: float) -> None:
+        self.adapter._after_step()
 
     def wake_at(self) -> float | None:
         return self.adapter._wake_at()

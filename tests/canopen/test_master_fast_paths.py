@@ -124,9 +124,7 @@ mappings = st.lists(
 
 
 @given(mappings, st.binary(max_size=8))
-def test_the_struct_unpacks_as_the_general_path(
-    fields_: list[PdoField], data: bytes
-) -> None:
+def test_the_struct_unpacks_as_the_general_path(fields_: list[PdoField], data: bytes) -> None:
     compiled = _pdo_struct(fields_)
     if any(p.entry.bits not in (8, 16, 32, 64) for p in fields_):
         assert compiled is None

@@ -13,6 +13,7 @@ On the bench's CAN line the extra TPDO2 of every node filled the bus (docs/decis
 
 from __future__ import annotations
 
+import itertools
 from collections import defaultdict
 from typing import Any
 
@@ -131,7 +132,7 @@ def test_a_steady_line_carries_the_sync_one_tpdo1_per_node_and_rpdo1_at_the_refr
         assert abs(len(tpdos) - len(syncs)) <= 1  # one per SYNC
         rpdos = [(t, fr.data) for t, fr in by_kind["RPDO1"] if fr.cob_id == f.rpdo_id(1, node)]
         assert len({data for _, data in rpdos}) == 1  # the drive stands still: no change
-        gaps = [b - a for (a, _), (b, _) in zip(rpdos, rpdos[1:], strict=False)]
+        gaps = [b - a for (a, _), (b, _) in itertools.pairwise(rpdos)]
         # every RPDO_REFRESH, at the first SYNC after it: never more often
         assert gaps and all(RPDO_REFRESH - 1e-9 <= g <= RPDO_REFRESH + SYNC_PERIOD for g in gaps)
         assert len(rpdos) <= 1.0 / RPDO_REFRESH + 1

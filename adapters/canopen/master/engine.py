@@ -178,6 +178,11 @@ class Master:
 
     # ------------------------------------------------------------ the engine protocol
 
+    @property
+    def next_cycle(self) -> float | None:
+        """When the next cycle (SYNC, RPDOs) is due; None once the engine left the line."""
+        return None if self._left else self._next_cycle
+
     def next_deadline(self) -> float | None:
         if self._kick:
             return -math.inf  # a job waits for its node's free SDO channel: step now
