@@ -595,15 +595,20 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
 
     def __init__(self, adapter: CanOpenAdapter) -> None:
         self.adapter = adapter
+        self._handlers = adapter._handlers
 
+    # every frame received and every action pass here: exact type tests first (the
+    # engine's and the link's classes are final dataclasses), no call in between
     def event(self, received: LinkEvent) -> Event:
+        if type(received) is RxFrame:
+            return FrameIn(received.frame)
         return _event(received)
 
     def frame(self, action: Action) -> CanFrame | None:
-        return action.frame if isinstance(action, Send) else None
+        return action.frame if type(action) is Send else None
 
     def handle(self, now: float, action: Action) -> None:
-        self.adapter._handle(now, action)
+        self._handlers[type(action)](now, action)
 
     def send_failed(self, result: SendResult) -> list[Event]:
         error = result.error or ""

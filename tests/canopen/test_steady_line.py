@@ -31,7 +31,7 @@ SYNC_PERIOD = 0.005  # s: shorter than the line's minimum is refused; 4 nodes ta
 MAX_STEP = 0.0005  # s: the fake clock never jumps further (the nodes' timers run)
 
 
-class _Wire(canopen.Network):  # type: ignore[misc]
+class _Wire(canopen.Network):
     """The nodes' side of an ideal bus: what they send is queued with the fake time."""
 
     def __init__(self, line: SteadyLine) -> None:
