@@ -301,6 +301,16 @@ class CanOpenAdapter:
             self._refresh(now)
             self._next_refresh = now + self.options.cycle
 
+    def _after_step(self) -> None:
+        """The next refresh comes with the engine's next cycle (SYNC and RPDOs): the
+        wishes are made just before the cycle that sends them, in the same pass of the
+        driver, so the refresh costs no wake-up of its own."""
+        engine = self.engine
+        if engine is not None:
+            cycle_at = engine.next_cycle
+            if cycle_at is not None and cycle_at < self._next_refresh:
+                self._next_refresh = cycle_at
+
     def _wake_at(self) -> float:
         return self._next_refresh
 
@@ -585,15 +595,20 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
 
     def __init__(self, adapter: CanOpenAdapter) -> None:
         self.adapter = adapter
+        self._handlers = adapter._handlers
 
+    # every frame received and every action pass here: exact type tests first (the
+    # engine's and the link's classes are final dataclasses), no call in between
     def event(self, received: LinkEvent) -> Event:
+        if type(received) is RxFrame:
+            return FrameIn(received.frame)
         return _event(received)
 
     def frame(self, action: Action) -> CanFrame | None:
-        return action.frame if isinstance(action, Send) else None
+        return action.frame if type(action) is Send else None
 
     def handle(self, now: float, action: Action) -> None:
-        self.adapter._handle(now, action)
+        self._handlers[type(action)](now, action)
 
     def send_failed(self, result: SendResult) -> list[Event]:
         error = result.error or ""
@@ -602,6 +617,9 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
 
     def before_step(self, now: float) -> None:
         self.adapter._before_step(now)
+
+    def after_step(self, now: float) -> None:
+        self.adapter._after_step()
 
     def wake_at(self) -> float | None:
         return self.adapter._wake_at()

@@ -28,6 +28,8 @@ from gateway.errors import FrameEncodeError, require_int
 MAX_NODE_ID = 127
 MAX_COB_ID = 0x7FF
 MAX_DATA_LENGTH = 8
+_new = object.__new__
+_set = object.__setattr__
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +60,16 @@ class CanFrame:
         """A received frame; :class:`InvalidCobId` for one CANopen cannot carry (CiA 301
         uses 11-bit identifiers and classic frames of at most 8 bytes)."""
         raw = bytes(data)
+        if (
+            not is_extended_id
+            and type(arbitration_id) is int
+            and 0 <= arbitration_id <= MAX_COB_ID
+            and len(raw) <= MAX_DATA_LENGTH
+        ):  # every frame received: one test for the usual case, the reasons below
+            frame = _new(cls)
+            _set(frame, "cob_id", arbitration_id)
+            _set(frame, "data", raw)
+            return frame
         if is_extended_id:
             raise InvalidCobId("extended (29-bit) identifier", raw)
         if (

@@ -398,3 +398,39 @@ def test_can_frame_from_bus() -> None:
             f.CanFrame.from_bus(*args)
     with pytest.raises(InvalidCobId):
         f.CanFrame.from_bus(0x185, b"", is_extended_id=True)
+
+
+class _Id(int):
+    """An int subclass (an IntEnum-like identifier): not the short cut's type, still valid."""
+
+
+@given(
+    st.one_of(
+        st.integers(-2, 0x802),
+        st.booleans(),
+        st.integers(0, 0x7FF).map(_Id),
+        st.just(389.0),
+    ),
+    st.binary(max_size=9).flatmap(lambda b: st.sampled_from([b, bytearray(b)])),
+    st.booleans(),
+)
+def test_from_bus_short_cut_is_the_checked_constructor(
+    cob_id: object, data: bytes | bytearray, extended: bool
+) -> None:
+    """``from_bus``'s one-test path for the usual frame against the checked constructor:
+    the same frame, or InvalidCobId for what CANopen cannot carry."""
+    valid = (
+        not extended
+        and isinstance(cob_id, int)
+        and not isinstance(cob_id, bool)
+        and 0 <= cob_id <= f.MAX_COB_ID
+        and len(data) <= f.MAX_DATA_LENGTH
+    )
+    if not valid:
+        with pytest.raises(InvalidCobId):
+            f.CanFrame.from_bus(cob_id, data, is_extended_id=extended)  # type: ignore[arg-type]
+        return
+    assert isinstance(cob_id, int)
+    frame = f.CanFrame.from_bus(cob_id, data, is_extended_id=extended)
+    assert frame == f.CanFrame(cob_id, bytes(data))
+    assert type(frame.data) is bytes and frame.data == bytes(data)

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import struct
 from collections.abc import Sequence
 
 from adapters.canopen import codes, frames
@@ -69,6 +70,7 @@ RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
 COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
+SYNC_FRAME = frames.encode_sync()  # no counter (CiA 301 §7.2.5.2.1): the same every cycle
 
 
 class Master:
@@ -80,7 +82,7 @@ class Master:
         for n in nodes:
             if n.node_id in self.nodes:
                 raise ValueError(f"node {n.node_id} configured twice")
-            self.nodes[n.node_id] = Node(n)
+            self.nodes[n.node_id] = Node(n, tpdo_struct=_pdo_struct(n.tpdo))
         self._tokens = itertools.count(1)
         self._next_cycle: float | None = 0.0
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
@@ -176,26 +178,41 @@ class Master:
 
     # ------------------------------------------------------------ the engine protocol
 
+    @property
+    def next_cycle(self) -> float | None:
+        """When the next cycle (SYNC, RPDOs) is due; None once the engine left the line."""
+        return None if self._left else self._next_cycle
+
     def next_deadline(self) -> float | None:
         if self._kick:
             return -math.inf  # a job waits for its node's free SDO channel: step now
         return self._due
 
     def _node_due(self, node: Node) -> float | None:
-        times = [
-            t for t in (node.probe_at, node.phase_deadline, node.sdo_deadline) if t is not None
-        ]
+        due = node.probe_at
+        t = node.phase_deadline
+        if t is not None and (due is None or t < due):
+            due = t
+        t = node.sdo_deadline
+        if t is not None and (due is None or t < due):
+            due = t
         if node.watch_heartbeat and node.heard_at is not None:
-            times.append(node.heard_at + self._hb_timeout(node))
-        return min(times) if times else None
+            t = node.heard_at + self.config.heartbeat_factor * node.heartbeat_timeout
+            if due is None or t < due:
+                due = t
+        return due
 
     def _compute_due(self) -> float | None:
-        times = [t for t in (self._next_cycle, self._next_heartbeat) if t is not None]
+        due = self._next_cycle
+        t = self._next_heartbeat
+        if t is not None and (due is None or t < due):
+            due = t
+        node_due = self._node_due
         for node in self.nodes.values():
-            t = self._node_due(node)
-            if t is not None:
-                times.append(t)
-        return min(times) if times else None
+            t = node_due(node)
+            if t is not None and (due is None or t < due):
+                due = t
+        return due
 
     def step(self, now: float, event: Event | None = None) -> list[Action]:
         """A frame touches its node only: the timers of every node run when one is due
@@ -260,7 +277,7 @@ class Master:
 
     def _cycle(self, now: float, out: list[Action]) -> None:
         if self.config.sync_period > 0:
-            out.append(Send(frames.encode_sync()))
+            out.append(Send(SYNC_FRAME))
             self.figures["syncs_tx"] += 1
         refresh = max(RPDO_REFRESH, self.config.cycle)
         for node in self.nodes.values():
@@ -313,6 +330,7 @@ class Master:
         node.reset_until = 0.0
         node.rpdo_sent, node.rpdo_at = None, 0.0
         node.rpdo_key = node.rpdo_frame = None
+        node.tpdo_data = node.tpdo_inputs = None
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
@@ -654,12 +672,26 @@ class Master:
             self._lose(node, now, f"the node left operational ({state.name.lower()})", out)
 
     def _on_tpdo(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
-        fields_ = node.config.tpdo
+        """TPDO1 in. A drive at rest repeats its TPDO1 every SYNC: the same data gives the
+        same :class:`Inputs` (the statusword in it is the node's already, so no state
+        changes and no fault read starts), the same object again without decoding."""
+        last = node.tpdo_inputs
+        if data == node.tpdo_data and last is not None and last.statusword == node.statusword:
+            node.figures["tpdo_rx"] += 1
+            out.append(last)
+            return
+        inputs = self._decode_tpdo(node, data)
+        if inputs is not None:
+            out.append(inputs)
+        node.tpdo_data, node.tpdo_inputs = data, inputs
+
+    def _decode_tpdo(self, node: Node, data: bytes) -> Inputs | None:
+        """The general path: unpack, the state behind a new statusword, a fault's reads."""
         try:
-            values = _unpack(fields_, data)
+            values = _unpack(node.config.tpdo, data, node.tpdo_struct)
         except CanOpenDecodeError:
             node.figures["bad_pdos"] += 1
-            return
+            return None
         node.figures["tpdo_rx"] += 1
         statusword = values[0]
         if statusword != node.statusword:
@@ -671,7 +703,7 @@ class Master:
             node.statusword, node.state = statusword, state
             if state in FAULT_STATES and previous not in FAULT_STATES:
                 self._read_fault(node)
-        out.append(Inputs(node.id, statusword, values[1:]))
+        return Inputs(node.id, statusword, values[1:])
 
     def _read_fault(self, node: Node) -> None:
         node.fault_reads = {}
@@ -705,7 +737,31 @@ def _pack(field_: PdoField, value: int) -> bytes:
     return max(low, min(high, value)).to_bytes(size, "little", signed=field_.signed)
 
 
-def _unpack(fields_: Sequence[PdoField], data: bytes) -> tuple[int, ...]:
+_STRUCT_CODES = {1: "b", 2: "h", 4: "i", 8: "q"}  # signed; upper case: unsigned
+
+
+def _pdo_struct(fields_: Sequence[PdoField]) -> struct.Struct | None:
+    """The mapping as one little-endian struct (CiA 301 §7.4.7.1: PDO data is packed
+    little-endian in mapping order), None when a field is not 1, 2, 4 or 8 bytes."""
+    codes_: list[str] = []
+    for f in fields_:
+        code = _STRUCT_CODES.get(f.size)
+        if code is None or f.entry.bits % 8:
+            return None
+        codes_.append(code if f.signed else code.upper())
+    return struct.Struct("<" + "".join(codes_))
+
+
+def _unpack(
+    fields_: Sequence[PdoField], data: bytes, compiled: struct.Struct | None = None
+) -> tuple[int, ...]:
+    """The mapped values of a PDO (bytes beyond the mapping ignored);
+    :class:`CanOpenDecodeError` when it is shorter than the mapping. ``compiled``: the
+    same mapping as one struct (:func:`_pdo_struct`), a short cut."""
+    if compiled is not None:
+        if len(data) >= compiled.size:
+            return compiled.unpack_from(data)
+        raise CanOpenDecodeError(f"TPDO of {len(data)} bytes, mapping needs more", data)
     out: list[int] = []
     offset = 0
     for f in fields_:

@@ -4,6 +4,7 @@ watch and the last statusword."""
 
 from __future__ import annotations
 
+import struct
 from collections import deque
 from dataclasses import dataclass, field
 from enum import Enum
@@ -11,7 +12,7 @@ from enum import Enum
 from adapters.canopen.cia402 import State
 from adapters.canopen.frames import CanFrame, NmtState, SdoClientTransfer
 from adapters.canopen.master.control import STOPPED, Want
-from adapters.canopen.master.events import NodeConfig
+from adapters.canopen.master.events import Inputs, NodeConfig
 
 
 class Phase(Enum):
@@ -75,6 +76,11 @@ class Node:
     # RPDO1 as last built, and what it was built from (state, want, reset pulse on)
     rpdo_key: tuple[State | None, Want, bool] | None = None
     rpdo_frame: CanFrame | None = None
+    # TPDO1 as last received and what it gave (a repeated TPDO1 gives the same again)
+    tpdo_data: bytes | None = None
+    tpdo_inputs: Inputs | None = None
+    # TPDO1's mapping as one struct (every field 1, 2, 4 or 8 bytes), else None
+    tpdo_struct: struct.Struct | None = None
     figures: dict[str, int] = field(
         default_factory=lambda: {
             "tpdo_rx": 0,
