@@ -119,6 +119,11 @@ class _Sent:
     remote: bool = True
 
 
+_OutMemory = tuple[bool, int | None, bool, _Sent]
+"""What ``outputs`` reads and writes of a profile's memory: stop held, the reset counter
+seen, the pulse sent, the last telegram's ``_sent``."""
+
+
 def _copy_readings(readings: Readings) -> Readings:
     """A copy the caller may keep or change (``values`` is the one nested dict)."""
     copy = readings.copy()
@@ -198,9 +203,7 @@ class WegProfile(DpProfileBase):
         # inputs' fast path: (key, the memory the call left, its readings)
         self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
         # outputs' fast path: (key, the memory before the call, the memory after, telegram)
-        self._outputs_memo: (
-            tuple[tuple[object, ...], tuple[object, ...], tuple[object, ...], bytes] | None
-        ) = None
+        self._outputs_memo: tuple[tuple[object, ...], _OutMemory, _OutMemory, bytes] | None = None
 
     # ------------------------------------------------------------------ setup
 
@@ -450,7 +453,7 @@ class WegProfile(DpProfileBase):
             return telegram
         return self._encode_outputs(desired, now)
 
-    def _outputs_memory(self) -> tuple[bool, int | None, bool, _Sent]:
+    def _outputs_memory(self) -> _OutMemory:
         """What :meth:`_encode_outputs` reads or writes of the profile's own state (with
         ``_pulse_until`` None: the fast path's condition)."""
         return (self._stop_held, self._reset_seen, self._pulse_sent, self._sent)

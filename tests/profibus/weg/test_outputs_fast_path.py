@@ -111,9 +111,9 @@ def test_a_repeated_command_is_not_encoded_again() -> None:
     calls: list[DesiredCommand] = []
     encode = p._encode_outputs
 
-    def counted(d: DesiredCommand, now: float) -> bytes:
-        calls.append(d)
-        return encode(d, now)
+    def counted(desired: DesiredCommand, now: float) -> bytes:
+        calls.append(desired)
+        return encode(desired, now)
 
     p._encode_outputs = counted  # type: ignore[method-assign]
     assert p.outputs(desired, 0.01) == first and calls == []
