@@ -122,6 +122,7 @@ class StreamDriver(Generic[EventT]):
         self.link = link
         self.protocol = protocol
         self.loop = link.loop
+        self._time = self.loop.time  # bound once: several reads of the clock per message
         self.on_action = on_action
         self.on_flushed = on_flushed
         self.on_stepped = on_stepped
@@ -179,7 +180,7 @@ class StreamDriver(Generic[EventT]):
             # path. The loop is held that long at most (plus the kernel's wake-up); never
             # a reply wait (docs/decisions.md, "Line timing without busy-waiting").
             while deadline is not None and due < MAX_DUE_STEPS:
-                wait = deadline - self.loop.time()
+                wait = deadline - self._time()
                 if wait > 0:
                     if slept + wait > SLEEP_LIMIT or self.engine.awaiting_reply():
                         break
@@ -196,8 +197,11 @@ class StreamDriver(Generic[EventT]):
         self.on_stepped()
 
     def _drain(self) -> None:
-        while self._queued and not self._stopped:
-            self._run(self.engine.step(self.loop.time(), self._queued.popleft()))
+        queued, step, now = self._queued, self.engine.step, self._time
+        while queued and not self._stopped:
+            actions = step(now(), queued.popleft())
+            if actions:
+                self._run(actions)
 
     def _run(self, actions: Sequence[Any]) -> None:
         """Requests first, then the other actions in their order.
@@ -206,8 +210,6 @@ class StreamDriver(Generic[EventT]):
         handler does can change it; the line must not wait while the adapter decodes a
         reply's inputs and updates the hub (the master's turnaround).
         """
-        if not actions:
-            return
         others: list[Any] = []
         todo = actions
         transmission = self.protocol.transmission
@@ -221,7 +223,7 @@ class StreamDriver(Generic[EventT]):
                 continue
             at = self._transmit(out)
             if at is not None:  # confirmed at once: what the engine does next comes first
-                more = self.engine.step(self.loop.time(), self.protocol.written(at))
+                more = self.engine.step(self._time(), self.protocol.written(at))
                 if more:
                     todo, i = [*todo[i:], *more], 0
         for action in others:
@@ -240,7 +242,7 @@ class StreamDriver(Generic[EventT]):
         """
         if self._stopped or deadline is None:
             return  # nothing due: an armed timer only causes one idle step
-        if deadline - self.loop.time() <= NEAR:
+        if deadline - self._time() <= NEAR:
             armed = self._near.at
             if armed is None or armed > deadline:
                 self._near_at = deadline
@@ -299,13 +301,13 @@ class StreamDriver(Generic[EventT]):
         time (confirmed to the engine from :meth:`_on_write_due`)."""
         for event in self.protocol.idle():  # the line was idle before this request
             self.on_flushed(event)
-        if self._writes or out.not_before > self.loop.time():
+        if self._writes or out.not_before > self._time():
             self._writes.append(out)  # after any still waiting: writes keep their order
             if self._write_timer.at is None:
                 self._write_timer.set(self._writes[0].not_before)
             return None
         self.link.write(out.data)
-        return self.loop.time()
+        return self._time()
 
     def _on_write_due(self) -> None:
         """The first waiting write's time has come: write what is due, in order, each

@@ -75,13 +75,11 @@ class _Libc:
         self.create = libc.timerfd_create  # AttributeError where there is none
         self.create.argtypes = (ctypes.c_int, ctypes.c_int)
         self.create.restype = ctypes.c_int
-        self.settime = libc.timerfd_settime
-        self.settime.argtypes = (
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.POINTER(_Itimerspec),
-            ctypes.POINTER(_Itimerspec),
-        )
+        # Called once per message: without argtypes, whose conversions took 2.2 us of the
+        # call's 2.9 on the test machine. Every argument is one ctypes passes as it is:
+        # the descriptor and the flags (Python ints: C int), a byref() of the
+        # itimerspec and None (NULL) for the old value.
+        self.settime = libc["timerfd_settime"]  # a function object of its own
         self.settime.restype = ctypes.c_int
 
 
@@ -134,6 +132,7 @@ class TimerFd:
         self._spec = _Itimerspec()
         self._value = self._spec.it_value  # a view into _spec: set in place
         self._ref = ctypes.byref(self._spec)
+        self._settime_c = libc.settime
         self._at: float | None = None
         try:
             loop.add_reader(fd, self._fired)
@@ -149,8 +148,10 @@ class TimerFd:
         if self._fd < 0:
             return  # closed
         ns = max(math.ceil(when * NS), 1)  # rounded up: never before `when`; 0 would disarm
-        self._value.tv_sec, self._value.tv_nsec = divmod(ns, NS)
-        self._settime()
+        value = self._value
+        value.tv_sec, value.tv_nsec = divmod(ns, NS)
+        if self._settime_c(self._fd, TFD_TIMER_ABSTIME, self._ref, None) < 0:
+            self._settime_failed()
         self._at = when
 
     def cancel(self) -> None:
@@ -169,9 +170,13 @@ class TimerFd:
         self._fd = -1
 
     def _settime(self) -> None:
-        if self._libc.settime(self._fd, TFD_TIMER_ABSTIME, self._ref, None) < 0:
-            err = ctypes.get_errno()
-            raise OSError(err, f"timerfd_settime: {os.strerror(err)}")
+        if self._settime_c(self._fd, TFD_TIMER_ABSTIME, self._ref, None) < 0:
+            self._settime_failed()
+
+    @staticmethod
+    def _settime_failed() -> None:
+        err = ctypes.get_errno()
+        raise OSError(err, f"timerfd_settime: {os.strerror(err)}")
 
     def _fired(self) -> None:
         try:

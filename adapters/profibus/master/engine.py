@@ -236,8 +236,9 @@ class Master:
         # in a cycle (after a broadcast): go on when the line is free; else the next cycle
         scheduler = self._scheduler
         base = line.busy_until if scheduler.cycle_started is not None else scheduler.next_cycle
-        times = [base, *(j.deadline for j in self._jobs.values())]
-        return max(line_free, min(times))
+        if self._jobs:  # (twice per message: no list built when no DP-V1 job waits)
+            base = min(base, *(j.deadline for j in self._jobs.values()))
+        return max(line_free, base)
 
     def awaiting_reply(self) -> bool:
         """A request is on the line (confirmed written) and its reply deadline runs."""

@@ -19,7 +19,7 @@ from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from adapters.profibus.events import Action, Transmit
 from adapters.profibus.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.common import Job, Pending
-from adapters.profibus.timing import MAX_TELEGRAM, BusParams
+from adapters.profibus.timing import BITS_PER_CHAR, MAX_TELEGRAM, BusParams
 
 
 class Line:
@@ -32,6 +32,7 @@ class Line:
         self.out = out
         self.tsyn = bus.tsyn  # BusParams computes these on every call; each message needs them
         self.reply_wait = bus.reply_wait
+        self._t_bit = bus.t_bit  # tx_time's factor (a property computed on every call)
         self.pending: Pending | None = None
         self.retry: Pending | None = None  # timed out, repeated once the line is idle
         self.unwritten: deque[tuple[int, Pending | None]] = deque()  # bytes, request
@@ -105,7 +106,7 @@ class Line:
         if not self.unwritten:
             return  # written before a reset: nothing waits for it any more
         n, pending = self.unwritten.popleft()
-        end = at + self.bus.tx_time(n)
+        end = at + n * BITS_PER_CHAR * self._t_bit  # bus.tx_time(n), as it computes it
         self.idle_since = max(self.idle_since, end)
         if pending is None:  # a broadcast: nobody answers, the line is free TSYN later
             self.busy_until = max(self.busy_until, end + self.tsyn)

@@ -119,6 +119,11 @@ class _Sent:
     remote: bool = True
 
 
+_OutMemory = tuple[bool, int | None, bool, _Sent]
+"""What ``outputs`` reads and writes of a profile's memory: stop held, the reset counter
+seen, the pulse sent, the last telegram's ``_sent``."""
+
+
 def _copy_readings(readings: Readings) -> Readings:
     """A copy the caller may keep or change (``values`` is the one nested dict)."""
     copy = readings.copy()
@@ -197,6 +202,8 @@ class WegProfile(DpProfileBase):
         self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
         # inputs' fast path: (key, the memory the call left, its readings)
         self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
+        # outputs' fast path: (key, the memory before the call, the memory after, telegram)
+        self._outputs_memo: tuple[tuple[object, ...], _OutMemory, _OutMemory, bytes] | None = None
 
     # ------------------------------------------------------------------ setup
 
@@ -423,6 +430,36 @@ class WegProfile(DpProfileBase):
     # ------------------------------------------------------------------ outputs
 
     def outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The output telegram for ``desired`` (called on every Data_Exchange reply).
+
+        Fast path: cycle after cycle the desired command is the same. The telegram is a
+        function of the command, of the speed base, P0202, the last PROFIdrive status and
+        the cyclic parameter words, and of the profile's output memory (stop held, the
+        reset counter seen, the last telegram's ``_sent``); of ``now`` only while a reset
+        pulse runs. When all of those equal a call's with no pulse before or after it,
+        that call's telegram and memory are taken again without encoding
+        (``tests/profibus/weg/test_outputs_fast_path.py`` checks both paths).
+        """
+        if self._pulse_until is None:
+            key = (desired, self.base, self.control_type, self._zsw, *self.out_values)
+            memory = self._outputs_memory()
+            memo = self._outputs_memo
+            if memo is not None and memo[0] == key and memo[1] == memory:
+                self._stop_held, self._reset_seen, self._pulse_sent, self._sent = memo[2]
+                return memo[3]
+            telegram = self._encode_outputs(desired, now)
+            if self._pulse_until is None:  # no pulse started: nothing depended on now
+                self._outputs_memo = (key, memory, self._outputs_memory(), telegram)
+            return telegram
+        return self._encode_outputs(desired, now)
+
+    def _outputs_memory(self) -> _OutMemory:
+        """What :meth:`_encode_outputs` reads or writes of the profile's own state (with
+        ``_pulse_until`` None: the fast path's condition)."""
+        return (self._stop_held, self._reset_seen, self._pulse_sent, self._sent)
+
+    def _encode_outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The general path of :meth:`outputs`."""
         reset = self._reset_pulse(desired.fault_reset_seq, now)
         if self.profidrive:
             control, reference = self._profidrive_out(desired, reset)
@@ -783,11 +820,14 @@ class WegProfile(DpProfileBase):
 
         The adapter then calls :meth:`read_codes` (DpProfile hooks, DpProfileBase defaults).
         """
-        fault_mapped = any(p in (49, 947) for p in self.in_map)
-        alarm_mapped = 48 in self.in_map
-        return (self._faulted and not fault_mapped and self._polled_fault is None) or (
-            self._alarm and not alarm_mapped and self._polled_alarm is None
-        )
+        # the status bits first: the word map is looked at only when one is set
+        if (
+            self._faulted
+            and self._polled_fault is None
+            and not any(p in (49, 947) for p in self.in_map)
+        ):
+            return True
+        return self._alarm and self._polled_alarm is None and 48 not in self.in_map
 
     async def read_codes(self, channel: RecordChannel) -> Readings:
         """Read P0049 (present fault) and P0048 (present alarm) through DP-V1."""
