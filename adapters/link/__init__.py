@@ -8,8 +8,10 @@
 * :mod:`.stream`: the driver loop of a byte-stream engine on a serial link (bytes -> the
   protocol's stream codec -> ``step``; transmits written when due); :mod:`.timer`: the
   precise timer its waits are slept on (a timerfd the loop watches).
-* :mod:`.can`: a python-can bus on the event loop (``Notifier(loop=...)``), opened through a
-  :class:`~.can.CanLinks` factory; :mod:`.canerror` decodes SocketCAN error frames.
+* :mod:`.can`: a python-can bus on the event loop (read by the loop itself, ``add_reader``,
+  when it has a file descriptor; by python-can's ``Notifier(loop=...)`` thread otherwise),
+  opened through a :class:`~.can.CanLinks` factory; :mod:`.canerror` decodes SocketCAN error
+  frames.
 * :mod:`.candriver`: the driver loop of a frame engine on a CAN link.
 
 Nothing here knows a fieldbus protocol: the bus adapters bring their codecs, engines and

@@ -1,15 +1,22 @@
-"""A python-can bus on the event loop, for any bus on CAN: its Notifier, an async reader.
+"""A python-can bus on the event loop, for any bus on CAN: read from the loop, never blocking.
 
-Fact sheet Part 3: python-can only through ``can.Notifier(bus, [reader], loop=loop)``
-with a ``can.AsyncBufferedReader`` (no blocking receive in a coroutine). Any python-can
+Fact sheet Part 3: no blocking receive in a coroutine. A bus with a file descriptor
+(SocketCAN, and any interface whose ``fileno()`` gives one) is read by the event loop
+itself: ``loop.add_reader`` on the descriptor, and each readiness drains what is waiting
+(``bus.recv(0)``, at most :data:`RX_BATCH` frames) into a plain list. A bus without one
+(``virtual``, vendor interfaces) is read by python-can's ``can.Notifier`` thread, which
+hands each message to the loop (``call_soon_threadsafe``) into the same list.
+:meth:`CanLink.receive` waits on one future that the reader completes, bounded by one
+``loop.call_at`` timer (cancelled when it is not needed): no ``asyncio.Queue`` and no
+``asyncio.timeout`` per wait, the per-frame cost on a busy line. Any python-can
 interface works (``socketcan``, ``virtual``, vendor interfaces); ``udp_multicast`` is
 refused (it sends multicast out of the network interface and is lossy). Frames go out
 with 11-bit identifiers (``is_extended_id=False``: DeviceNet, CANopen). Send failures
 (``CanOperationError``: transmit buffer full, interface down) are reported, never
 raised, so the engine can back off; so are receive failures (a SocketCAN socket reports
-ENETDOWN once when its interface goes down): never an exception in the Notifier.
-:meth:`CanLink.close` always stops the Notifier and shuts the bus down: no thread is left
-behind.
+ENETDOWN once when its interface goes down): never an exception in the reader.
+:meth:`CanLink.close` always removes the reader (or stops the Notifier) and shuts the bus
+down: no thread and no watched descriptor is left behind.
 
 A received message becomes one event (:func:`convert`): :class:`RxFrame` with the frame as
 the bus's codec builds it (the ``make`` function a bus adapter gives the link: it raises a
@@ -144,24 +151,37 @@ class LinkFigures:
     last_receive_error: str | None = None
 
 
-_WAKE = can.Message(arbitration_id=0, is_extended_id=False)  # marker put in our own queue
-RX_BATCH = 64  # frames read per readiness of a socket (SocketCAN), at most
+RX_BATCH = 64  # frames read per readiness of a bus's descriptor (SocketCAN), at most
 
 
-class _Notifier(can.Notifier):
-    """python-can's Notifier, reading everything waiting when a socket is readable.
+def bus_fileno(bus: can.BusABC) -> int | None:
+    """The bus's file descriptor, the loop watches it; None for a bus without one
+    (``virtual``, most vendor interfaces: python-can's ``fileno`` raises then)."""
+    try:
+        fd = bus.fileno()
+    except (NotImplementedError, AttributeError, OSError, ValueError):
+        return None
+    return fd if isinstance(fd, int) and fd >= 0 else None
 
-    On a bus with a file descriptor (SocketCAN) python-can's Notifier reads one frame per
-    readiness callback, so a busy line costs one event-loop pass per frame (``virtual``'s
-    reader thread hands frames over in batches). Up to :data:`RX_BATCH` are read at once.
-    """
 
-    def _on_message_available(self, bus: can.BusABC) -> None:
-        for _ in range(RX_BATCH):
-            msg = bus.recv(0)
-            if msg is None:
-                return
-            self._on_message_received(msg)
+def _release(waiter: asyncio.Future[None]) -> None:
+    """End a :meth:`CanLink.receive` wait (something came, a wake, or the wait is over)."""
+    if not waiter.done():
+        waiter.set_result(None)
+
+
+class _Listener(can.Listener):
+    """For a bus without a descriptor: python-can's Notifier thread reads it and calls this
+    on the loop (``call_soon_threadsafe``, as ``Notifier(loop=...)`` does)."""
+
+    def __init__(self, link: CanLink[Any]) -> None:
+        self._link = link
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self._link._arrived(msg)
+
+    def stop(self) -> None:
+        return
 
 
 def error_number(exc: BaseException) -> int | None:
@@ -230,13 +250,12 @@ def convert(msg: can.Message, make: FrameMaker[FrameT]) -> CanEvent[FrameT]:
         return RxError(decode_error_frame(msg.arbitration_id, data))
     if msg.is_remote_frame:
         return RxBad("remote frame")
-    if getattr(msg, "is_fd", False):
+    if msg.is_fd:
         return RxBad("CAN FD frame")
     try:
-        frame = make(msg.arbitration_id, data, msg.is_extended_id)
+        return RxFrame(make(msg.arbitration_id, data, msg.is_extended_id))
     except FrameDecodeError as exc:
         return RxBad(exc.message)
-    return RxFrame(frame)
 
 
 class CanLink(Generic[FrameT]):
@@ -250,11 +269,14 @@ class CanLink(Generic[FrameT]):
         self.make = make
         self.figures = LinkFigures()
         self._bus: can.BusABC | None = None
-        self._reader: can.AsyncBufferedReader | None = None
-        self._notifier: can.Notifier | None = None
+        self._fd: int | None = None  # watched by the loop (a bus with a descriptor)
+        self._notifier: can.Notifier | None = None  # a bus without one
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
+        self._rx: list[can.Message] = []  # received, not yet taken by receive()
         self._failures: list[RxFailed] = []
+        self._woken = False  # wake() since the last receive()
+        self._waiter: asyncio.Future[None] | None = None  # a receive() waiting
         self._rx_buffer: int | None = None
 
     async def __aenter__(self) -> Self:
@@ -279,25 +301,30 @@ class CanLink(Generic[FrameT]):
         if self.config.bitrate and self.config.interface not in BITRATE_SET_BY_SYSTEM:
             kwargs["bitrate"] = self.config.bitrate
         try:
-            self._bus = can.Bus(**kwargs)
+            bus = can.Bus(**kwargs)
         except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
             raise AdapterError(open_problem(self.config, exc)) from exc
-        self._rx_buffer = enlarge_receive_buffer(self._bus)
-        self._guard_receive(self._bus)
-        self._reader = can.AsyncBufferedReader()
+        self._bus = bus
+        self._rx_buffer = enlarge_receive_buffer(bus)
+        self._guard_receive(bus)
+        fd = bus_fileno(bus)
         try:
-            self._notifier = _Notifier(
-                self._bus, [self._reader], timeout=NOTIFIER_TIMEOUT, loop=loop
-            )
+            if fd is not None:
+                loop.add_reader(fd, self._readable)
+                self._fd = fd
+            else:
+                self._notifier = can.Notifier(
+                    bus, [_Listener(self)], timeout=NOTIFIER_TIMEOUT, loop=loop
+                )
         except Exception:
-            self._bus.shutdown()
             self._bus = None
+            bus.shutdown()
             raise
         log.debug("CAN %s %s open", self.config.interface, self.config.channel)
 
     def _guard_receive(self, bus: can.BusABC) -> None:
         """A receive error becomes an :class:`RxFailed` event, never an exception in the
-        Notifier (whose thread would end, or whose loop callback would raise)."""
+        reader (the loop's callback would raise, the Notifier's thread would end)."""
         bus.recv = self._guarded(bus.recv)  # type: ignore[method-assign,assignment]
 
     def _guarded(
@@ -312,27 +339,64 @@ class CanLink(Generic[FrameT]):
 
         return guarded
 
+    def _readable(self) -> None:
+        """The bus's descriptor is readable: take what is waiting, at most RX_BATCH (the
+        loop gets its turn; the rest comes at the next readiness)."""
+        bus = self._bus
+        if bus is None:
+            return
+        recv, rx = bus.recv, self._rx
+        for _ in range(RX_BATCH):
+            msg = recv(0)
+            if msg is None:
+                break
+            rx.append(msg)
+        waiter = self._waiter
+        if waiter is not None and (rx or self._failures):
+            self._waiter = None
+            _release(waiter)
+
+    def _arrived(self, msg: can.Message) -> None:
+        """A message from the Notifier (a bus without a descriptor), on the loop."""
+        if self._bus is None:
+            return
+        self._rx.append(msg)
+        self._wake_waiter()
+
     def _receive_failed(self, exc: BaseException) -> None:
         self.figures.receive_failures += 1
         self.figures.last_receive_error = str(exc)
         failure = RxFailed(str(exc), error_number(exc) in LINK_DOWN_ERRNOS)
-        reader, loop = self._reader, self._loop
-        if reader is None or loop is None:
+        loop = self._loop
+        if self._bus is None or loop is None:
             return
         if threading.get_ident() == self._loop_thread:
-            self._failures.append(failure)
-            reader.buffer.put_nowait(_WAKE)
+            self._failed(failure)
         else:  # the Notifier's thread (buses without a file descriptor)
-            loop.call_soon_threadsafe(self._failures.append, failure)
-            loop.call_soon_threadsafe(reader.buffer.put_nowait, _WAKE)
+            loop.call_soon_threadsafe(self._failed, failure)
+
+    def _failed(self, failure: RxFailed) -> None:
+        self._failures.append(failure)
+        self._wake_waiter()
+
+    def _wake_waiter(self) -> None:
+        waiter = self._waiter
+        if waiter is not None:
+            self._waiter = None
+            _release(waiter)
 
     def close(self) -> None:
-        """Stop the Notifier (joins its thread) and shut the bus down; idempotent."""
+        """Stop reading (the loop's reader removed, or the Notifier stopped and its thread
+        joined) and shut the bus down; idempotent."""
         notifier, self._notifier = self._notifier, None
+        fd, self._fd = self._fd, None
         bus, self._bus = self._bus, None
-        self._reader = None
+        if fd is not None and self._loop is not None:
+            self._loop.remove_reader(fd)
         if notifier is not None:
             notifier.stop(timeout=1.0)
+        self._rx.clear()
+        self._failures.clear()
         if bus is not None:
             with contextlib.suppress(can.CanError, OSError):
                 bus.shutdown()
@@ -342,69 +406,77 @@ class CanLink(Generic[FrameT]):
         return self._bus is not None
 
     def wake(self) -> None:
-        """Make a pending :meth:`receive` return now (for work queued from elsewhere)."""
-        if self._reader is not None:
-            self._reader.buffer.put_nowait(_WAKE)
+        """Make a pending :meth:`receive` return now, or the next one at once (for work
+        queued from elsewhere)."""
+        if self._bus is not None:
+            self._woken = True
+            self._wake_waiter()
 
     async def receive(self, wait: float) -> list[CanEvent[FrameT]]:
         """Everything waiting, or what arrives within ``wait`` seconds (possibly nothing)."""
-        reader = self._reader
-        if reader is None:
+        loop = self._loop
+        if self._bus is None or loop is None:
             raise AdapterError("CAN link is closed")
-        buffer = reader.buffer
-        messages: list[can.Message] = []
-        if buffer.empty():
+        if not (self._rx or self._failures or self._woken):
             if wait <= 0:
                 await asyncio.sleep(0)  # never a coroutine that returns without yielding
                 return []
+            # One future the reader (or wake, or the timer) completes. A cancellation
+            # that arrives as a frame does is never swallowed (the task ends cancelled,
+            # the frame stays for the next receive), unlike wait_for on Python 3.11,
+            # which can leave a task that never ends.
+            waiter: asyncio.Future[None] = loop.create_future()
+            self._waiter = waiter
+            timer = loop.call_at(loop.time() + wait, _release, waiter)
             try:
-                # asyncio.timeout, not wait_for: wait_for can swallow a cancellation that
-                # arrives as the message does (Python 3.11), leaving a task that never ends.
-                async with asyncio.timeout(wait):
-                    messages.append(await buffer.get())
-            except TimeoutError:
-                return []
-        while not buffer.empty():
-            messages.append(buffer.get_nowait())
+                await waiter
+            finally:
+                timer.cancel()
+                if self._waiter is waiter:
+                    self._waiter = None
+        self._woken = False
+        messages, self._rx = self._rx, []
         events: list[CanEvent[FrameT]] = []
         if self._failures:
             events.extend(self._failures)
             self._failures.clear()
+        if not messages:
+            return events
+        make, figures = self.make, self.figures
         for msg in messages:
-            if msg is _WAKE:
-                continue
-            event = convert(msg, self.make)
-            self._count(event)
+            event = convert(msg, make)
+            if type(event) is RxFrame:
+                figures.frames_rx += 1
+            elif type(event) is RxError:
+                figures.error_frames += 1
+            else:
+                figures.bad_frames += 1
             events.append(event)
         return events
 
-    def _count(self, event: CanEvent[FrameT]) -> None:
-        if isinstance(event, RxFrame):
-            self.figures.frames_rx += 1
-        elif isinstance(event, RxError):
-            self.figures.error_frames += 1
-        else:
-            self.figures.bad_frames += 1
-
     def send(self, frames: Iterable[Frame]) -> SendResult:
         """Send frames in order; stop at the first failure and say how many were dropped."""
-        batch = list(frames)
+        batch = frames if isinstance(frames, list) else list(frames)
         bus = self._bus
         if bus is None:
             return SendResult(0, len(batch), "CAN link is closed")
-        for i, frame in enumerate(batch):
-            msg = can.Message(
+        send, message, figures = bus.send, can.Message, self.figures
+        sent = 0
+        for frame in batch:
+            msg = message(
                 arbitration_id=frame.arbitration_id, data=frame.data, is_extended_id=False
             )
             try:
-                bus.send(msg, timeout=0)
+                send(msg, 0)
             except (can.CanError, OSError) as exc:
-                self.figures.send_failures += 1
-                self.figures.last_send_error = str(exc)
+                figures.frames_tx += sent
+                figures.send_failures += 1
+                figures.last_send_error = str(exc)
                 down = error_number(exc) in LINK_DOWN_ERRNOS
-                return SendResult(i, len(batch) - i, str(exc), link_down=down)
-            self.figures.frames_tx += 1
-        return SendResult(len(batch))
+                return SendResult(sent, len(batch) - sent, str(exc), link_down=down)
+            sent += 1
+        figures.frames_tx += sent
+        return SendResult(sent)
 
     def diagnostics(self) -> dict[str, Any]:
         f = self.figures

@@ -87,31 +87,41 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
 
     async def run(self) -> None:
         """Pass after pass until cancelled (see the module docstring)."""
-        engine, protocol, clock = self.engine, self.protocol, self.clock
+        engine, protocol, clock, link = self.engine, self.protocol, self.clock, self.link
+        next_deadline, wake_at = engine.next_deadline, protocol.wake_at
         while True:
             now = clock()
             protocol.before_step(now)
-            deadline = engine.next_deadline()
+            deadline = next_deadline()
             if deadline is None or now >= deadline:
                 self.act(now, engine.step(now))
             protocol.after_step(now)
-            self.flush(now)
-            events = await self.link.receive(max(self._wake() - clock(), 0.0))
-            now = clock()
-            self.take(now, events)
-            self.flush(now)
-
-    def _wake(self) -> float:
-        deadline = self.engine.next_deadline()
-        other = self.protocol.wake_at()
-        times = [t for t in (deadline, other) if t is not None]
-        return min(times) if times else self.clock() + IDLE_WAIT
+            if self._outbox:
+                self.flush(now)
+            # the wait: until the earliest of the engine's deadline (after its step) and
+            # the adapter's, IDLE_WAIT when neither has one
+            deadline = next_deadline()
+            other = wake_at()
+            if other is not None and (deadline is None or other < deadline):
+                deadline = other
+            wait = IDLE_WAIT if deadline is None else deadline - clock()
+            events = await link.receive(wait if wait > 0.0 else 0.0)
+            if events or self._outbox:  # the outbox: frames queued from elsewhere meanwhile
+                now = clock()
+                self.take(now, events)
+                self.flush(now)
 
     def take(self, now: float, events: Sequence[CanEvent[FrameT]]) -> None:
         """Step each received event (then show it to the adapter)."""
+        step, event_of, received, act = (
+            self.engine.step,
+            self.protocol.event,
+            self.protocol.received,
+            self.act,
+        )
         for event in events:
-            self.act(now, self.engine.step(now, self.protocol.event(event)))
-            self.protocol.received(now, event)
+            act(now, step(now, event_of(event)))
+            received(now, event)
 
     def act(self, now: float, actions: Sequence[ActionT]) -> None:
         """Frames to the outbox, the rest to the adapter, in order."""

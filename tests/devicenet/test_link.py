@@ -24,9 +24,7 @@ from adapters.devicenet.link import (
 )
 from adapters.link.can import (
     LINK_DOWN_ERRNOS,
-    RX_BATCH,
     RX_BUFFER_BYTES,
-    _Notifier,
     enlarge_receive_buffer,
     error_number,
     open_problem,
@@ -224,27 +222,6 @@ async def test_a_receive_error_is_an_event_not_an_exception_in_the_notifier() ->
             assert link.diagnostics()["receive_failures"] == 1
         finally:
             raw.shutdown()
-
-
-def test_a_readable_socket_is_drained_not_read_one_frame_per_loop_pass() -> None:
-    """python-can's Notifier reads one frame per readiness of a SocketCAN socket; ours
-    reads what is waiting (at most RX_BATCH), as virtual's reader thread hands over."""
-    waiting = [can.Message(arbitration_id=0x3CA, data=bytes([i])) for i in range(RX_BATCH + 3)]
-    got: list[can.Message] = []
-
-    class Bus:
-        def recv(self, timeout: float | None = None) -> can.Message | None:
-            assert timeout == 0
-            return waiting.pop(0) if waiting else None
-
-    assert hasattr(can.Notifier, "_on_message_available")  # python-can 4.6's callback
-    notifier = _Notifier.__new__(_Notifier)
-    notifier.listeners = [got.append]
-    notifier._loop = None
-    notifier._on_message_available(Bus())  # type: ignore[arg-type]
-    assert len(got) == RX_BATCH and len(waiting) == 3  # bounded: the loop gets its turn
-    notifier._on_message_available(Bus())  # type: ignore[arg-type]
-    assert len(got) == RX_BATCH + 3 and not waiting
 
 
 def test_a_socket_bus_gets_a_large_receive_queue() -> None:

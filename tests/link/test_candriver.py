@@ -154,3 +154,44 @@ async def test_the_adapters_hooks_come_around_the_step_and_its_wake_time_counts(
     assert line.calls[:4] == ["before", "after", "wake", f"received {RxFrame(Frame(2))}"]
     assert link.waits[0] == 0.125  # the adapter's time, before the engine's
     assert engine.steps == [(10.0, RxFrame(Frame(2)))]  # its deadline had not come
+
+
+class Counting(Engine):
+    def __init__(self, deadline: float | None) -> None:
+        super().__init__(deadline)
+        self.asked = 0
+
+    def next_deadline(self) -> float | None:
+        self.asked += 1
+        return self.deadline
+
+
+async def test_a_pass_asks_each_time_once_and_reads_the_clock_only_when_it_needs_it() -> None:
+    """The pass is cheap: the engine's deadline once before its step and once after, the
+    adapter's wake time once, no list; an idle pass (no deadline, nothing received,
+    nothing queued) reads the clock once, a pass with a deadline once more for the wait,
+    and one that received something once more to step it."""
+    reads = 0
+
+    def clock() -> float:
+        nonlocal reads
+        reads += 1
+        return 10.0
+
+    engine, line = Counting(deadline=None), Hooked()
+    line.wake_at = lambda: None  # type: ignore[method-assign]
+    link = Link([[], []])
+    with pytest.raises(asyncio.CancelledError):
+        await CanDriver(engine, cast(Any, link), line, clock=clock).run()
+    passes = 3  # two whole, the third ends in the receive that is cancelled
+    assert engine.asked == 2 * passes and reads == passes
+    assert link.waits == [IDLE_WAIT] * passes
+
+    reads = 0
+    engine = Counting(deadline=10.5)
+    link = Link([[RxFrame(Frame(1))]])
+    with pytest.raises(asyncio.CancelledError):
+        await CanDriver(engine, cast(Any, link), Line(), clock=clock).run()
+    # pass 1: now, the wait, the frame's step; pass 2: now, the wait (then cancelled)
+    assert reads == 5 and engine.asked == 4
+    assert link.waits == [0.5, 0.5]

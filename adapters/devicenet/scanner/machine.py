@@ -176,9 +176,9 @@ class NodeMachine:
             self.jobs.fail(node, "scanner leaving the line")
             if node.phase in (Phase.CONFIGURING, Phase.ONLINE, Phase.ALLOCATING, Phase.RELEASING):
                 node.unconnected = None  # an Allocate in flight is abandoned
-                node.phase = Phase.LEAVING  # its Release goes out in turn (request_spacing)
+                self.schedule.enter(node, Phase.LEAVING)  # its Release goes out in turn
             elif node.phase is not Phase.LEAVING:
-                node.phase = Phase.RELEASED
+                self.schedule.enter(node, Phase.RELEASED)
         for node in self.ctx.nodes.values():
             if node.phase is Phase.LEAVING:
                 self._tick_unconnected(node, now)
@@ -249,7 +249,7 @@ class NodeMachine:
             return
         node.unconnected = None
         if pending.purpose is Purpose.RELEASE:
-            node.phase = Phase.RELEASED
+            self.schedule.enter(node, Phase.RELEASED)
             return
         if node.problem(f"no answer to {pending.purpose.value}"):
             self.ctx.report(
@@ -287,12 +287,12 @@ class NodeMachine:
         c = self.ctx.config
         body = AllocateConnectionSet(node.cfg.choice, c.mac)
         self._start_unconnected(node, now, body, Purpose.ALLOCATE, c.allocate_timeout)
-        node.phase = Phase.ALLOCATING
+        self.schedule.enter(node, Phase.ALLOCATING)
 
     def _start_release(self, node: Node, now: float, purpose: Purpose) -> None:
         body = ReleaseConnectionSet(node.cfg.choice)
         self._start_unconnected(node, now, body, purpose, self.ctx.config.explicit_timeout)
-        node.phase = _RELEASE_PHASE[purpose]
+        self.schedule.enter(node, _RELEASE_PHASE[purpose])
 
     def _start_unconnected(
         self,
@@ -316,7 +316,7 @@ class NodeMachine:
         if pending.purpose is Purpose.EXPLICIT_AGAIN:
             self._on_explicit_again(node, body)
         elif pending.purpose is Purpose.RELEASE:
-            node.phase = Phase.RELEASED
+            self.schedule.enter(node, Phase.RELEASED)
         elif pending.purpose is Purpose.RELEASE_THEN_ALLOCATE:
             node.released_before_allocate = True
             self._start_allocate(node, now)
@@ -370,7 +370,7 @@ class NodeMachine:
             return
         node.figures.allocations += 1
         node.released_before_allocate = False
-        node.phase = Phase.CONFIGURING
+        self.schedule.enter(node, Phase.CONFIGURING)
         node.reassembler.reset()
         node.io_reassembler.reset()
         node.last_explicit = now
@@ -412,7 +412,7 @@ class NodeMachine:
         ctx = self.ctx
         node.unconnected = None
         node.released_before_allocate = False
-        node.phase = Phase.WAITING
+        self.schedule.enter(node, Phase.WAITING)
         failed = ctx.last_tx_failure
         if failed is not None and failed >= node.attempt_started:
             # The line could not send during this attempt (buffer full, bus-off, link
@@ -494,7 +494,7 @@ class NodeMachine:
             self._go_online(node, now)
 
     def _go_online(self, node: Node, now: float) -> None:
-        node.phase = Phase.ONLINE
+        self.schedule.enter(node, Phase.ONLINE)
         node.output = b""  # every bring-up starts idle: no command from before it (rule 1)
         node.backoff = self.ctx.config.retry_min
         node.last_rx = now
@@ -593,7 +593,7 @@ class NodeMachine:
     def node_down(self, node: Node, now: float, reason: str) -> None:
         self.jobs.fail(node, f"node went offline: {reason}")
         self.schedule.forget(node.mac)
-        node.phase = Phase.WAITING
+        self.schedule.enter(node, Phase.WAITING)
         node.unconnected = None
         node.figures.offline_count += 1
         node.problem(reason)

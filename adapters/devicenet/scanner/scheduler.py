@@ -12,7 +12,7 @@ from collections import deque
 
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import IoKind
-from adapters.devicenet.scanner.node import Phase
+from adapters.devicenet.scanner.node import Node, Phase
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
 
@@ -25,14 +25,22 @@ class Scheduler:
         self.poll_queue: deque[int] = deque()
         self.in_flight: dict[int, float] = {}
         self.explicit_busy: set[int] = set()  # nodes with an explicit request in flight
-        self.bringing = 0  # nodes in bring-up, counted at each step (bringup_window)
+        self.in_bringup = 0  # nodes in bring-up now, kept by enter()
+        self.bringing = 0  # nodes in bring-up at the step's start, plus those it started
         self.cycle_started: float | None = None
         self.cycle_due = 0.0
 
     # ------------------------------------------------------------ bring-up window
 
+    def enter(self, node: Node, phase: Phase) -> None:
+        """A node's new phase; every change of phase goes through here, so that the count
+        of nodes in bring-up is kept (not counted over the line for every frame)."""
+        self.in_bringup += (phase in _BRINGUP_PHASES) - (node.phase in _BRINGUP_PHASES)
+        node.phase = phase
+
     def bringups(self) -> int:
-        return sum(1 for n in self.ctx.nodes.values() if n.phase in _BRINGUP_PHASES)
+        """The nodes allocating or configuring now."""
+        return self.in_bringup
 
     def bringup_free(self) -> bool:
         """Whether another node may start its bring-up (``bringup_window``)."""

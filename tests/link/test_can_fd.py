@@ -1,0 +1,277 @@
+"""The CAN link on a bus with a file descriptor (as SocketCAN): read by the event loop
+itself (``add_reader``), no Notifier thread; frames, error and bad frames, receive
+failures, wake, close and a cancellation at the instant a frame arrives.
+
+The bus is a python-can bus over a Unix socket pair (one record per frame), registered
+as an interface for the test: the test writes frames into the other end."""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import socket
+import struct
+import threading
+import uuid
+from collections.abc import AsyncIterator, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import can
+import pytest
+
+from adapters.link.can import (
+    RX_BATCH,
+    CanConfig,
+    CanLink,
+    RxBad,
+    RxError,
+    RxFailed,
+    RxFrame,
+    bus_fileno,
+)
+from adapters.link.canerror import LineCondition
+from gateway.errors import AdapterError, FrameDecodeError
+from tests.support.timing import scaled
+
+INTERFACE = "pairtest"
+RECORD = struct.Struct("<IBB8s")  # identifier, flags, dlc, data
+EXTENDED, REMOTE, ERROR = 1, 2, 4
+PAIRS: dict[str, PairBus] = {}  # channel -> the bus the link opened
+
+
+class PairBus(can.BusABC):
+    """One end of a socket pair; the test holds the other (``peer``)."""
+
+    def __init__(self, channel: Any, can_filters: Any = None, **kwargs: object) -> None:
+        self._sock, self.peer = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self._sock.setblocking(False)
+        self.recv_calls = 0
+        self.fail_next: OSError | None = None
+        self.channel_info = f"pair {channel}"
+        super().__init__(channel, can_filters=can_filters, **kwargs)
+        PAIRS[str(channel)] = self
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._sock.send(RECORD.pack(msg.arbitration_id, 0, msg.dlc, bytes(msg.data)))
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        self.recv_calls += 1
+        if self.fail_next is not None:
+            exc, self.fail_next = self.fail_next, None
+            raise can.CanOperationError(exc.strerror or "", exc.errno)
+        try:
+            record = self._sock.recv(RECORD.size)
+        except BlockingIOError:
+            return None, False
+        ident, flags, dlc, data = RECORD.unpack(record)
+        msg = can.Message(
+            arbitration_id=ident,
+            is_extended_id=bool(flags & EXTENDED),
+            is_remote_frame=bool(flags & REMOTE),
+            is_error_frame=bool(flags & ERROR),
+            dlc=dlc,
+            data=data[:dlc],
+        )
+        return msg, False
+
+    def fileno(self) -> int:
+        return self._sock.fileno()
+
+    def write(self, ident: int, data: bytes = b"", flags: int = 0) -> None:
+        """A frame from the line (the test's end)."""
+        self.peer.send(RECORD.pack(ident, flags, len(data), data))
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._sock.close()
+
+
+@dataclass(frozen=True)
+class Frame:
+    arbitration_id: int
+    data: bytes
+
+
+def make(arbitration_id: int, data: bytes, is_extended_id: bool) -> Frame:
+    if is_extended_id:
+        raise FrameDecodeError(f"extended identifier 0x{arbitration_id:X}")
+    return Frame(arbitration_id, data)
+
+
+@pytest.fixture
+def pair_interface(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    import can.interfaces
+    import can.util
+
+    monkeypatch.setitem(can.interfaces.BACKENDS, INTERFACE, (__name__, "PairBus"))
+    valid = frozenset({*can.util.VALID_INTERFACES, INTERFACE})  # type: ignore[attr-defined]
+    monkeypatch.setattr(can.util, "VALID_INTERFACES", valid)
+    yield
+    for bus in PAIRS.values():
+        bus.peer.close()
+    PAIRS.clear()
+
+
+@pytest.fixture
+async def link(pair_interface: None) -> AsyncIterator[tuple[CanLink[Frame], PairBus]]:
+    channel = f"pair-{uuid.uuid4().hex[:8]}"
+    async with CanLink(CanConfig(INTERFACE, channel), make) as opened:
+        yield opened, PAIRS[channel]
+
+
+async def test_a_bus_with_a_descriptor_is_read_by_the_loop_not_by_a_thread(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    assert bus_fileno(bus) == bus.fileno() and lnk._fd == bus.fileno()
+    assert lnk._notifier is None
+    assert not [t for t in threading.enumerate() if "can.notifier" in t.name.lower()]
+    bus.write(0x3CA, b"\x10\x03")
+    bus.write(0x3CB, b"")
+    got: list[object] = []
+    while len(got) < 2:
+        got.extend(await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)))
+    assert got == [RxFrame(Frame(0x3CA, b"\x10\x03")), RxFrame(Frame(0x3CB, b""))]
+    assert lnk.figures.frames_rx == 2
+    assert lnk.send([Frame(0x455, b"\x01\x02")]).sent == 1
+    assert RECORD.unpack(bus.peer.recv(RECORD.size))[0] == 0x455
+    assert lnk.figures.frames_tx == 1
+
+
+async def test_a_readable_bus_is_drained_in_batches(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    """Each readiness reads what is waiting, at most RX_BATCH (the loop gets its turn)."""
+    lnk, bus = link
+    asyncio.get_running_loop().remove_reader(bus.fileno())  # the test plays the loop
+    for i in range(RX_BATCH + 3):
+        bus.write(0x100 + i, bytes([i % 256]))
+    lnk._readable()
+    assert len(lnk._rx) == RX_BATCH and bus.recv_calls == RX_BATCH  # no read past the batch
+    lnk._readable()
+    assert len(lnk._rx) == RX_BATCH + 3 and bus.recv_calls == RX_BATCH + 4  # the last: none
+    got = await lnk.receive(0.0)
+    assert [e.frame.arbitration_id for e in got if isinstance(e, RxFrame)] == [
+        0x100 + i for i in range(RX_BATCH + 3)
+    ]
+
+
+async def test_error_and_bad_frames_are_events_and_counted(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    bus.write(0x040, bytes(8), ERROR)  # controller problems: bus-off
+    bus.write(0x1ABCDEF, b"\x01", EXTENDED)
+    bus.write(0x3CA, b"", REMOTE)
+    got: list[object] = []
+    while len(got) < 3:
+        got.extend(await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)))
+    assert got == [
+        RxError(frozenset({LineCondition.BUS_OFF})),
+        RxBad("extended identifier 0x1ABCDEF"),
+        RxBad("remote frame"),
+    ]
+    assert (lnk.figures.error_frames, lnk.figures.bad_frames, lnk.figures.frames_rx) == (1, 2, 0)
+
+
+async def test_a_receive_failure_is_an_event_and_reading_goes_on(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    bus.fail_next = OSError(errno.ENETDOWN, "Network is down")
+    bus.write(0x3CA, b"\x01")  # readable: the read fails, the frame stays for the next one
+    events = await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0))
+    assert events[0] == RxFailed("Network is down [Error Code 100]", link_down=True)
+    got = events[1:]
+    while not got:
+        got.extend(await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)))
+    assert got == [RxFrame(Frame(0x3CA, b"\x01"))]
+    assert lnk.diagnostics()["receive_failures"] == 1
+    bus.fail_next = OSError(errno.ENOBUFS, "No buffer space available")
+    bus.write(0x3CB)
+    events = await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0))
+    assert events[0] == RxFailed("No buffer space available [Error Code 105]", link_down=False)
+
+
+async def test_wake_ends_a_wait_and_a_wake_before_makes_the_next_receive_return(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, _ = link
+    loop = asyncio.get_running_loop()
+    loop.call_soon(lnk.wake)
+    # without the wake the receive would wait an hour: the bound fails the test
+    assert await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)) == []
+    lnk.wake()
+    assert await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)) == []
+    assert await lnk.receive(0.001) == []  # the wake was taken: this one waits, for nothing
+
+
+async def test_receive_without_waiting_still_yields(link: tuple[CanLink[Frame], PairBus]) -> None:
+    lnk, _ = link
+    ran = asyncio.Event()
+
+    async def other() -> None:
+        ran.set()
+
+    task = asyncio.create_task(other())
+    assert await lnk.receive(0.0) == []
+    assert ran.is_set()
+    await task
+
+
+@pytest.mark.parametrize("order", ["frame, then cancel", "cancel, then frame"])
+async def test_a_cancellation_as_a_frame_arrives_ends_the_task_and_keeps_the_frame(
+    link: tuple[CanLink[Frame], PairBus], order: str
+) -> None:
+    """The frame completes the wait and the cancellation comes in the same loop turn:
+    the task must end cancelled (not swallow it and wait on, as wait_for could on
+    Python 3.11), and the frame must come with the next receive."""
+    lnk, bus = link
+    task = asyncio.create_task(lnk.receive(3600.0))
+    await asyncio.sleep(0)  # the task runs up to its wait
+    assert lnk._waiter is not None
+    bus.write(0x3CA, b"\x07")
+    if order == "frame, then cancel":
+        lnk._readable()  # the loop's reader callback, as it runs when the frame is there
+        task.cancel()
+    else:
+        task.cancel()
+        lnk._readable()
+    with pytest.raises(asyncio.CancelledError):
+        await asyncio.wait_for(task, scaled(10.0))
+    assert task.cancelled()
+    assert lnk._waiter is None
+    got = await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0))
+    assert got == [RxFrame(Frame(0x3CA, b"\x07"))]
+
+
+async def test_a_timed_out_wait_leaves_no_timer_and_no_waiter(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    assert await lnk.receive(0.001) == []
+    assert lnk._waiter is None
+    bus.write(0x3CA)  # what comes after a timed-out wait is taken by the next receive
+    got: list[object] = []
+    while not got:
+        got.extend(await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0)))
+    assert got == [RxFrame(Frame(0x3CA, b""))]
+
+
+async def test_close_removes_the_reader_and_is_idempotent(pair_interface: None) -> None:
+    loop = asyncio.get_running_loop()
+    channel = f"pair-{uuid.uuid4().hex[:8]}"
+    lnk = CanLink(CanConfig(INTERFACE, channel), make)
+    async with lnk:
+        bus = PAIRS[channel]
+        fd = bus.fileno()
+        assert loop.remove_reader(fd) is True  # the loop watches it...
+        loop.add_reader(fd, lnk._readable)  # ...(put back)
+    assert loop.remove_reader(fd) is False  # close removed it
+    lnk.close()  # again: nothing to do, no error
+    assert not lnk.is_open and bus._sock.fileno() == -1  # the bus was shut down
+    lnk.wake()  # nothing to wake: no error
+    assert lnk.send([Frame(0x455, b"")]).error == "CAN link is closed"
+    with pytest.raises(AdapterError, match="closed"):
+        await lnk.receive(0.0)
