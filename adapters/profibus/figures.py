@@ -92,6 +92,7 @@ class LineFigures(ErrorCounters):
     telegrams: int = 0  # requests and broadcasts sent
     discarded_bytes: int = 0
     unexpected: int = 0  # telegrams nobody waited for (late replies, other stations)
+    low_deferred: int = 0  # low-priority telegrams left for a later cycle (its budget spent)
     cycle: Samples = field(default_factory=Samples)  # first request -> end of the cycle
 
     def to_json(self) -> dict[str, Any]:
@@ -101,5 +102,6 @@ class LineFigures(ErrorCounters):
             **self.counters(),
             "discarded_bytes": self.discarded_bytes,
             "unexpected_telegrams": self.unexpected,
+            "low_priority_deferred": self.low_deferred,
             "cycle_ms": self.cycle.to_json(),
         }

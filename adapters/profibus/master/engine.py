@@ -79,7 +79,9 @@ class Master:
                 raise FrameEncodeError(f"slave address {params.address} configured twice")
             self._slaves[params.address] = Station(params, context, now)
             self._acyclic.add_station(params.address)
-        self._scheduler = Scheduler(bus, self._slaves, self._line, self._acyclic, now)
+        self._scheduler = Scheduler(
+            bus, self._slaves, self._line, self._acyclic, now, context=context
+        )
         self._stopped = False
         # a steady reply was taken while the line was not free yet (TSYN): the next turn,
         # once it is, is the steady one unless an event comes first (see _steady_turn)

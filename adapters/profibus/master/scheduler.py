@@ -9,6 +9,21 @@ Operate/Clear broadcast and one live-list probe when due. An absent slave is pro
 per ``absent_retry`` with a single try, so it costs one slot time per period, never a
 whole retry series every cycle. A cycle starts no sooner than ``cycle_time`` after the
 last one started.
+
+Data exchange first, the rest in the time left (the target rotation time's rule of
+IEC 61158-4-3: high-priority cyclic traffic first, low-priority only while the cycle has
+time for it). High priority: each Data_Exchange, the Slave_Diag a slave in data exchange
+asks for, Global_Control. Low priority: starting a bring-up (the first Slave_Diag of a
+slave in WAIT_DIAG), probing an absent or faulty slave, DP-V1, the live-list probe; they
+go out only while the cycle's low-priority time is within its budget, ``LOW_SHARE`` of the
+shortest watchdog among the slaves in data exchange less the cycle's data exchange time
+(the line time per Data_Exchange measured, times the slaves in data exchange), and at
+least one per cycle, so that bring-up always progresses. A bring-up under way (Set_Prm,
+Chk_Cfg, Get_Cfg, the ready polls) is low priority and counts in the budget, but is not
+deferred: its start was, and deferring it would run into its state timeouts and the
+slave's own watchdog (running since Set_Prm). With no slave in data exchange, or none with
+a watchdog, there is no budget. The line time of a telegram is counted from its
+transmission to the next one (its reply, retries, slot times and TSYN included).
 """
 
 from __future__ import annotations
@@ -30,11 +45,14 @@ from adapters.profibus.fdl import (
 from adapters.profibus.master.acyclic import JobQueue
 from adapters.profibus.master.common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
 from adapters.profibus.master.line import Line
-from adapters.profibus.master.station import Station
+from adapters.profibus.master.station import Station, StationContext
 from adapters.profibus.scan import status_request
 from adapters.profibus.timing import BusParams
 
 IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
+# The share of the shortest watchdog in data exchange that one cycle may take (data exchange
+# plus low-priority work): every slave in data exchange is served well within its watchdog.
+LOW_SHARE: Final = 0.25
 
 
 class Scheduler:
@@ -47,11 +65,14 @@ class Scheduler:
         line: Line,
         jobs: JobQueue,
         now: float,
+        *,
+        context: StationContext,
     ) -> None:
         self.bus = bus
         self.stations = stations
         self.line = line
         self.jobs = jobs
+        self.context = context
         self.mode = LineMode.OPERATE
         self.cycle_started: float | None = None
         self._cycle_sent = 0
@@ -64,6 +85,19 @@ class Scheduler:
         self._probe_due = now + bus.live_list_period if bus.live_list_period > 0 else math.inf
         self._probe_next = 0
         self.probed: dict[int, StationType] = {}  # stations that answered a live-list probe
+        # the budget of low-priority work (module docstring): line time per class this cycle
+        self._last_at: float | None = None  # the last transmission of this cycle
+        self._last_low = False  # ... and whether it was low priority
+        self._low_used = 0.0  # line time of this cycle's low-priority telegrams so far
+        self._high_used = 0.0  # ... of its high-priority ones
+        self._low_sent = 0  # low-priority telegrams begun in this cycle
+        self._dx_sent = 0  # Data_Exchange telegrams in this cycle (retries not counted)
+        self._dx_each = 0.0  # line time per Data_Exchange, as the last cycle measured it
+        self._low_budget = math.inf  # the budget (s), for the slaves in data exchange ...
+        self._budget_for = -1  # ... when context.exchange_changes was this
+        # the budget goes round: a cycle's grants start at the slave the last one refused
+        self._low_from = 0
+        self._refused_at: int | None = None
 
     # ------------------------------------------------------------------ commands
 
@@ -94,6 +128,7 @@ class Scheduler:
             return
         if line.retry is not None:
             retry, line.retry = line.retry, None
+            self._mark(now, self._last_low)  # a repetition is of its first try's class
             self._transmit(retry, now)
             return
         for _ in range(len(self.stations) + 8):  # bounded: each pass ends or starts a cycle
@@ -111,10 +146,75 @@ class Scheduler:
         self.queue = deque(self.stations)
         self._current = None
         self.line_done = False
+        self._last_at = None
+        self._low_used = self._high_used = 0.0
+        self._low_sent = self._dx_sent = 0
+        self._refused_at = None
+
+    def _budget(self) -> float:
+        """The cycle's low-priority budget: ``LOW_SHARE`` of the shortest watchdog in data
+        exchange less their Data_Exchange time (inf: no slave in data exchange has one).
+        Computed again whenever a slave entered or left data exchange (mid-cycle too: a
+        slave that came up in this cycle is protected from its next Data_Exchange on)."""
+        changes = self.context.exchange_changes
+        if changes == self._budget_for:
+            return self._low_budget
+        self._budget_for = changes
+        shortest = math.inf
+        exchanging = 0
+        for sl in self.stations.values():
+            if sl.state is SlaveState.DATA_EXCHANGE:
+                exchanging += 1
+                watchdog = sl.params.watchdog
+                if watchdog is not None and 0 < watchdog < shortest:
+                    shortest = watchdog
+        self._low_budget = LOW_SHARE * shortest - self._dx_each * exchanging
+        return self._low_budget
+
+    def low_allowed(self, now: float, address: int) -> bool:
+        """Whether a low-priority telegram for ``address`` that can wait may go out now.
+
+        At least one a cycle, then while the cycle's low-priority line time is within its
+        budget. The grants go round the line: when the budget refused a slave, the next
+        cycle's grants begin with it (the slaves before it wait for the round to wrap, a
+        cycle later at most), so that absent slaves at low addresses cannot starve the
+        bring-up of those above them."""
+        if address < self._low_from:
+            return False
+        if not self._low_sent:
+            return True
+        used = self._low_used
+        if self._last_low and self._last_at is not None:
+            used += now - self._last_at
+        if used < self._budget():
+            return True
+        if self._refused_at is None:
+            self._refused_at = address
+        self.line.figures.low_deferred += 1
+        return False
+
+    def _mark(self, now: float, low: bool) -> None:
+        """A telegram of class ``low`` goes out: the line time since the last one was the
+        last one's."""
+        last = self._last_at
+        if last is not None:
+            if self._last_low:
+                self._low_used += now - last
+            else:
+                self._high_used += now - last
+        self._last_at = now
+        self._last_low = low
 
     def end_cycle(self, now: float) -> None:
         started = self.cycle_started if self.cycle_started is not None else now
         self.cycle_started = None
+        if self._last_at is not None:
+            self._mark(now, False)
+            self._last_at = None
+            if self._dx_sent:
+                self._dx_each = self._high_used / self._dx_sent
+                self._budget_for = -1  # computed again with this figure
+        self._low_from = self._refused_at if self._refused_at is not None else 0
         if self._cycle_sent:
             figures = self.line.figures
             figures.cycles += 1
@@ -185,6 +285,13 @@ class Scheduler:
     def _want_start_up(self, sl: Station, now: float) -> Purpose | None:
         return _START_UP[sl.state]
 
+    def _want_bring_up(self, sl: Station, now: float) -> Purpose | None:
+        """WAIT_DIAG: the Slave_Diag that starts a bring-up, if the cycle has time for it;
+        later in the same turn (after a reply) the bring-up goes on without asking."""
+        if sl.turn.count or self.low_allowed(now, sl.address):
+            return Purpose.DIAG
+        return None
+
     def _want_ready(self, sl: Station, now: float) -> Purpose | None:
         return None if sl.turn.ready_polls else Purpose.DIAG
 
@@ -194,10 +301,13 @@ class Scheduler:
             return Purpose.DATA
         if sl.diag_pending and not turn.diag:
             return Purpose.DIAG
-        return self.jobs.want(sl, now) if self.jobs.jobs else None
+        if not self.jobs.jobs:
+            return None
+        purpose = self.jobs.want(sl, now)  # DP-V1: low priority
+        return purpose if purpose is None or self.low_allowed(now, sl.address) else None
 
     def _want_probe(self, sl: Station, now: float) -> Purpose | None:
-        if sl.turn.count or now < sl.retry_at:
+        if sl.turn.count or now < sl.retry_at or not self.low_allowed(now, sl.address):
             return None
         if sl.state is SlaveState.FAULT:
             sl.enter(SlaveState.WAIT_DIAG, now, "retrying after a fault")
@@ -208,10 +318,15 @@ class Scheduler:
         fc = sl.fcb.fc(RequestFunction.SRD_HIGH)
         job: Job | None = None
         if purpose is Purpose.DATA:  # the message of every cycle: nothing else to decide
+            self._mark(now, False)
+            self._dx_sent += 1
             sl.turn.data = True
             data = sl.data_frame(fc, self.mode is LineMode.OPERATE)
             dsap, tries = None, 1 + self.bus.retries
         else:
+            low = not (purpose is Purpose.DIAG and sl.state is SlaveState.DATA_EXCHANGE)
+            self._mark(now, low)
+            self._low_sent += low
             job = self._count_in_turn(sl, purpose)
             telegram: DataTelegram
             if purpose in DPV1_PURPOSES:
@@ -259,17 +374,20 @@ class Scheduler:
             clear = self.mode is LineMode.CLEAR
             self._broadcast(GlobalControl(clear_data=clear), now)
             return True
-        if now >= self._probe_due:
+        if now >= self._probe_due and self.low_allowed(now, MAX_STATION + 1):
             self._probe_due = now + self.bus.live_list_period
             address = self._next_probe()
             if address is not None:
                 data = status_request(address, self.bus.master_address)
                 pending = Pending(address, Purpose.STATUS, data, now, now, 1, False)
+                self._mark(now, True)
+                self._low_sent += 1
                 self._transmit(pending, now, fresh=True)
                 return True
         return False
 
     def _broadcast(self, control: GlobalControl, now: float) -> None:
+        self._mark(now, False)
         self._cycle_sent += 1
         self.line.broadcast(control, now)
 
@@ -300,7 +418,7 @@ _START_UP: Final[dict[SlaveState, Purpose]] = {
 }
 
 _WANTS: Final[dict[SlaveState, Callable[[Scheduler, Station, float], Purpose | None]]] = {
-    SlaveState.WAIT_DIAG: Scheduler._want_start_up,
+    SlaveState.WAIT_DIAG: Scheduler._want_bring_up,
     SlaveState.SET_PRM: Scheduler._want_start_up,
     SlaveState.CHK_CFG: Scheduler._want_start_up,
     SlaveState.WAIT_READY: Scheduler._want_ready,

@@ -76,7 +76,8 @@ class StationContext:
 
     ``timed`` holds the stations in a start-up state with a timeout (so that a line in
     data exchange has nothing to look at per step); ``left_exchange`` is called when a
-    station leaves data exchange (its DP-V1 jobs end).
+    station leaves data exchange (its DP-V1 jobs end); ``exchange_changes`` counts the
+    stations that entered or left data exchange (the scheduler's budget follows them).
     """
 
     bus: BusParams
@@ -84,6 +85,7 @@ class StationContext:
     figures: LineFigures
     left_exchange: Callable[[Station], None]
     timed: dict[int, Station] = field(default_factory=dict)
+    exchange_changes: int = 0
 
     @property
     def master(self) -> int:
@@ -360,6 +362,8 @@ class Station:
             context.timed[self.address] = self
         else:
             context.timed.pop(self.address, None)
+        if old is SlaveState.DATA_EXCHANGE or new is SlaveState.DATA_EXCHANGE:
+            context.exchange_changes += 1
         if old is SlaveState.DATA_EXCHANGE:
             self.figures.restarts += 1
             self.diag_pending = False
