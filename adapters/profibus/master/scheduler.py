@@ -21,7 +21,8 @@ shortest watchdog among the slaves in data exchange less the cycle's data exchan
 least one per cycle, so that bring-up always progresses. A bring-up under way (Set_Prm,
 Chk_Cfg, Get_Cfg, the ready polls) is low priority and counts in the budget, but is not
 deferred: its start was, and deferring it would run into its state timeouts and the
-slave's own watchdog (running since Set_Prm). With no slave in data exchange, or none with
+slave's own watchdog (running since Set_Prm); so are the polls for a DP-V1 answer once
+its request went out (the job's deadline runs). With no slave in data exchange, or none with
 a watchdog, there is no budget. The line time of a telegram is counted from its
 transmission to the next one (its reply, retries, slot times and TSYN included).
 """
@@ -178,7 +179,8 @@ class Scheduler:
         budget. The grants go round the line: when the budget refused a slave, the next
         cycle's grants begin with it (the slaves before it wait for the round to wrap, a
         cycle later at most), so that absent slaves at low addresses cannot starve the
-        bring-up of those above them."""
+        bring-up of those above them. A DP-V1 request asks as ``MAX_STATION + 1``, never
+        held by the round: its job's deadline runs from when it was queued."""
         if address < self._low_from:
             return False
         if not self._low_sent:
@@ -303,8 +305,12 @@ class Scheduler:
             return Purpose.DIAG
         if not self.jobs.jobs:
             return None
-        purpose = self.jobs.want(sl, now)  # DP-V1: low priority
-        return purpose if purpose is None or self.low_allowed(now, sl.address) else None
+        # DP-V1: low priority; a job's request waits for the budget, the polls for its
+        # answer go on (as a bring-up under way does: the job's deadline runs)
+        purpose = self.jobs.want(sl, now)
+        if purpose is Purpose.RECORD and not self.low_allowed(now, MAX_STATION + 1):
+            return None
+        return purpose
 
     def _want_probe(self, sl: Station, now: float) -> Purpose | None:
         if sl.turn.count or now < sl.retry_at or not self.low_allowed(now, sl.address):
