@@ -13,12 +13,12 @@ import itertools
 
 from adapters.profibus.master import InputsReceived, Master, SlaveDown, SlaveState
 from adapters.profibus.master.common import MAX_TURN
-from adapters.profibus.master.scheduler import LOW_SHARE
+from adapters.profibus.master.scheduler import LOW_FLOOR, LOW_SHARE
 from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.sim.slave import DpSlave
 from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
 
-WATCHDOG = 0.4  # s
+WATCHDOG = 0.5  # s
 LAG = 0.002  # s: every request is written this late (the loop busy with other lines)
 UP = list(range(3, 13))  # in data exchange when the others appear
 STARTING = list(range(13, 53))  # switched on while the first ten exchange
@@ -47,13 +47,13 @@ def _data_exchange_to(data: bytes) -> int | None:
 
 
 def _cycle_bound(w: Wire, exchanging: int) -> float:
-    """The longest a cycle may take: the data exchange of ``exchanging`` slaves, or the
-    budget's share of the watchdog if that is longer, plus one grant's overrun and the
-    Global_Control broadcast."""
+    """The longest a cycle may take: the budget's share of the watchdog, or the data
+    exchange of ``exchanging`` slaves with the floor's share for low-priority work if that
+    is longer, plus one grant's overrun and the Global_Control broadcast."""
     bus = w.bus
     exchange = LAG + 2 * bus.tx_time(13) + w.turnaround + bus.tsyn  # 4 bytes each way
     gc = LAG + bus.tx_time(LONGEST) + bus.tsyn
-    return max(LOW_SHARE * WATCHDOG, exchanging * exchange) + _turn_bound(w) + gc
+    return max(LOW_SHARE * WATCHDOG, (1 + LOW_FLOOR) * exchanging * exchange) + _turn_bound(w) + gc
 
 
 def _turn_bound(w: Wire) -> float:

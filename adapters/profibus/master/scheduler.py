@@ -17,8 +17,9 @@ asks for, Global_Control. Low priority: starting a bring-up (the first Slave_Dia
 slave in WAIT_DIAG), probing an absent or faulty slave, DP-V1, the live-list probe; they
 go out only while the cycle's low-priority time is within its budget, ``LOW_SHARE`` of the
 shortest watchdog among the slaves in data exchange less the cycle's data exchange time
-(the line time per Data_Exchange measured, times the slaves in data exchange), and at
-least one per cycle, so that bring-up always progresses. A bring-up under way (Set_Prm,
+(the line time per Data_Exchange measured, times the slaves in data exchange), but at
+least ``LOW_FLOOR`` of that data exchange time and at least one telegram per cycle, so
+that bring-up always progresses. A bring-up under way (Set_Prm,
 Chk_Cfg, Get_Cfg, the ready polls) is low priority and counts in the budget, but is not
 deferred: its start was, and deferring it would run into its state timeouts and the
 slave's own watchdog (running since Set_Prm); so are the polls for a DP-V1 answer once
@@ -54,6 +55,10 @@ IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
 # The share of the shortest watchdog in data exchange that one cycle may take (data exchange
 # plus low-priority work): every slave in data exchange is served well within its watchdog.
 LOW_SHARE: Final = 0.25
+# ... and however long the data exchange alone takes, low-priority work may have this share
+# of it in every cycle, so that bring-up keeps a part of the line (a third of it) when the
+# data exchange alone fills LOW_SHARE of the watchdog (a slow host: each turnaround late).
+LOW_FLOOR: Final = 0.5
 
 
 class Scheduler:
@@ -154,7 +159,8 @@ class Scheduler:
 
     def _budget(self) -> float:
         """The cycle's low-priority budget: ``LOW_SHARE`` of the shortest watchdog in data
-        exchange less their Data_Exchange time (inf: no slave in data exchange has one).
+        exchange less their Data_Exchange time, at least ``LOW_FLOOR`` of that time (inf:
+        no slave in data exchange has a watchdog).
         Computed again whenever a slave entered or left data exchange (mid-cycle too: a
         slave that came up in this cycle is protected from its next Data_Exchange on)."""
         changes = self.context.exchange_changes
@@ -169,7 +175,8 @@ class Scheduler:
                 watchdog = sl.params.watchdog
                 if watchdog is not None and 0 < watchdog < shortest:
                     shortest = watchdog
-        self._low_budget = LOW_SHARE * shortest - self._dx_each * exchanging
+        exchange = self._dx_each * exchanging
+        self._low_budget = max(LOW_SHARE * shortest - exchange, LOW_FLOOR * exchange)
         return self._low_budget
 
     def low_allowed(self, now: float, address: int) -> bool:
