@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 
-from adapters.profibus.master import InputsReceived, Master, SlaveDown, SlaveState
+from adapters.profibus.master import InputsReceived, Master, RecordDone, SlaveDown, SlaveState
 from adapters.profibus.master.common import MAX_TURN
 from adapters.profibus.master.scheduler import LOW_FLOOR, LOW_SHARE
 from adapters.profibus.sim.echo import EchoSim
@@ -106,3 +106,29 @@ def test_slaves_without_a_watchdog_leave_bring_up_unbudgeted() -> None:
     assert w.run_until(lambda: _in(w, configured), 5.0)
     assert w.master.figures.low_deferred == 0
     assert w.master.figures.cycles <= 3  # all of them started in the first cycle
+
+
+def test_dpv1_jobs_wait_for_the_budget_but_none_expires_and_bring_up_goes_on() -> None:
+    """Thirty slaves in data exchange take more than the budget's share of the watchdog
+    (the floor's share is left for low-priority work); a DP-V1 read queued to each at once
+    while five more slaves start up: every read completes within its deadline, the bring-up
+    completes, and no slave in data exchange drops out."""
+    up = list(range(3, 33))
+    later = list(range(33, 38))
+    watchdog = 0.2
+    master = Master(FAST_BUS, [echo_params(a, watchdog=watchdog) for a in up + later])
+    w = Wire(master, echo_line(up))
+    w.write_lag = LAG
+    assert w.run_until(lambda: _in(w, up) and _in(w, later, SlaveState.ABSENT), 5.0)
+    w.master.write_record(up[0], 0, 1, b"\x12\x34", w.now)  # (a first job: the turn's time)
+    assert w.run_until(lambda: bool(w.of(RecordDone)), 1.0)
+    w.clear()
+    for a in later:
+        w.line.add(DpSlave(a, EchoSim(4)))
+    jobs = {w.master.read_record(a, 0, 1, 240, w.now): a for a in up}
+    w.poke()
+    assert w.run_until(lambda: len(w.of(RecordDone)) == len(jobs) and _in(w, up + later), 5.0)
+    assert all(d.failure is None and d.error is None for d in w.of(RecordDone))
+    assert {d.job for d in w.of(RecordDone)} == set(jobs)
+    assert w.of(SlaveDown) == []
+    assert w.master.figures.low_deferred > 0

@@ -23,7 +23,8 @@ that bring-up always progresses. A bring-up under way (Set_Prm,
 Chk_Cfg, Get_Cfg, the ready polls) is low priority and counts in the budget, but is not
 deferred: its start was, and deferring it would run into its state timeouts and the
 slave's own watchdog (running since Set_Prm); so are the polls for a DP-V1 answer once
-its request went out (the job's deadline runs). With no slave in data exchange, or none with
+its request went out (the job's deadline runs), and a DP-V1 request whose job would
+expire before the slave's next turn. With no slave in data exchange, or none with
 a watchdog, there is no budget. The line time of a telegram is counted from its
 transmission to the next one (its reply, retries, slot times and TSYN included).
 """
@@ -104,6 +105,7 @@ class Scheduler:
         # the budget goes round: a cycle's grants start at the slave the last one refused
         self._low_from = 0
         self._refused_at: int | None = None
+        self.last_cycle = 0.0  # how long the last cycle took (s)
 
     # ------------------------------------------------------------------ commands
 
@@ -187,7 +189,8 @@ class Scheduler:
         cycle's grants begin with it (the slaves before it wait for the round to wrap, a
         cycle later at most), so that absent slaves at low addresses cannot starve the
         bring-up of those above them. A DP-V1 request asks as ``MAX_STATION + 1``, never
-        held by the round: its job's deadline runs from when it was queued."""
+        held by the round: its job's deadline runs from when it was queued; one whose
+        deadline would pass before the slave's next turn goes without asking."""
         if address < self._low_from:
             return False
         if not self._low_sent:
@@ -224,6 +227,7 @@ class Scheduler:
                 self._dx_each = self._high_used / self._dx_sent
                 self._budget_for = -1  # computed again with this figure
         self._low_from = self._refused_at if self._refused_at is not None else 0
+        self.last_cycle = now - started
         if self._cycle_sent:
             figures = self.line.figures
             figures.cycles += 1
@@ -315,8 +319,12 @@ class Scheduler:
         # DP-V1: low priority; a job's request waits for the budget, the polls for its
         # answer go on (as a bring-up under way does: the job's deadline runs)
         purpose = self.jobs.want(sl, now)
-        if purpose is Purpose.RECORD and not self.low_allowed(now, MAX_STATION + 1):
-            return None
+        if (
+            purpose is Purpose.RECORD
+            and now + self.last_cycle < self.jobs.head(sl.address).deadline
+            and not self.low_allowed(now, MAX_STATION + 1)
+        ):
+            return None  # (a job that would expire before the next turn goes now)
         return purpose
 
     def _want_probe(self, sl: Station, now: float) -> Purpose | None:
