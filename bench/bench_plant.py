@@ -82,6 +82,7 @@ MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
 MEASURE: Final = 30.0  # s measured (make bench)
 SHORT_MEASURE: Final = 8.0  # s measured with --short
 SETTLE: Final = 3.0  # s of full load before the window opens
+PROFIBUS_WATCHDOG: Final = 2.0  # s, the slaves' (the config below)
 STARTUP_BOUND: Final = 150.0  # s for every drive to come online (three lines on a loaded host)
 STOP_BOUND: Final = 15.0  # s for a process to end after SIGTERM (then SIGKILL)
 PY: Final = sys.executable
@@ -170,7 +171,7 @@ def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> s
             f"baudrate = {PROFIBUS_BAUD}",
             f"master_address = {MASTER_ADDRESS}",
             "cycle_time = 0.0",
-            "watchdog = 2.0",
+            f"watchdog = {PROFIBUS_WATCHDOG:g}",
             "latency = 0.05",
             "live_list_period = 0.0",
         ]
@@ -519,7 +520,9 @@ def measure(plant: Plant) -> list[Figure]:
         _start(plant, "gateway", [*gateway, "--", "run", "--config", str(config)], tmp)
         drives = plant.profibus + plant.devicenet + plant.canopen
 
+        started = time.monotonic()
         _wait_online(plant, tmp, record, drives)
+        online_at = time.monotonic()
         load_before = os.getloadavg()
         client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
         if plant.modbus_clients:
@@ -597,6 +600,7 @@ def measure(plant: Plant) -> list[Figure]:
         load=(load_before, load_after),
         others=others,
         gc_pauses=gc_pauses,
+        come_up=(started, online_at),
     )
 
 
@@ -617,6 +621,7 @@ def _figures(
     load: tuple[tuple[float, ...], tuple[float, ...]],
     others: dict[str, float],
     gc_pauses: list[list[float]],
+    come_up: tuple[float, float] | None = None,
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
@@ -635,6 +640,8 @@ def _figures(
         Figure("plant_gateway_rss", round(rss, 1), "MiB", note="VmRSS at the end of the window"),
         _gc_figure(gc_pauses, t1 - t0),
     ]
+    if come_up is not None:
+        figures.append(_come_up_figure(come_up, cycles.get("profibus", [])))
     if plant.profibus:
         bus = bus_params()
         extra = ""
@@ -731,6 +738,24 @@ def _figures(
         )
     )
     return figures
+
+
+def _come_up_figure(come_up: tuple[float, float], profibus: list[list[float]]) -> Figure:
+    """How long every drive took to come online (from the gateway's start), and the
+    Profibus cycles meanwhile against the slaves' watchdog (a longer cycle drops slaves
+    already in data exchange: docs/decisions.md, issue 25, fourth round)."""
+    started, online = come_up
+    during = [c for at, c in profibus if started <= at <= online]
+    note = "from the gateway's start to every drive online"
+    if during:
+        over = sum(1 for c in during if c > PROFIBUS_WATCHDOG)
+        note += (
+            f"; Profibus cycles meanwhile: {len(during)}, the longest {max(during):.3f} s, "
+            f"{over} over the slaves' {PROFIBUS_WATCHDOG:g} s watchdog"
+        )
+    return Figure(
+        "plant_come_up", round(online - started, 1), "s", reference=STARTUP_BOUND, note=note
+    )
 
 
 class StartupFailed(RuntimeError):

@@ -123,6 +123,8 @@ def test_a_tiny_plant_runs_and_stops() -> None:
     assert all(proc.poll() is not None for proc in plant.procs.values())
     assert figures["plant_gateway_cpu"].value > 0
     assert figures["plant_gateway_rss"].value > 0
+    come_up = figures["plant_come_up"]
+    assert 0 < come_up.value <= bench_plant.STARTUP_BOUND and "Profibus cycles" in come_up.note
     for line in ("profibus_2_slaves_1500k", "devicenet_2_nodes_500k", "canopen_2_nodes_500k"):
         cycle = figures[f"plant_{line}_cycle"]
         assert not math.isnan(cycle.value)
