@@ -9,6 +9,7 @@ turnaround (the master's loop busy elsewhere) makes every telegram expensive.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 from adapters.profibus.master import InputsReceived, Master, RecordDone, SlaveDown, SlaveState
@@ -132,3 +133,23 @@ def test_dpv1_jobs_wait_for_the_budget_but_none_expires_and_bring_up_goes_on() -
     assert {d.job for d in w.of(RecordDone)} == set(jobs)
     assert w.of(SlaveDown) == []
     assert w.master.figures.low_deferred > 0
+
+
+def test_a_dpv1_request_that_would_expire_before_the_next_turn_is_not_held() -> None:
+    """Thirty reads queued at once with a deadline of a few cycles: the budget holds most
+    of them at first, and each goes once its deadline could pass before the next turn of
+    its slave (held by the budget all along, three expire unasked)."""
+    up = list(range(3, 33))
+    bus = dataclasses.replace(FAST_BUS, acyclic_timeout=0.4)
+    master = Master(bus, [echo_params(a, watchdog=0.2) for a in up])
+    w = Wire(master, echo_line(up))
+    w.write_lag = LAG
+    assert w.run_until(lambda: _in(w, up), 5.0)
+    w.run(0.5)
+    w.clear()
+    jobs = {w.master.read_record(a, 0, 1, 240, w.now): a for a in up}
+    w.poke()
+    assert w.run_until(lambda: len(w.of(RecordDone)) == len(jobs), 2.0)
+    assert [d for d in w.of(RecordDone) if d.failure is not None] == []
+    assert w.master.figures.low_deferred > 0
+    assert w.of(SlaveDown) == []

@@ -190,7 +190,8 @@ class Scheduler:
         cycle later at most), so that absent slaves at low addresses cannot starve the
         bring-up of those above them. A DP-V1 request asks as ``MAX_STATION + 1``, never
         held by the round: its job's deadline runs from when it was queued; one whose
-        deadline would pass before the slave's next turn goes without asking."""
+        deadline could pass before the slave's next turn (two of the last cycle's length) goes
+        without asking."""
         if address < self._low_from:
             return False
         if not self._low_sent:
@@ -321,10 +322,11 @@ class Scheduler:
         purpose = self.jobs.want(sl, now)
         if (
             purpose is Purpose.RECORD
-            and now + self.last_cycle < self.jobs.head(sl.address).deadline
+            and now + 2 * self.last_cycle < self.jobs.head(sl.address).deadline
             and not self.low_allowed(now, MAX_STATION + 1)
         ):
-            return None  # (a job that would expire before the next turn goes now)
+            return None  # (a job that could expire before the next turn goes now: two of
+            # the last cycle's length, since the cycle that carries it grows by it)
         return purpose
 
     def _want_probe(self, sl: Station, now: float) -> Purpose | None:
