@@ -10,23 +10,23 @@ per ``absent_retry`` with a single try, so it costs one slot time per period, ne
 whole retry series every cycle. A cycle starts no sooner than ``cycle_time`` after the
 last one started.
 
-Data exchange first, the rest in the time left (the target rotation time's rule of
-IEC 61158-4-3: high-priority cyclic traffic first, low-priority only while the cycle has
-time for it). High priority: each Data_Exchange, the Slave_Diag a slave in data exchange
-asks for, Global_Control. Low priority: starting a bring-up (the first Slave_Diag of a
-slave in WAIT_DIAG), probing an absent or faulty slave, DP-V1, the live-list probe; they
-go out only while the cycle's low-priority time is within its budget, ``LOW_SHARE`` of the
-shortest watchdog among the slaves in data exchange less the cycle's data exchange time
-(the line time per Data_Exchange measured, times the slaves in data exchange), but at
-least ``LOW_FLOOR`` of that data exchange time and at least one telegram per cycle, so
-that bring-up always progresses. A bring-up under way (Set_Prm,
-Chk_Cfg, Get_Cfg, the ready polls) is low priority and counts in the budget, but is not
-deferred: its start was, and deferring it would run into its state timeouts and the
-slave's own watchdog (running since Set_Prm); so are the polls for a DP-V1 answer once
-its request went out (the job's deadline runs), and a DP-V1 request whose job would
-expire before the slave's next turn. With no slave in data exchange, or none with
-a watchdog, there is no budget. The line time of a telegram is counted from its
-transmission to the next one (its reply, retries, slot times and TSYN included).
+Data exchange first, the rest in the time left (the target rotation time's rule of IEC
+61158-4-3: high-priority cyclic traffic first, low-priority only while the cycle has time
+for it). High priority: each Data_Exchange, the Slave_Diag a slave in data exchange asks
+for, Global_Control. Low priority: starting a bring-up (the first Slave_Diag of a slave in
+WAIT_DIAG), probing an absent or faulty slave, DP-V1, the live-list probe; they go out only
+while the cycle's low-priority time is within its budget, ``LOW_SHARE`` of the shortest
+watchdog among the slaves in data exchange less the cycle's data exchange time (the line
+time per Data_Exchange measured, times the slaves in data exchange), but at least
+``LOW_FLOOR`` of that data exchange time and at least one telegram per cycle, so that
+bring-up always progresses. A bring-up under way (Set_Prm, Chk_Cfg, Get_Cfg, the ready
+polls) is low priority and counts in the budget, but is not deferred: its start was, and
+deferring it would run into its state timeouts and the slave's own watchdog (running since
+Set_Prm); so are the polls for a DP-V1 answer once its request went out (the job's deadline
+runs), and a DP-V1 request whose job could expire before the slave's next turn (two of the
+last cycle's length). With no slave in data exchange, or none with a watchdog, there is no
+budget. The line time of a telegram is counted from its transmission to the next one (its
+reply, retries, slot times and TSYN included).
 """
 
 from __future__ import annotations
@@ -190,8 +190,8 @@ class Scheduler:
         cycle later at most), so that absent slaves at low addresses cannot starve the
         bring-up of those above them. A DP-V1 request asks as ``MAX_STATION + 1``, never
         held by the round: its job's deadline runs from when it was queued; one whose
-        deadline could pass before the slave's next turn (two of the last cycle's length) goes
-        without asking."""
+        deadline could pass before the slave's next turn (two of the last cycle's length)
+        goes without asking."""
         if address < self._low_from:
             return False
         if not self._low_sent:
