@@ -104,7 +104,11 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
     async def run(self) -> None:
         """Pass after pass until cancelled (see the module docstring)."""
         engine, protocol, clock, link = self.engine, self.protocol, self.clock, self.link
-        next_deadline, wake_at, hold_until = engine.next_deadline, protocol.wake_at, protocol.hold_until
+        next_deadline, wake_at, hold_until = (
+            engine.next_deadline,
+            protocol.wake_at,
+            protocol.hold_until,
+        )
         events: Sequence[CanEvent[FrameT]] = ()
         while True:
             now = clock()

@@ -10,7 +10,7 @@ import dataclasses
 import pytest
 
 from adapters.canopen.master import Master
-from adapters.canopen.master.engine import HOLD_MARGIN
+from adapters.canopen.master.engine import HOLD_MARGIN, HOLD_MIN
 from adapters.canopen.master.node import Phase
 from tests.canopen.test_steady_line import MAX_STEP, SteadyLine
 
@@ -36,17 +36,21 @@ def test_a_steady_line_holds_until_just_before_the_next_sync(line: SteadyLine) -
     at = master.hold_until(line.now)
     due = master.next_deadline()
     assert at is not None and master.next_cycle is not None and due is not None
-    assert at == min(master.next_cycle, due) - HOLD_MARGIN
-    assert line.now < at < master.next_cycle
+    margin = min(HOLD_MARGIN, master.config.cycle / 4)
+    assert at == min(master.next_cycle, due) - margin
+    assert line.now + HOLD_MIN <= at < master.next_cycle
     assert master.hold_until(at) is None  # the hold is over: frames are taken as they come
 
 
 def test_the_hold_ends_before_any_other_deadline_of_the_engine(line: SteadyLine) -> None:
     master = line.master
     assert master.next_cycle is not None
-    master._due = line.now + 0.0015  # a node's heartbeat loss due before the next SYNC
+    master._due = line.now + 0.004  # a node's heartbeat loss due before the next SYNC
     at = master.hold_until(line.now)
-    assert at == pytest.approx(line.now + 0.0015 - HOLD_MARGIN)
+    margin = min(HOLD_MARGIN, master.config.cycle / 4)
+    assert at == pytest.approx(line.now + 0.004 - margin)
+    master._due = line.now + 0.003  # too soon for a hold worth its wake-up
+    assert master.hold_until(line.now) is None
 
 
 def test_no_hold_with_an_sdo_in_flight_or_queued(line: SteadyLine) -> None:

@@ -317,22 +317,26 @@ async def test_a_held_receive_ends_at_its_time_with_what_came(
     assert await lnk.receive(0.0, True) == []  # nothing waiting: nothing, no error
 
 
-async def test_a_receive_failure_ends_a_hold_on_a_bus_without_a_descriptor() -> None:
+async def test_a_hold_on_a_bus_without_a_descriptor_keeps_frames_a_failure_ends_it() -> None:
     """The Notifier's frames are kept during a hold without ending it; a wake ends it."""
     channel = f"hold-{uuid.uuid4().hex[:8]}"
     async with CanLink(CanConfig("virtual", channel), make) as lnk:
         assert lnk._notifier is not None
         peer = can.Bus(interface="virtual", channel=channel)
         try:
+            arrived = asyncio.Event()
+            kept = lnk._arrived
+
+            def note(msg: can.Message) -> None:
+                kept(msg)
+                arrived.set()
+
+            lnk._arrived = note  # type: ignore[method-assign]
             task = asyncio.create_task(lnk.receive(3600.0, True))
             await asyncio.sleep(0)
             peer.send(can.Message(arbitration_id=0x181, data=b"\x05", is_extended_id=False))
-
-            async def arrived() -> None:
-                while not lnk._rx:
-                    await asyncio.sleep(0.001)
-
-            await asyncio.wait_for(arrived(), scaled(10.0))
+            await asyncio.wait_for(arrived.wait(), scaled(10.0))
+            assert lnk._rx
             assert not task.done()  # the frame did not end the hold
             lnk._failed(RxFailed("Network is down", link_down=True))  # a failure does
             got = await asyncio.wait_for(task, scaled(10.0))
