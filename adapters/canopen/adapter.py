@@ -624,6 +624,10 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
     def wake_at(self) -> float | None:
         return self.adapter._wake_at()
 
+    def hold_until(self, now: float) -> float | None:
+        engine = self.adapter.engine
+        return None if engine is None else engine.hold_until(now)
+
 
 def _event(event: LinkEvent) -> Event:
     if isinstance(event, RxFrame):

@@ -8,7 +8,11 @@ itself: ``loop.add_reader`` on the descriptor, and each readiness drains what is
 hands each message to the loop (``call_soon_threadsafe``) into the same list.
 :meth:`CanLink.receive` waits on one future that the reader completes, bounded by one
 ``loop.call_at`` timer (cancelled when it is not needed): no ``asyncio.Queue`` and no
-``asyncio.timeout`` per wait, the per-frame cost on a busy line. Any python-can
+``asyncio.timeout`` per wait, the per-frame cost on a busy line. A held receive
+(``receive(wait, hold=True)``, the driver's receive hold) is not ended by frames: the
+descriptor is not watched meanwhile (the reader is removed, put back by the next receive
+that is not held) and the Notifier's frames are kept without completing the wait; at its
+end everything waiting is drained (at most :data:`RX_DRAIN` frames). Any python-can
 interface works (``socketcan``, ``virtual``, vendor interfaces); ``udp_multicast`` is
 refused (it sends multicast out of the network interface and is lossy). Frames go out
 with 11-bit identifiers (``is_extended_id=False``: DeviceNet, CANopen). Send failures
@@ -152,6 +156,7 @@ class LinkFigures:
 
 
 RX_BATCH = 64  # frames read per readiness of a bus's descriptor (SocketCAN), at most
+RX_DRAIN = 8 * RX_BATCH  # frames read at the end of a held receive, at most (the rest: next)
 
 
 def bus_fileno(bus: can.BusABC) -> int | None:
@@ -277,6 +282,8 @@ class CanLink(Generic[FrameT]):
         self._failures: list[RxFailed] = []
         self._woken = False  # wake() since the last receive()
         self._waiter: asyncio.Future[None] | None = None  # a receive() waiting
+        self._reading = False  # the loop watches the descriptor (not during a hold)
+        self._holding = False  # a held receive: the Notifier's frames do not end it
         self._rx_buffer: int | None = None
 
     async def __aenter__(self) -> Self:
@@ -311,7 +318,7 @@ class CanLink(Generic[FrameT]):
         try:
             if fd is not None:
                 loop.add_reader(fd, self._readable)
-                self._fd = fd
+                self._fd, self._reading = fd, True
             else:
                 self._notifier = can.Notifier(
                     bus, [_Listener(self)], timeout=NOTIFIER_TIMEOUT, loop=loop
@@ -356,12 +363,22 @@ class CanLink(Generic[FrameT]):
             self._waiter = None
             _release(waiter)
 
+    def _drain(self, bus: can.BusABC) -> None:
+        """Read what is waiting on the descriptor, at most RX_DRAIN (the end of a hold)."""
+        recv, rx = bus.recv, self._rx
+        for _ in range(RX_DRAIN):
+            msg = recv(0)
+            if msg is None:
+                break
+            rx.append(msg)
+
     def _arrived(self, msg: can.Message) -> None:
         """A message from the Notifier (a bus without a descriptor), on the loop."""
         if self._bus is None:
             return
         self._rx.append(msg)
-        self._wake_waiter()
+        if not self._holding:
+            self._wake_waiter()
 
     def _receive_failed(self, exc: BaseException) -> None:
         self.figures.receive_failures += 1
@@ -391,8 +408,9 @@ class CanLink(Generic[FrameT]):
         notifier, self._notifier = self._notifier, None
         fd, self._fd = self._fd, None
         bus, self._bus = self._bus, None
-        if fd is not None and self._loop is not None:
+        if fd is not None and self._loop is not None and self._reading:
             self._loop.remove_reader(fd)
+        self._reading = self._holding = False
         if notifier is not None:
             notifier.stop(timeout=1.0)
         self._rx.clear()
@@ -412,28 +430,43 @@ class CanLink(Generic[FrameT]):
             self._woken = True
             self._wake_waiter()
 
-    async def receive(self, wait: float) -> list[CanEvent[FrameT]]:
-        """Everything waiting, or what arrives within ``wait`` seconds (possibly nothing)."""
+    async def receive(self, wait: float, hold: bool = False) -> list[CanEvent[FrameT]]:
+        """Everything waiting, or what arrives within ``wait`` seconds (possibly nothing).
+        Held (``hold``): frames do not end the wait, only its time, :meth:`wake` or a
+        receive failure; then everything waiting is taken."""
         loop = self._loop
-        if self._bus is None or loop is None:
+        bus = self._bus
+        if bus is None or loop is None:
             raise AdapterError("CAN link is closed")
-        if not (self._rx or self._failures or self._woken):
+        fd = self._fd
+        if fd is not None and self._reading is hold:
+            if hold:  # the loop stops watching: no wake-up per frame during the hold
+                loop.remove_reader(fd)
+                self._reading = False
+            else:  # after a hold: take what came since, then watch again
+                self._drain(bus)
+                loop.add_reader(fd, self._readable)
+                self._reading = True
+        if not ((self._rx and not hold) or self._failures or self._woken):
             if wait <= 0:
                 await asyncio.sleep(0)  # never a coroutine that returns without yielding
-                return []
-            # One future the reader (or wake, or the timer) completes. A cancellation
-            # that arrives as a frame does is never swallowed (the task ends cancelled,
-            # the frame stays for the next receive), unlike wait_for on Python 3.11,
-            # which can leave a task that never ends.
-            waiter: asyncio.Future[None] = loop.create_future()
-            self._waiter = waiter
-            timer = loop.call_at(loop.time() + wait, _release, waiter)
-            try:
-                await waiter
-            finally:
-                timer.cancel()
-                if self._waiter is waiter:
-                    self._waiter = None
+            else:
+                # One future the reader (or wake, or the timer) completes. A cancellation
+                # that arrives as a frame does is never swallowed (the task ends
+                # cancelled, the frame stays for the next receive), unlike wait_for on
+                # Python 3.11, which can leave a task that never ends.
+                waiter: asyncio.Future[None] = loop.create_future()
+                self._waiter, self._holding = waiter, hold
+                timer = loop.call_at(loop.time() + wait, _release, waiter)
+                try:
+                    await waiter
+                finally:
+                    timer.cancel()
+                    self._holding = False
+                    if self._waiter is waiter:
+                        self._waiter = None
+        if hold and fd is not None and self._bus is not None:
+            self._drain(bus)
         self._woken = False
         messages, self._rx = self._rx, []
         events: list[CanEvent[FrameT]] = []

@@ -1,12 +1,22 @@
 """The driver loop of a frame engine on a :class:`~adapters.link.can.CanLink`.
 
 One pass of :meth:`CanDriver.run`: the adapter's work before the step
-(:meth:`CanProtocol.before_step`: new outputs from the hub, once per poll), a step of the
-engine when its deadline has come (or when it has none), the adapter's work after it
-(:meth:`CanProtocol.after_step`: a second engine sharing the line), the frames asked for
-sent in one batch; then a wait for frames until the earliest of the engine's deadline and
-the adapter's (:meth:`CanProtocol.wake_at`), each received event stepped at the time it was
-taken (and shown to :meth:`CanProtocol.received`), and what that asked for sent.
+(:meth:`CanProtocol.before_step`: new outputs from the hub, once per poll), the events the
+last wait received stepped (each shown to :meth:`CanProtocol.received` after its step), a
+step of the engine when its deadline has come (or when it has none), the adapter's work
+after it (:meth:`CanProtocol.after_step`: a second engine sharing the line), the frames
+asked for sent in one batch; then a wait for frames until the earliest of the engine's
+deadline, the adapter's (:meth:`CanProtocol.wake_at`) and the end of a receive hold.
+
+Receive hold (:meth:`CanProtocol.hold_until`): when the protocol says received frames need
+not be handled before a time, the wait is held (``CanLink.receive(wait, hold=True)``):
+frames arriving meanwhile do not end it; it ends at the earliest of the times above (a
+deadline of the engine or the adapter is never put off by a hold), or at once on
+:meth:`~adapters.link.can.CanLink.wake` (frames queued from elsewhere, an SDO asked for)
+or a receive failure. Then everything waiting is drained and stepped in the next pass
+*at the drain time* (the pass's ``now``), after ``before_step``, before the engine's own
+step: a frame that arrived during the hold is stepped as if it had arrived at the hold's
+end. Without a hold (None, the default) each frame ends the wait as before.
 
 A send that fails (a full transmit queue, the interface down) goes back to the engine as
 the events :meth:`CanProtocol.send_failed` makes of it, so it backs off; the frames not
@@ -68,6 +78,12 @@ class CanProtocol(Protocol[FrameT_contra, EventT_co, ActionT_contra]):
         """A link event, after the engine stepped it (a second engine on the line)."""
         return
 
+    def hold_until(self, now: float) -> float | None:
+        """Received frames need not be handled before this time (the link does not wake
+        the loop for them until then; a deadline, a wake or a failure still ends the wait
+        at once); None: each frame is handled as it comes."""
+        return None
+
 
 class CanDriver(Generic[FrameT, EventT, ActionT]):
     """Glue between one engine and one CAN link (see the module docstring)."""
@@ -88,28 +104,38 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
     async def run(self) -> None:
         """Pass after pass until cancelled (see the module docstring)."""
         engine, protocol, clock, link = self.engine, self.protocol, self.clock, self.link
-        next_deadline, wake_at = engine.next_deadline, protocol.wake_at
+        next_deadline, wake_at, hold_until = (
+            engine.next_deadline,
+            protocol.wake_at,
+            protocol.hold_until,
+        )
+        events: Sequence[CanEvent[FrameT]] = ()
         while True:
             now = clock()
             protocol.before_step(now)
+            if events:  # what the last wait received, at the drain time
+                self.take(now, events)
             deadline = next_deadline()
             if deadline is None or now >= deadline:
                 self.act(now, engine.step(now))
             protocol.after_step(now)
-            if self._outbox:
+            if self._outbox:  # also frames queued from elsewhere meanwhile
                 self.flush(now)
-            # the wait: until the earliest of the engine's deadline (after its step) and
-            # the adapter's, IDLE_WAIT when neither has one
+            # the wait: until the earliest of the engine's deadline (after its step), the
+            # adapter's and a hold's end, IDLE_WAIT when none has one
             deadline = next_deadline()
             other = wake_at()
             if other is not None and (deadline is None or other < deadline):
                 deadline = other
-            wait = IDLE_WAIT if deadline is None else deadline - clock()
-            events = await link.receive(wait if wait > 0.0 else 0.0)
-            if events or self._outbox:  # the outbox: frames queued from elsewhere meanwhile
-                now = clock()
-                self.take(now, events)
-                self.flush(now)
+            held = hold_until(now)
+            if held is not None and held > now:
+                if deadline is None or held < deadline:
+                    deadline = held
+                wait = deadline - clock()
+                events = await link.receive(wait if wait > 0.0 else 0.0, True)
+            else:
+                wait = IDLE_WAIT if deadline is None else deadline - clock()
+                events = await link.receive(wait if wait > 0.0 else 0.0)
 
     def take(self, now: float, events: Sequence[CanEvent[FrameT]]) -> None:
         """Step each received event (then show it to the adapter)."""

@@ -275,3 +275,71 @@ async def test_close_removes_the_reader_and_is_idempotent(pair_interface: None) 
     assert lnk.send([Frame(0x455, b"")]).error == "CAN link is closed"
     with pytest.raises(AdapterError, match="closed"):
         await lnk.receive(0.0)
+
+
+async def test_a_held_receive_is_not_ended_by_frames_and_takes_them_all_at_its_end(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    """During a hold the loop does not watch the descriptor (no read, no wake-up per
+    frame); a wake ends it and everything waiting is drained; the next receive that is
+    not held watches the descriptor again."""
+    lnk, bus = link
+    loop = asyncio.get_running_loop()
+    task = asyncio.create_task(lnk.receive(3600.0, True))
+    await asyncio.sleep(0)  # the task runs up to its wait
+    assert lnk._waiter is not None and not lnk._reading
+    for i in range(3):
+        bus.write(0x180 + i, bytes([i]))
+    for _ in range(10):  # loop turns: a watched descriptor would have been read by now
+        await asyncio.sleep(0)
+    assert not task.done() and bus.recv_calls == 0
+    assert loop.remove_reader(bus.fileno()) is False  # not watched during the hold
+    lnk.wake()  # work queued from elsewhere ends the hold at once
+    got = await asyncio.wait_for(task, scaled(10.0))
+    assert got == [RxFrame(Frame(0x180 + i, bytes([i]))) for i in range(3)]
+    assert lnk.figures.frames_rx == 3
+    bus.write(0x1A0, b"")  # came after the drain: taken by the next receive
+    got = await asyncio.wait_for(lnk.receive(3600.0), scaled(10.0))
+    assert got == [RxFrame(Frame(0x1A0, b""))] and lnk._reading
+    assert loop.remove_reader(bus.fileno()) is True  # watched again
+    loop.add_reader(bus.fileno(), lnk._readable)
+
+
+async def test_a_held_receive_ends_at_its_time_with_what_came(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    bus.write(0x181, b"\x01")
+    await asyncio.sleep(0)  # a watched descriptor: the frame is read into the link
+    bus.write(0x182, b"\x02")  # this one waits in the socket
+    got = await asyncio.wait_for(lnk.receive(0.01, True), scaled(10.0))
+    assert [e.frame.arbitration_id for e in got if isinstance(e, RxFrame)] == [0x181, 0x182]
+    assert await lnk.receive(0.0, True) == []  # nothing waiting: nothing, no error
+
+
+async def test_a_hold_on_a_bus_without_a_descriptor_keeps_frames_a_failure_ends_it() -> None:
+    """The Notifier's frames are kept during a hold without ending it; a wake ends it."""
+    channel = f"hold-{uuid.uuid4().hex[:8]}"
+    async with CanLink(CanConfig("virtual", channel), make) as lnk:
+        assert lnk._notifier is not None
+        peer = can.Bus(interface="virtual", channel=channel)
+        try:
+            arrived = asyncio.Event()
+            kept = lnk._arrived
+
+            def note(msg: can.Message) -> None:
+                kept(msg)
+                arrived.set()
+
+            lnk._arrived = note  # type: ignore[method-assign]
+            task = asyncio.create_task(lnk.receive(3600.0, True))
+            await asyncio.sleep(0)
+            peer.send(can.Message(arbitration_id=0x181, data=b"\x05", is_extended_id=False))
+            await asyncio.wait_for(arrived.wait(), scaled(10.0))
+            assert lnk._rx
+            assert not task.done()  # the frame did not end the hold
+            lnk._failed(RxFailed("Network is down", link_down=True))  # a failure does
+            got = await asyncio.wait_for(task, scaled(10.0))
+            assert got == [RxFailed("Network is down", True), RxFrame(Frame(0x181, b"\x05"))]
+        finally:
+            peer.shutdown()

@@ -26,10 +26,12 @@ class Link:
     script: list[list[CanEvent[Frame]]]
     fail: SendResult | None = None
     waits: list[float] = field(default_factory=list)
+    holds: list[bool] = field(default_factory=list)
     sent: list[list[Any]] = field(default_factory=list)
 
-    async def receive(self, wait: float) -> list[CanEvent[Frame]]:
+    async def receive(self, wait: float, hold: bool = False) -> list[CanEvent[Frame]]:
         self.waits.append(wait)
+        self.holds.append(hold)
         if not self.script:
             raise asyncio.CancelledError
         return self.script.pop(0)
@@ -82,8 +84,9 @@ async def test_a_pass_steps_what_is_due_sends_it_and_steps_what_arrives() -> Non
     link = Link([[RxFrame(Frame(7))]])
     with pytest.raises(asyncio.CancelledError):
         await driver(engine, link, line).run()
-    assert engine.steps[:2] == [(10.0, None), (10.0, RxFrame(Frame(7)))]
-    assert link.sent[:2] == [[Frame(0x1)], [Frame(0x107)]]
+    assert engine.steps[:3] == [(10.0, None), (10.0, RxFrame(Frame(7))), (10.0, None)]
+    # the frame is stepped in the next pass, before the engine's own step: one batch
+    assert link.sent[:2] == [[Frame(0x1)], [Frame(0x107), Frame(0x1)]]
     assert line.handled[0] == (10.0, "got 7")
 
 
@@ -151,7 +154,7 @@ async def test_the_adapters_hooks_come_around_the_step_and_its_wake_time_counts(
     link = Link([[RxFrame(Frame(2))]])
     with pytest.raises(asyncio.CancelledError):
         await driver(engine, link, line).run()
-    assert line.calls[:4] == ["before", "after", "wake", f"received {RxFrame(Frame(2))}"]
+    assert line.calls[:5] == ["before", "after", "wake", "before", f"received {RxFrame(Frame(2))}"]
     assert link.waits[0] == 0.125  # the adapter's time, before the engine's
     assert engine.steps == [(10.0, RxFrame(Frame(2)))]  # its deadline had not come
 
@@ -192,6 +195,176 @@ async def test_a_pass_asks_each_time_once_and_reads_the_clock_only_when_it_needs
     link = Link([[RxFrame(Frame(1))]])
     with pytest.raises(asyncio.CancelledError):
         await CanDriver(engine, cast(Any, link), Line(), clock=clock).run()
-    # pass 1: now, the wait, the frame's step; pass 2: now, the wait (then cancelled)
-    assert reads == 5 and engine.asked == 4
+    # pass 1: now, the wait; pass 2: now (the frame's step and the engine's), the wait
+    assert reads == 4 and engine.asked == 4
     assert link.waits == [0.5, 0.5]
+
+
+class Holding(Hooked):
+    """A protocol that holds received frames until ``until`` (None: no hold)."""
+
+    def __init__(self, until: float | None, wake: float | None = None) -> None:
+        super().__init__()
+        self.until, self.wake = until, wake
+        self.asked_hold: list[float] = []
+
+    def wake_at(self) -> float | None:
+        wake, self.wake = self.wake, None  # once
+        return wake
+
+    def hold_until(self, now: float) -> float | None:
+        self.asked_hold.append(now)
+        return self.until
+
+
+class Ticking(Engine):
+    """An engine whose deadline moves on by ``period`` at each timer step."""
+
+    def __init__(self, deadline: float | None, period: float = 1.0) -> None:
+        super().__init__(deadline)
+        self.period = period
+
+    def step(self, now: float, event: Any = None) -> list[Any]:
+        if event is None and self.deadline is not None and now >= self.deadline:
+            self.deadline += self.period
+        return super().step(now, event)
+
+
+class Clock:
+    def __init__(self, now: float) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@dataclass
+class TimedLink:
+    """A link on an injected clock: frames arrive at given times; a held wait is not
+    ended by them (only by its time or a wake), an unheld one ends at the first."""
+
+    clock: Clock
+    arrivals: list[tuple[float, Frame]]
+    wakes: list[float] = field(default_factory=list)  # times wake() is called
+    sent: list[tuple[float, list[Any]]] = field(default_factory=list)
+    received_at: list[tuple[float, list[int]]] = field(default_factory=list)
+    calls: list[tuple[float, bool]] = field(default_factory=list)
+    end: float = 2.0
+
+    async def receive(self, wait: float, hold: bool = False) -> list[CanEvent[Frame]]:
+        now = self.clock.now
+        self.calls.append((wait, hold))
+        until = now + wait
+        woken = [t for t in self.wakes if now <= t <= until]
+        if woken:
+            until = woken[0]
+            self.wakes.remove(until)
+        elif not hold:
+            first = [t for t, _ in self.arrivals if t <= until]
+            if first:
+                until = max(now, first[0])
+        if until >= self.end:
+            raise asyncio.CancelledError
+        self.clock.now = until
+        got = [f for t, f in self.arrivals if t <= until]
+        self.arrivals = [(t, f) for t, f in self.arrivals if t > until]
+        self.received_at.append((until, [f.arbitration_id for f in got]))
+        return [RxFrame(f) for f in got]
+
+    def send(self, frames: Sequence[Any]) -> SendResult:
+        self.sent.append((self.clock.now, list(frames)))
+        return SendResult(len(frames))
+
+
+async def run_timed(
+    engine: Engine, link: TimedLink, line: Line, clock: Clock
+) -> CanDriver[Any, Any, Any]:
+    d = CanDriver(engine, cast(Any, link), line, clock=clock)
+    with pytest.raises(asyncio.CancelledError):
+        await d.run()
+    return d
+
+
+async def test_frames_arriving_during_a_hold_are_stepped_after_it_at_the_drain_time() -> None:
+    clock = Clock(1.0)
+    engine = Ticking(deadline=1.5)
+    line = Holding(until=1.25)
+    link = TimedLink(clock, [(1.01, Frame(1)), (1.02, Frame(2)), (1.10, Frame(3))], end=1.4)
+    await run_timed(engine, link, line, clock)
+    assert link.calls[0] == (0.25, True)  # held, until the hold's end (before the deadline)
+    # one wake-up for the three frames, at the hold's end; all three stepped then
+    assert link.received_at[0] == (1.25, [1, 2, 3])
+    assert [(t, e.frame.arbitration_id) for t, e in engine.steps if e is not None] == [
+        (1.25, 1),
+        (1.25, 2),
+        (1.25, 3),
+    ]
+    # the drained frames come after the adapter's before_step, each shown to it after its step
+    received = [f"received {RxFrame(Frame(i))}" for i in (1, 2, 3)]
+    assert line.calls[:7] == ["before", "after", "before", *received, "after"]
+
+
+async def test_a_hold_never_puts_off_the_engines_deadline_nor_the_adapters() -> None:
+    clock = Clock(1.0)
+    engine = Ticking(deadline=1.1)
+    link = TimedLink(clock, [(1.01, Frame(1))], end=1.2)
+    await run_timed(engine, link, Holding(until=1.5), clock)
+    wait, hold = link.calls[0]
+    assert wait == pytest.approx(0.1) and hold  # the engine's deadline first
+    at, got = link.received_at[0]
+    assert at == pytest.approx(1.1) and got == [1]
+    clock = Clock(1.0)
+    link = TimedLink(clock, [(1.01, Frame(1))], end=1.2)
+    await run_timed(Ticking(deadline=None), link, Holding(until=1.5, wake=1.05), clock)
+    wait, hold = link.calls[0]
+    assert wait == pytest.approx(0.05) and hold  # the adapter's wake time first
+
+
+async def test_a_wake_during_a_hold_still_sends_at_once() -> None:
+    clock = Clock(1.0)
+    engine = Ticking(deadline=1.5)
+    line = Holding(until=1.25)
+    link = TimedLink(clock, [(1.01, Frame(1))], wakes=[1.05], end=1.2)
+    d = CanDriver(engine, cast(Any, link), line, clock=clock)
+
+    async def run() -> None:
+        await d.run()
+
+    d.queue(Frame(0x3F))  # queued from elsewhere (a second engine): it woke the link
+    with pytest.raises(asyncio.CancelledError):
+        await run()
+    # the first pass sends it; a frame queued during the hold goes at the wake
+    assert link.sent[0] == (1.0, [Frame(0x3F)])
+    assert link.received_at[0] == (1.05, [1])
+
+
+async def test_a_frame_queued_during_a_hold_goes_out_at_the_wake() -> None:
+    clock = Clock(1.0)
+    engine = Ticking(deadline=1.5)
+    line = Holding(until=1.25)
+    link = TimedLink(clock, [], wakes=[1.05], end=1.2)
+    d = CanDriver(engine, cast(Any, link), line, clock=clock)
+    original = link.receive
+
+    async def receive(wait: float, hold: bool = False) -> list[CanEvent[Frame]]:
+        if clock.now == 1.0:
+            d.queue(Frame(0x40))  # as another engine does while the driver waits
+        return await original(wait, hold)
+
+    link.receive = receive  # type: ignore[method-assign]
+    with pytest.raises(asyncio.CancelledError):
+        await d.run()
+    assert link.calls[0] == (0.25, True)
+    assert link.sent == [(1.05, [Frame(0x40)])]
+
+
+async def test_a_hold_of_none_or_in_the_past_waits_as_before() -> None:
+    for until in (None, 1.0, 0.5):
+        clock = Clock(1.0)
+        engine = Ticking(deadline=1.5)
+        link = TimedLink(clock, [(1.01, Frame(1)), (1.02, Frame(2))], end=1.4)
+        await run_timed(engine, link, Holding(until=until), clock)
+        assert link.calls[0] == (0.5, False)
+        # each frame ends its wait and is stepped at its own time
+        assert link.received_at[:2] == [(1.01, [1]), (1.02, [2])]
+        assert [t for t, e in engine.steps if e is not None] == [1.01, 1.02]

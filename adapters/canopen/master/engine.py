@@ -70,6 +70,10 @@ RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
 COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
+HOLD_MARGIN = 0.002  # s: a receive hold ends this long before the next SYNC (at most cycle/4)
+# s: no shorter hold (the loop's wait is rounded up to whole milliseconds, epoll: a short
+# hold would put the SYNC off; on a short cycle there are few frames to save a wake-up for)
+HOLD_MIN = 0.002
 SYNC_FRAME = frames.encode_sync()  # no counter (CiA 301 §7.2.5.2.1): the same every cycle
 
 
@@ -182,6 +186,32 @@ class Master:
     def next_cycle(self) -> float | None:
         """When the next cycle (SYNC, RPDOs) is due; None once the engine left the line."""
         return None if self._left else self._next_cycle
+
+    def hold_until(self, now: float) -> float | None:
+        """Until when received frames may wait (the driver's receive hold), or None.
+
+        Only on a steady line: SYNC produced (``sync_period`` > 0), every node online, no
+        SDO under way or queued (no bring-up, no job, no release), not leaving. Then what
+        the next cycle needs of the line is the TPDO1s the last SYNC asked for, so frames
+        may wait until just before the next SYNC (:data:`HOLD_MARGIN`, at most a quarter
+        of the cycle, ahead of it): stepped then, before that SYNC and its RPDOs; no hold
+        shorter than :data:`HOLD_MIN` (the loop's waits are whole milliseconds). The hold
+        also ends as far ahead of any other deadline of the engine (the gateway's
+        heartbeat, a node's heartbeat loss), so a heartbeat that came in time is stepped
+        before the loss is judged, as without a hold. An EMCY or a boot-up is seen at most
+        one cycle later."""
+        cfg = self.config
+        at = self._next_cycle
+        if at is None or cfg.sync_period <= 0 or self._left or self._releasing or self._kick:
+            return None
+        due = self._due
+        if due is not None and due < at:
+            at = due
+        for node in self.nodes.values():
+            if node.phase is not Phase.ONLINE or node.current is not None or node.jobs:
+                return None
+        at -= min(HOLD_MARGIN, cfg.cycle / 4)
+        return at if at - now >= HOLD_MIN else None
 
     def next_deadline(self) -> float | None:
         if self._kick:
