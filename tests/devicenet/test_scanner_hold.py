@@ -60,14 +60,19 @@ def test_a_steady_line_holds_until_half_the_window_can_be_answered() -> None:
     scanner = lin.scanner
     half = (scanner.config.poll_window + 1) // 2
     bits = half * (frame_bits_min(len(OUTPUT)) + frame_bits_min(4))  # 4 bytes back (71)
+    answers = (half - 1) * frame_bits_min(4) / BITRATE  # all but one response, after now
+    sends = bits / BITRATE  # 4 x 158 bits: 1.264 ms
     at = scanner.hold_until(lin.now)
-    assert at == pytest.approx(lin.now + bits / BITRATE)  # 4 x 158 bits: 1.264 ms
-    assert at is not None and at < lin.now + HOLD_MAX
-    # a later pass with none of them answered yet: their responses are still to come,
-    # all but one wholly after it
-    later = (half - 1) * frame_bits_min(4) / BITRATE
-    assert scanner.hold_until(at) == pytest.approx(at + later)
+    assert at == pytest.approx(lin.now + max(sends, answers))
+    assert at is not None and lin.now < at < lin.now + HOLD_MAX
+    # a later pass with none of them answered yet: their responses are still to come
+    assert scanner.hold_until(at) == pytest.approx(at + answers)
+    # from the sends, when that is later
     assert scanner.hold_until(lin.now + 0.0001) == pytest.approx(at)  # from the sends
+    # the cycle's last polls in flight, none left to send: no hold (the cycle's end and
+    # the next cycle's start wait on their responses)
+    queue, scanner.schedule.poll_queue = scanner.schedule.poll_queue, deque()
+    assert queue and scanner.hold_until(lin.now) is None
 
 
 def test_the_hold_is_capped() -> None:
@@ -102,19 +107,25 @@ def test_no_hold_with_an_explicit_request_queued_or_in_flight() -> None:
 
 
 def test_no_hold_while_a_node_is_lost_and_brought_up_again() -> None:
-    lin = steady()
+    lin = HeldLine(HELD, [node(m) for m in MACS], [sim(m) for m in MACS])
+    lin.outputs = dict.fromkeys(MACS, OUTPUT)
+    lin.power_on()
+    lin.run(1.0)
     scanner = lin.scanner
+    assert scanner.schedule.online == len(MACS)
     lin.sims[5].power_off()
-    lin.run(0.5)  # inactivity: offline
-    assert scanner.nodes[5].phase is not Phase.ONLINE
-    if scanner.schedule.cycle_started is None:
-        lin.now = max(lin.now, scanner.schedule.cycle_due)
-        scanner.step(lin.now)
-    assert scanner.schedule.in_flight
+    lost = False
+    for _ in range(2000):  # inactivity: offline at 4 x EPR
+        lin.run(0.0005)
+        if scanner.nodes[5].phase is not Phase.ONLINE:
+            lost = True
+            if scanner.schedule.in_flight:
+                break
+    assert lost and scanner.schedule.in_flight
     assert scanner.hold_until(lin.now) is None  # a node lost
     lin.power_on(lin.sims[5])
     bringup = False
-    for _ in range(2000):
+    for _ in range(4000):
         lin.run(0.0005)
         if scanner.schedule.in_bringup:
             bringup = True
@@ -122,9 +133,9 @@ def test_no_hold_while_a_node_is_lost_and_brought_up_again() -> None:
         if scanner.nodes[5].phase is Phase.ONLINE:
             break
     assert bringup and scanner.nodes[5].phase is Phase.ONLINE
-    lin.run(0.1)
-    start_cycle(lin)
-    assert scanner.hold_until(lin.now) is not None
+    holds = lin.holds
+    lin.run(0.2)
+    assert lin.holds > holds  # steady again: held again
 
 
 def test_no_hold_when_leaving_the_line() -> None:
@@ -261,3 +272,18 @@ def test_a_held_steady_line_polls_every_node_every_cycle(macs: tuple[int, ...]) 
         assert n.figures.poll_timeouts == 0, mac
     assert not lin.late_deadlines
     assert lin.held_frames > lin.holds  # a hold takes more than one response a pass
+
+
+def test_the_adapter_line_asks_its_scanner() -> None:
+    from adapters.devicenet.adapter import _Line
+
+    lin = steady()
+    start_cycle(lin)
+
+    class Adapter:
+        engine: object = lin.scanner
+
+    line = _Line(Adapter())  # type: ignore[arg-type]
+    assert line.hold_until(lin.now) == lin.scanner.hold_until(lin.now) is not None
+    Adapter.engine = None  # not running
+    assert line.hold_until(lin.now) is None

@@ -137,7 +137,10 @@ class Scheduler:
     def hold_until(self, now: float) -> float | None:
         """The earliest time the first half (``ceil(poll_window / 2)``) of the polls in
         flight can have been answered, never more than :data:`HOLD_MAX` after ``now``;
-        None when no poll is in flight, the bit rate is unknown or that time has passed.
+        None when no poll is in flight, the bit rate is unknown or that time has passed,
+        and at the end of a cycle: with no poll left to send in it, the next cycle
+        starts when the last response is stepped, and a hold would leave the line idle
+        until then (measured: the plant's cycle was 4-6 % longer with such holds).
 
         ``now`` is a pass of the driver, which has just stepped every frame received, so
         none of the polls in flight had its response received then. Two lower bounds,
@@ -152,8 +155,8 @@ class Scheduler:
         Meanwhile the other half of the window keeps the line busy."""
         in_flight = self.in_flight
         bitrate = self.ctx.config.bitrate
-        if not in_flight or bitrate <= 0:
-            return None
+        if not in_flight or not self.poll_queue or bitrate <= 0:
+            return None  # the cycle's last polls: its end (and the next cycle) waits on them
         half = (self.ctx.config.poll_window + 1) // 2
         nodes = self.ctx.nodes
         first = now
