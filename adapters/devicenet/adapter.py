@@ -272,6 +272,7 @@ class DeviceNetAdapter:
             allocate_timeout=o.explicit_timeout,
             retry_min=min(0.5, o.retry_max),
             retry_max=o.retry_max,
+            bitrate=o.bitrate,
         )
 
     def node_configs(self) -> list[NodeConfig]:
@@ -824,6 +825,10 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
 
     def received(self, now: float, event: LinkEvent) -> None:
         self.adapter._received(now, event)
+
+    def hold_until(self, now: float) -> float | None:
+        engine = self.adapter.engine
+        return engine.hold_until(now) if engine is not None else None
 
 
 def _event(event: LinkEvent) -> Event:

@@ -93,6 +93,9 @@ class Scanner:
         self.jobs = ExplicitJobs(ctx, self.schedule)
         self.machine = NodeMachine(ctx, self.schedule, self.jobs)
         self._ticks = self.machine.ticks
+        # for hold_until: fixed by the scan list, and every node's explicit queue
+        self._all_polled = all(n.cfg.io is IoKind.POLLED for n in self.nodes.values())
+        self._queues = [n.queue for n in self.nodes.values()]
         self._frame_handlers: dict[PredefinedMessage, Callable[[Node, float, bytes], None]] = {
             PredefinedMessage.SLAVE_POLL_RESPONSE: self.machine.on_poll_response,
             PredefinedMessage.SLAVE_COS_CYCLIC: self.machine.on_production,
@@ -126,6 +129,32 @@ class Scanner:
         Kept up to date as events, requests and outputs come in; O(1).
         """
         return self._ctx.soonest
+
+    def hold_until(self, now: float) -> float | None:
+        """Received frames need not be handled before this time (the CAN driver's
+        receive hold, :meth:`adapters.link.candriver.CanProtocol.hold_until`); None: each
+        frame is handled as it comes.
+
+        Only on a steady line: online, not leaving, health ok, no send hold, every node
+        in the scan list online and polled with no explicit request queued, none in
+        flight and none in bring-up; then until the first half of the poll window can
+        have been answered, at most ``HOLD_MAX`` (:meth:`Scheduler.hold_until`). Every
+        deadline of the engine still ends a hold (the driver bounds it by
+        :meth:`next_deadline`)."""
+        ctx, schedule = self._ctx, self.schedule
+        if (
+            not self._all_polled
+            or schedule.online != len(self.nodes)
+            or self.phase is not LinePhase.ONLINE
+            or ctx.leaving
+            or self.health is not LineHealth.OK
+            or now < ctx.tx_hold_until
+            or schedule.in_bringup
+            or schedule.explicit_busy
+            or any(self._queues)
+        ):
+            return None
+        return schedule.hold_until(now)
 
     def set_output(self, mac: int, data: bytes | None) -> None:
         """The output data for a node's next production; None = idle (zero-length)."""

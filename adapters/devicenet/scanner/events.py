@@ -107,6 +107,9 @@ class ScannerConfig:
     # s between Allocate/Release requests: a line of 63 drives coming up (or leaving) does
     # not put 63 frames at once into a SocketCAN transmit queue of 10 (decision).
     request_spacing: float = 0.002
+    # bit/s of the line, for the receive hold's bit times (Scanner.hold_until); 0: unknown,
+    # no hold
+    bitrate: int = 0
     tx_backoff_min: float = 0.01
     tx_backoff_max: float = 1.0
 
@@ -121,6 +124,8 @@ class ScannerConfig:
             raise ValueError("bringup_window must be at least 1")
         if self.request_spacing < 0:
             raise ValueError("request_spacing cannot be negative")
+        if self.bitrate < 0:
+            raise ValueError("bitrate cannot be negative")
 
 
 # ---------------------------------------------------------------- events (in)

@@ -9,12 +9,27 @@
 from __future__ import annotations
 
 from collections import deque
+from itertools import islice
+from typing import Final
 
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import IoKind
 from adapters.devicenet.scanner.node import Node, Phase
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
+
+# Receive hold (Scanner.hold_until): never longer than this after the pass that asks
+# (docs/devices.md, "DeviceNet timing": what it may delay is bounded by it).
+HOLD_MAX: Final = 0.003  # s
+
+
+def frame_bits_min(data_bytes: int) -> int:
+    """The shortest a CAN 2.0A (11-bit identifier) data frame with ``data_bytes`` bytes
+    can be on the wire, in bit times, the 3-bit intermission included (ISO 11898-1):
+    47 + 8n with no stuff bit at all. A lower bound: the frame can take no less, so a
+    hold computed from it never waits past the earliest time its answer can be there
+    (stuffing adds at most (34 + 8n - 1) // 4 bits: 19 % for a 4-byte frame)."""
+    return 47 + 8 * min(data_bytes, 8)  # a fragmented message: its first frame at least
 
 
 class Scheduler:
@@ -26,6 +41,7 @@ class Scheduler:
         self.in_flight: dict[int, float] = {}
         self.explicit_busy: set[int] = set()  # nodes with an explicit request in flight
         self.in_bringup = 0  # nodes in bring-up now, kept by enter()
+        self.online = 0  # nodes online now, kept by enter()
         self.bringing = 0  # nodes in bring-up at the step's start, plus those it started
         self.cycle_started: float | None = None
         self.cycle_due = 0.0
@@ -36,6 +52,7 @@ class Scheduler:
         """A node's new phase; every change of phase goes through here, so that the count
         of nodes in bring-up is kept (not counted over the line for every frame)."""
         self.in_bringup += (phase in _BRINGUP_PHASES) - (node.phase in _BRINGUP_PHASES)
+        self.online += (phase is Phase.ONLINE) - (node.phase is Phase.ONLINE)
         node.phase = phase
 
     def bringups(self) -> int:
@@ -114,6 +131,47 @@ class Scheduler:
     def stop(self) -> None:
         """Leaving the line: polls are over, their timeouts no longer matter."""
         self.in_flight.clear()
+
+    # ------------------------------------------------------------ receive hold
+
+    def hold_until(self, now: float) -> float | None:
+        """The earliest time the first half (``ceil(poll_window / 2)``) of the polls in
+        flight can have been answered, never more than :data:`HOLD_MAX` after ``now``;
+        None when no poll is in flight, the bit rate is unknown or that time has passed,
+        and at the end of a cycle: with no poll left to send in it, the next cycle
+        starts when the last response is stepped, and a hold would leave the line idle
+        until then (measured: the plant's cycle was 4-6 % longer with such holds).
+
+        ``now`` is a pass of the driver, which has just stepped every frame received, so
+        none of the polls in flight had its response received then. Two lower bounds,
+        the later one taken, from the polls' frames at least :func:`frame_bits_min` bit
+        times each on the one bus, one after the other:
+
+        - from when they were sent: the first half's request and response frames all
+          follow the oldest request (``in_flight`` keeps the send order);
+        - from now: their responses are still to come, all but one (which may be on the
+          wire already) wholly after now.
+
+        Meanwhile the other half of the window keeps the line busy."""
+        in_flight = self.in_flight
+        bitrate = self.ctx.config.bitrate
+        if not in_flight or not self.poll_queue or bitrate <= 0:
+            return None  # the cycle's last polls: its end (and the next cycle) waits on them
+        half = (self.ctx.config.poll_window + 1) // 2
+        nodes = self.ctx.nodes
+        first = now
+        sent_bits = answer_bits = last = 0
+        for mac, sent in islice(in_flight.items(), half):
+            if not sent_bits:
+                first = sent
+            node = nodes[mac]
+            last = frame_bits_min(node.cfg.produced_size)
+            sent_bits += frame_bits_min(len(node.output)) + last
+            answer_bits += last
+        until = max(first + sent_bits / bitrate, now + (answer_bits - last) / bitrate)
+        if until <= now:
+            return None
+        return until if until < now + HOLD_MAX else now + HOLD_MAX
 
     # ------------------------------------------------------------ deadlines
 
