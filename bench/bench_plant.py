@@ -235,7 +235,8 @@ def canopen_sync_period(nodes: int) -> float:
     (``adapters.canopen.options.min_sync_period``: the same frames at worst-case bit
     stuffing, a little longer than :func:`canopen_cycle`'s exact count at standstill),
     rounded up to the microsecond."""
-    from adapters.canopen.options import SYNC_FLOOR, frame_bits
+    from adapters.canopen.options import SYNC_FLOOR
+    from adapters.link.canbits import frame_bits
 
     bits = frame_bits(0) + nodes * (
         frame_bits(CANOPEN_RPDO1_BYTES) + frame_bits(CANOPEN_TPDO1_BYTES)
@@ -388,20 +389,28 @@ def _plant(plant: Plant) -> Iterator[Path]:
             _stop_all(plant)
 
 
+def _start_broker(plant: Plant, tmp: Path, name: str, socket: str, what: str) -> Path:
+    """A bench CAN broker process (:mod:`bench.plant.canbus`) named ``name`` on ``socket``
+    (the one the gateway's config names), its frame log beside it; the socket's path once
+    it listens."""
+    sock = tmp / socket
+    _start(
+        plant,
+        name,
+        [
+            *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
+            *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / name)),
+        ],
+        tmp,
+    )
+    _wait(what, sock.exists, 20, plant, tmp)
+    return sock
+
+
 def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
     launch = [PY, "-m", "bench.plant.launch"]
     if plant.devicenet:
-        sock = tmp / "can.sock"
-        _start(
-            plant,
-            "canbus",
-            [
-                *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
-                *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / "canbus")),
-            ],
-            tmp,
-        )
-        _wait("the CAN broker", sock.exists, 20, plant, tmp)
+        sock = _start_broker(plant, tmp, "canbus", "can.sock", "the CAN broker")
         nodes = f"1-{plant.devicenet}" if plant.devicenet > 1 else "1"
         _start(
             plant,
@@ -414,17 +423,7 @@ def _start_lines(plant: Plant, tmp: Path, config: Path) -> None:
             tmp,
         )
     if plant.canopen:
-        sock = tmp / "canopen.sock"
-        _start(
-            plant,
-            "canopen-bus",
-            [
-                *(PY, "-m", "bench.plant.canbus", "--path", str(sock)),
-                *("--bitrate", str(CAN_BITRATE), "--out", str(tmp / "canopen-bus")),
-            ],
-            tmp,
-        )
-        _wait("the CANopen broker", sock.exists, 20, plant, tmp)
+        sock = _start_broker(plant, tmp, "canopen-bus", "canopen.sock", "the CANopen broker")
         node_args = [a for n in range(1, plant.canopen + 1) for a in ("--node", str(n))]
         _start(
             plant,

@@ -21,6 +21,7 @@ from adapters.canopen import cia402
 from adapters.canopen.errors import EdsError
 from adapters.canopen.od import Dictionary, Variable, obj_name, parse_object
 from adapters.link.can import REFUSED_INTERFACES
+from adapters.link.canbits import frame_bits
 from gateway.config import DriveConfig, shipped_file
 from gateway.schema import Table
 
@@ -308,15 +309,6 @@ def _eds_max_rpm(eds: Dictionary) -> float | None:
 
 
 # ---------------------------------------------------------------- bus time
-
-
-def frame_bits(data_bytes: int) -> int:
-    """The worst-case length in bits of a CAN 2.0A (11-bit identifier) data frame with
-    ``data_bytes`` bytes, the 3-bit intermission included (ISO 11898-1): of its 47 + 8n
-    bits, the 34 + 8n from SOF to the CRC are stuffed, at worst one stuff bit per 4 after
-    the first (Davis, Burns, Bril, Lukkien 2007): 47 + 8n + floor((34 + 8n - 1) / 4)."""
-    stuffed = 34 + 8 * data_bytes  # SOF, id 11, RTR, IDE, r0, DLC 4, data, CRC 15
-    return stuffed + 13 + (stuffed - 1) // 4  # CRC delimiter, ACK 2, EOF 7, intermission 3
 
 
 def cycle_bits(drives: list[DriveOptions] | tuple[DriveOptions, ...]) -> int:

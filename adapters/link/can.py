@@ -352,21 +352,17 @@ class CanLink(Generic[FrameT]):
         bus = self._bus
         if bus is None:
             return
-        recv, rx = bus.recv, self._rx
-        for _ in range(RX_BATCH):
-            msg = recv(0)
-            if msg is None:
-                break
-            rx.append(msg)
+        self._drain(bus, RX_BATCH)
         waiter = self._waiter
-        if waiter is not None and (rx or self._failures):
+        if waiter is not None and (self._rx or self._failures):
             self._waiter = None
             _release(waiter)
 
-    def _drain(self, bus: can.BusABC) -> None:
-        """Read what is waiting on the descriptor, at most RX_DRAIN (the end of a hold)."""
+    def _drain(self, bus: can.BusABC, limit: int = RX_DRAIN) -> None:
+        """Read what is waiting on the descriptor, at most ``limit`` frames (RX_DRAIN at
+        the end of a hold, RX_BATCH per readiness)."""
         recv, rx = bus.recv, self._rx
-        for _ in range(RX_DRAIN):
+        for _ in range(limit):
             msg = recv(0)
             if msg is None:
                 break

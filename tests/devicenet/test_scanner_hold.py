@@ -18,7 +18,8 @@ from adapters.devicenet.ids import match_predefined
 from adapters.devicenet.objects import IdentityAttribute
 from adapters.devicenet.scanner import BusErrorIn, FrameIn, TxFailed
 from adapters.devicenet.scanner.node import Phase
-from adapters.devicenet.scanner.scheduler import HOLD_MAX, frame_bits_min
+from adapters.devicenet.scanner.scheduler import HOLD_MAX
+from adapters.link.canbits import frame_bits_min
 from adapters.link.canerror import LineCondition
 from tests.devicenet.harness import Line
 from tests.devicenet.test_scanner import FAST, node, sim

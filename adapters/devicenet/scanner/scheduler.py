@@ -15,21 +15,13 @@ from typing import Final
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import IoKind
 from adapters.devicenet.scanner.node import Node, Phase
+from adapters.link.canbits import frame_bits_min
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
 
 # Receive hold (Scanner.hold_until): never longer than this after the pass that asks
 # (docs/devices.md, "DeviceNet timing": what it may delay is bounded by it).
 HOLD_MAX: Final = 0.003  # s
-
-
-def frame_bits_min(data_bytes: int) -> int:
-    """The shortest a CAN 2.0A (11-bit identifier) data frame with ``data_bytes`` bytes
-    can be on the wire, in bit times, the 3-bit intermission included (ISO 11898-1):
-    47 + 8n with no stuff bit at all. A lower bound: the frame can take no less, so a
-    hold computed from it never waits past the earliest time its answer can be there
-    (stuffing adds at most (34 + 8n - 1) // 4 bits: 19 % for a 4-byte frame)."""
-    return 47 + 8 * min(data_bytes, 8)  # a fragmented message: its first frame at least
 
 
 class Scheduler:
