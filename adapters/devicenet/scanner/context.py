@@ -44,6 +44,8 @@ class LineContext:
         self.leaving = False
         self.touched: Node | None = None  # the node an event step concerns
         self.soonest: float | None = 0.0  # see Scanner.next_deadline
+        # the next timer step ticks every node (wake_all); else only those due or busy
+        self.all_due = True
         self.request_slot = 0.0  # no Allocate/Release before this (request_spacing)
         self.tx_hold_until = 0.0
         self.tx_backoff = config.tx_backoff_min
@@ -59,6 +61,12 @@ class LineContext:
         for t in times:
             if self.soonest is None or t < self.soonest:
                 self.soonest = t
+
+    def wake_all(self) -> None:
+        """Something that may let any node go on (a request queued, a window freed, an
+        output changed): a timer step at once, and one that ticks every node."""
+        self.soonest = 0.0
+        self.all_due = True
 
     # ------------------------------------------------------------ send hold
 

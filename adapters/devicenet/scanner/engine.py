@@ -55,6 +55,7 @@ from adapters.devicenet.scanner.jobs import ExplicitJobs
 from adapters.devicenet.scanner.machine import NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
 from adapters.devicenet.scanner.scheduler import Scheduler
+from adapters.devicenet.scanner.timers import SteadyTimers
 from adapters.link.canerror import LineCondition, LineHealth, health_after
 from gateway.errors import FrameEncodeError
 
@@ -93,6 +94,8 @@ class Scanner:
         self.jobs = ExplicitJobs(ctx, self.schedule)
         self.machine = NodeMachine(ctx, self.schedule, self.jobs)
         self._ticks = self.machine.ticks
+        self._timers = SteadyTimers(self.nodes, self.machine.steady, self.machine.idle_time)
+        self.lazy_timers = True  # False: every timer step is a full pass (tests compare)
         # for hold_until: fixed by the scan list, and every node's explicit queue
         self._all_polled = all(n.cfg.io is IoKind.POLLED for n in self.nodes.values())
         self._queues = [n.queue for n in self.nodes.values()]
@@ -112,15 +115,19 @@ class Scanner:
         """
         ctx, schedule = self._ctx, self.schedule
         if event is None:
-            self._tick(now)
-            self._recompute()
+            if self._lazy_step(now):
+                self._tick_due(now)
+                self._recompute_due()
+            else:
+                self._tick(now)
+                self._recompute()
         else:
             ctx.touched = None
             before = schedule.bringing = schedule.bringups()
             self._on_event(now, event)
             self._after_event(now, event)
             if before >= self.config.bringup_window > schedule.bringups():
-                ctx.fold((0.0,))  # a bring-up ended: a waiting node may start its own
+                ctx.wake_all()  # a bring-up ended: a waiting node may start its own
         return ctx.take()
 
     def next_deadline(self) -> float | None:
@@ -165,7 +172,7 @@ class Scanner:
                 f"node {mac} consumes {node.cfg.consumed_size} bytes, not {len(raw)}"
             )
         if raw != node.output and node.cfg.io is IoKind.COS:
-            self._ctx.fold((0.0,))  # a change of state goes out at once
+            self._ctx.wake_all()  # a change of state goes out at once
         node.output = raw
 
     def submit(self, mac: int, body: Request) -> int:
@@ -242,7 +249,53 @@ class Scanner:
     # ------------------------------------------------------------ deadlines
 
     def _recompute(self) -> None:
-        self._ctx.soonest = self._all_deadlines()
+        ctx = self._ctx
+        ctx.soonest = self._all_deadlines()
+        if self.phase is LinePhase.ONLINE:
+            self._timers.rebuild()
+            ctx.all_due = False
+
+    def _lazy_step(self, now: float) -> bool:
+        """Whether a timer step may look only at the nodes due or busy
+        (:class:`SteadyTimers`): an online line, not leaving, no send hold, and nothing
+        since the last full pass that asked for every node to be ticked."""
+        ctx = self._ctx
+        return (
+            self.lazy_timers
+            and not ctx.all_due
+            and self.phase is LinePhase.ONLINE
+            and not ctx.leaving
+            and now >= ctx.tx_hold_until
+        )
+
+    def _tick_due(self, now: float) -> None:
+        """:meth:`_tick` for the nodes :meth:`SteadyTimers.due` gives (the others' ticks
+        do nothing now)."""
+        schedule = self.schedule
+        schedule.bringing = schedule.bringups()
+        ticks, idle, track = self._ticks, self.machine.idle_until, self._timers.track
+        for node in self._timers.due(now):
+            if not idle(node, now):
+                ticks[node.phase](node, now)
+            track(node)
+        schedule.polls(now)
+
+    def _recompute_due(self) -> None:
+        """:meth:`_recompute` from the nodes not steady and the steady nodes' earliest
+        idle time (a steady node's deadlines, :meth:`NodeMachine.soonest`, are its idle
+        time when no send hold is on)."""
+        schedule = self.schedule
+        schedule.bringing = schedule.bringups()
+        times = schedule.deadlines()
+        soonest = self.machine.soonest
+        for node in self._timers.unsteady_nodes():
+            t = soonest(node)
+            if t is not None:
+                times.append(t)
+        steady = self._timers.soonest()
+        if steady is not None:
+            times.append(steady)
+        self._ctx.soonest = min(times) if times else None
 
     def _all_deadlines(self) -> float | None:
         self.schedule.bringing = self.schedule.bringups()
@@ -284,6 +337,7 @@ class Scanner:
             soonest = self.machine.soonest(node)
             if soonest is not None:
                 ctx.fold((soonest,))
+            self._timers.track(node)
         if not ctx.leaving:
             self.schedule.after_frame(now)
 

@@ -129,11 +129,14 @@ class NodeMachine:
     def idle_until(self, node: Node, now: float) -> bool:
         """A steady node whose tick at ``now`` would do nothing: neither its inactivity
         nor its keep-alive (ungated: the tick queues it whatever the send hold) has come."""
-        return (
-            self.steady(node)
-            and now < node.last_rx + INACTIVITY_EPR_FACTOR * node.epr
-            and now < node.last_explicit + self.ctx.config.explicit_epr / 2
-        )
+        return self.steady(node) and now < self.idle_time(node)
+
+    def idle_time(self, node: Node) -> float:
+        """When a steady node's tick first does something: the earlier of its inactivity
+        and its keep-alive, ungated (:meth:`idle_until`)."""
+        inactive = node.last_rx + INACTIVITY_EPR_FACTOR * node.epr
+        keep_alive = node.last_explicit + self.ctx.config.explicit_epr / 2
+        return inactive if inactive < keep_alive else keep_alive
 
     def deadlines(self, node: Node) -> list[float]:
         """The node's timers; those that lead to a send are gated by the send hold."""

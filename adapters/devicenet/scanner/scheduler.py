@@ -69,7 +69,7 @@ class Scheduler:
         full = not self.explicit_free()
         self.explicit_busy.discard(mac)
         if full:
-            self.ctx.fold((0.0,))  # wake the next step: every waiting node is ticked
+            self.ctx.wake_all()  # the next step ticks every waiting node
 
     # ------------------------------------------------------------ poll cycle
 
