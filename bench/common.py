@@ -37,7 +37,20 @@ def first_paragraph(doc: str | None) -> str:
     return " ".join((doc or "").strip().split("\n\n", 1)[0].split())
 
 
-def arg_parser(module: str, doc: str | None) -> argparse.ArgumentParser:
+class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default in its help, but for a flag or an unset option."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or isinstance(action.default, bool):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def arg_parser(
+    module: str,
+    doc: str | None,
+    epilog: str = "make bench (python -m bench) runs it with the defaults.",
+) -> argparse.ArgumentParser:
     """The command line of ``python -m bench.<module>``: the description is the first
     paragraph of the module's docstring, every option's help shows its default (the value
     ``make bench`` runs with), and a bad option exits 2 with argparse's message before
@@ -45,8 +58,8 @@ def arg_parser(module: str, doc: str | None) -> argparse.ArgumentParser:
     return argparse.ArgumentParser(
         prog=f"python -m bench.{module}",
         description=first_paragraph(doc),
-        epilog="make bench (python -m bench) runs it with the defaults.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        epilog=epilog,
+        formatter_class=_ShowDefaults,
     )
 
 
