@@ -38,6 +38,9 @@ gateway against reference. The note gives the line's physical maximum (1 / the m
 SYNC period), the bits each case actually put on the wire per cycle (the broker's frame
 log), the CPU per cycle of this process in each case (the gateway's; the simulator and the
 broker are other processes), the broker's delivery lateness, and the machine's load.
+
+``python -m bench canopen``, or alone: ``python -m bench.bench_canopen [--nodes N ...]
+[--seconds S]``.
 """
 
 from __future__ import annotations
@@ -64,7 +67,7 @@ import canopen
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.options import min_sync_period
 from adapters.canopen.sim.node import DEFAULT_EDS
-from bench.common import Figure
+from bench.common import Figure, arg_parser, id_range, positive_float, print_figures
 from bench.plant import canbus
 from gateway.config import Config, parse
 from gateway.daemon import build_hub
@@ -239,7 +242,7 @@ def _start_sim(procs: Procs, tmp: Path, nodes: int) -> None:
 # ---------------------------------------------------------------------- the two cases
 
 
-def reference(network: canopen.Network, nodes: int, sim_pid: int) -> Case:
+def reference(network: canopen.Network, nodes: int, sim_pid: int, seconds: float) -> Case:
     """The bare canopen-library closed loop (see the module docstring)."""
     ids = list(range(1, nodes + 1))
     lock = threading.Lock()
@@ -261,12 +264,12 @@ def reference(network: canopen.Network, nodes: int, sim_pid: int) -> Case:
     network.nmt.send_command(0x01)  # start all
     rpdo = struct.pack("<Hh", 0x0006, 0)
     cycles = 0
-    end = time.monotonic() + SETTLE + MEASURE
+    end = time.monotonic() + SETTLE + seconds
     started: float | None = None
     cpu = sim_cpu = 0.0
     host = _host_busy()
     while (now := time.monotonic()) < end:
-        if started is None and now >= end - MEASURE:
+        if started is None and now >= end - seconds:
             started, cycles, cpu, host = now, 0, time.process_time(), _host_busy()
             sim_cpu = _cpu_seconds(sim_pid)
         with lock:
@@ -292,7 +295,7 @@ def reference(network: canopen.Network, nodes: int, sim_pid: int) -> Case:
     )
 
 
-async def gateway(channel: str, nodes: int, sim_pid: int) -> tuple[Case, float]:
+async def gateway(channel: str, nodes: int, sim_pid: int, seconds: float) -> tuple[Case, float]:
     """The CANopen adapter at the physical minimum SYNC period; and that period."""
     bus = _bus(channel, nodes)
     sync_period = physical_sync(bus)
@@ -319,7 +322,7 @@ async def gateway(channel: str, nodes: int, sim_pid: int) -> tuple[Case, float]:
         host = _host_busy()
         t0, cpu, sim_cpu = time.monotonic(), time.process_time(), _cpu_seconds(sim_pid)
         with hub.subscribe_events() as events:
-            await asyncio.sleep(MEASURE)
+            await asyncio.sleep(seconds)
             offline = tuple(e.text for e in events.drain() if "offline" in e.text)
         received = sum(n.figures["tpdo_rx"] for n in engine.nodes.values()) - first
         syncs = engine.figures["syncs_tx"] - syncs
@@ -377,8 +380,10 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
 
 
-def measure(nodes: int) -> Figure:
-    """Both cases for ``nodes`` simulated nodes on one broker and one simulator process."""
+def measure(nodes: int, seconds: float | None = None) -> Figure:
+    """Both cases for ``nodes`` simulated nodes on one broker and one simulator process,
+    each measured ``seconds`` (:data:`MEASURE` when None)."""
+    seconds = MEASURE if seconds is None else seconds
     canbus.register()
     with _line(nodes) as (tmp, procs):
         channel = str(tmp / "can.sock")
@@ -388,10 +393,10 @@ def measure(nodes: int) -> Figure:
         try:
             _wait_boot(network, nodes, procs, tmp)
             sim_pid = procs.procs["canopen-sim"].pid
-            ref = reference(network, nodes, sim_pid)
+            ref = reference(network, nodes, sim_pid, seconds)
         finally:
             network.disconnect()
-        ours, sync_period = asyncio.run(gateway(channel, nodes, sim_pid))
+        ours, sync_period = asyncio.run(gateway(channel, nodes, sim_pid, seconds))
         _stop_all(procs)
         ends, bits = canbus.load_log(str(tmp / "canbus"))
         summary = _read_summary(tmp / "canbus.json")
@@ -443,10 +448,31 @@ def _read_summary(path: Path) -> dict[str, Any]:
     return doc if isinstance(doc, dict) else {}
 
 
-def run(node_counts: tuple[int, ...] = NODE_COUNTS) -> list[Figure]:
-    return [measure(n) for n in node_counts]
+def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float | None = None) -> list[Figure]:
+    return [measure(n, seconds) for n in node_counts]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_canopen", __doc__)
+    parser.add_argument(
+        "--nodes",
+        type=id_range(1, 127, "CANopen node counts (node ids 1..N)"),
+        nargs="+",
+        metavar="N",
+        default=list(NODE_COUNTS),
+        help="simulated CiA 402 drives, one case per count",
+    )
+    parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        default=MEASURE,
+        help="seconds measured per case",
+    )
+    args = parser.parse_args(argv)
+    print_figures(run(tuple(args.nodes), args.seconds))
+    return 0
 
 
 if __name__ == "__main__":
-    for fig in run():
-        print(fig.line(), flush=True)
+    raise SystemExit(main())

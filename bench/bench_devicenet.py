@@ -8,6 +8,9 @@ Reference, same run, same interface: bare python-can request/response round trip
 the same traffic: one 4-byte request and one 4-byte answer per node, 8 in flight.
 Also: the time the physical bus itself needs for that traffic at 500 kbit/s (two frames
 per node, 111-135 bits each, fact sheet 2.13).
+
+``python -m bench devicenet``, or alone: ``python -m bench.bench_devicenet [--nodes N ...]
+[--seconds S]``.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim import SimRunner
 from adapters.devicenet.sim.simulated import sim_configs
-from bench.common import Figure
+from bench.common import Figure, arg_parser, id_range, positive_float, print_figures
 from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.model import CommState
@@ -35,9 +38,10 @@ WINDOW = 8  # the scanner's poll window
 MEASURE = 2.0  # s of polling measured per case
 BITRATE = 500_000
 FRAME_BITS = (111, 135)  # fact sheet 2.13
+NODE_COUNTS = (1, 63)  # simulated CFW-08s per case: MAC IDs 1..N (DeviceNet MAC IDs are 0-63)
 
 
-async def scanner_rate(nodes: int) -> tuple[float, float]:
+async def scanner_rate(nodes: int, seconds: float = MEASURE) -> tuple[float, float]:
     """(polls per second, average cycle in s) of the full DeviceNet stack."""
     channel = f"bench-{uuid.uuid4().hex[:8]}"
     drives = [
@@ -74,7 +78,7 @@ async def scanner_rate(nodes: int) -> tuple[float, float]:
         assert engine is not None
         await asyncio.sleep(0.3)
         first = (engine.line.cycles, engine.line.cycle_sum)
-        await asyncio.sleep(MEASURE)
+        await asyncio.sleep(seconds)
         cycles = engine.line.cycles - first[0]
         spent = engine.line.cycle_sum - first[1]
     finally:
@@ -85,7 +89,7 @@ async def scanner_rate(nodes: int) -> tuple[float, float]:
     return nodes / cycle, cycle
 
 
-async def raw_rate(nodes: int) -> tuple[float, float]:
+async def raw_rate(nodes: int, seconds: float = MEASURE) -> tuple[float, float]:
     """(round trips per second, average cycle in s) of bare python-can on virtual."""
     channel = f"raw-{uuid.uuid4().hex[:8]}"
     async with (
@@ -103,7 +107,7 @@ async def raw_rate(nodes: int) -> tuple[float, float]:
         responder = asyncio.create_task(respond())
         try:
             cycles, spent = 0, 0.0
-            end = time.perf_counter() + MEASURE + 0.3
+            end = time.perf_counter() + seconds + 0.3
             while time.perf_counter() < end:
                 spent += await _raw_cycle(master, nodes)
                 cycles += 1
@@ -175,11 +179,11 @@ def timer_step_figure() -> Figure:
     )
 
 
-async def _run() -> list[Figure]:
+async def _run(node_counts: tuple[int, ...], seconds: float) -> list[Figure]:
     figures: list[Figure] = [timer_step_figure()]
-    for nodes in (1, 63):
-        raw, raw_cycle = await raw_rate(nodes)
-        ours, our_cycle = await scanner_rate(nodes)
+    for nodes in node_counts:
+        raw, raw_cycle = await raw_rate(nodes, seconds)
+        ours, our_cycle = await scanner_rate(nodes, seconds)
         best, worst = bus_time(nodes)
         figures.append(
             Figure(
@@ -214,5 +218,31 @@ async def _run() -> list[Figure]:
     return figures
 
 
-def run() -> list[Figure]:
-    return asyncio.run(_run())
+def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float = MEASURE) -> list[Figure]:
+    return asyncio.run(_run(node_counts, seconds))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_devicenet", __doc__)
+    parser.add_argument(
+        "--nodes",
+        type=id_range(1, 63, "DeviceNet node counts (MAC IDs 1..N)"),
+        nargs="+",
+        metavar="N",
+        default=list(NODE_COUNTS),
+        help="simulated CFW-08s, one case per count",
+    )
+    parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        default=MEASURE,
+        help="seconds measured per case",
+    )
+    args = parser.parse_args(argv)
+    print_figures(run(tuple(args.nodes), args.seconds))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -14,13 +14,13 @@
    desired command has changed (``hub.on_command`` fires), over 1000 commands
    alternating run 1/0 (each one a run edge), p50 and p99; target p99 < 5 ms.
 
-``python -m bench modbus`` (or ``python -m bench.bench_modbus --load ...`` is the
-load generator the benchmark starts itself).
+``python -m bench modbus``, or alone: ``python -m bench.bench_modbus [--rounds N]
+[--round-seconds S] [--clients N] [--commands N]`` (``--load ...`` is the load generator
+the benchmark starts itself).
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import sys
@@ -32,7 +32,7 @@ from pathlib import Path
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
 from gateway.config import load
 from gateway.daemon import Daemon
 from gateway.modbus.frontend import ModbusFrontEnd
@@ -122,7 +122,7 @@ class Round:
     cpu_us: float  # this process's CPU time per read, in µs
 
 
-async def measure_reads(port: int) -> Round:
+async def measure_reads(port: int, seconds: float = ROUND_S, clients: int = CLIENTS) -> Round:
     """One round of load on the server at ``port`` from a child process."""
     cpu0 = time.process_time()
     proc = await asyncio.create_subprocess_exec(
@@ -132,8 +132,8 @@ async def measure_reads(port: int) -> Round:
         "--load",
         str(port),
         str(UNIT),
-        str(ROUND_S),
-        str(CLIENTS),
+        str(seconds),
+        str(clients),
         cwd=ROOT,
         stdout=asyncio.subprocess.PIPE,
     )
@@ -188,7 +188,7 @@ class Gateway:
 # ------------------------------------------------------------------ command latency
 
 
-async def command_latency(gw: Gateway) -> tuple[list[float], list[float]]:
+async def command_latency(gw: Gateway, commands: int = COMMANDS) -> tuple[list[float], list[float]]:
     """(write -> hub desired changed, write -> response), in ms, per command."""
     hub = gw.daemon.hub
     changed: list[float] = []
@@ -199,7 +199,7 @@ async def command_latency(gw: Gateway) -> tuple[list[float], list[float]]:
     try:
         writer.write(frame(1, UNIT, b"\x06\x00\x00\x00\x00"))  # first word: run 0
         await reader.readexactly(12)
-        for i in range(COMMANDS):
+        for i in range(commands):
             word = 1 - (i % 2)  # 1, 0, 1, ...: every write is a run edge
             changed.clear()
             t0 = time.perf_counter()
@@ -225,7 +225,7 @@ def percentile(values: list[float], p: float) -> float:
 # ------------------------------------------------------------------ run
 
 
-async def _main() -> list[Figure]:
+async def _main(rounds: int, seconds: float, clients: int, commands: int) -> list[Figure]:
     with tempfile.TemporaryDirectory() as tmp:
         async with Gateway(Path(tmp)) as gw:
             registers = list(gw.frontend.drives["d1"].inputs)
@@ -234,17 +234,17 @@ async def _main() -> list[Figure]:
             bare_rounds: list[Round] = []
             gw_rounds: list[Round] = []
             try:
-                for _ in range(ROUNDS):
-                    bare_rounds.append(await measure_reads(bare_port))
-                    gw_rounds.append(await measure_reads(gw.port))
+                for _ in range(rounds):
+                    bare_rounds.append(await measure_reads(bare_port, seconds, clients))
+                    gw_rounds.append(await measure_reads(gw.port, seconds, clients))
             finally:
                 await bare.shutdown()
-            to_hub, round_trip = await command_latency(gw)
+            to_hub, round_trip = await command_latency(gw, commands)
     bare_rate = max(r.rate for r in bare_rounds)
     gw_rate = max(r.rate for r in gw_rounds)
     bare_cpu = min(r.cpu_us for r in bare_rounds)
     gw_cpu = min(r.cpu_us for r in gw_rounds)
-    note = f"{CLIENTS} clients, FC4 x{INPUTS} registers, best of {ROUNDS} x {ROUND_S:g} s rounds"
+    note = f"{clients} clients, FC4 x{INPUTS} registers, best of {rounds} x {seconds:g} s rounds"
     return [
         Figure(
             "modbus status reads/s (gateway vs bare pymodbus)",
@@ -266,14 +266,14 @@ async def _main() -> list[Figure]:
             "modbus command latency p50 (write -> hub)",
             round(percentile(to_hub, 50), 4),
             "ms",
-            note=f"FC6 holding 0 -> hub desired command changed, {COMMANDS} commands",
+            note=f"FC6 holding 0 -> hub desired command changed, {commands} commands",
         ),
         Figure(
             "modbus command latency p99 (write -> hub)",
             round(percentile(to_hub, 99), 4),
             "ms",
             target="< 5 ms",
-            note=f"FC6 holding 0 -> hub desired command changed, {COMMANDS} commands",
+            note=f"FC6 holding 0 -> hub desired command changed, {commands} commands",
         ),
         Figure(
             "modbus command round trip p99",
@@ -284,19 +284,56 @@ async def _main() -> list[Figure]:
     ]
 
 
-def run() -> list[Figure]:
-    return asyncio.run(_main())
+def run(
+    rounds: int = ROUNDS,
+    seconds: float = ROUND_S,
+    clients: int = CLIENTS,
+    commands: int = COMMANDS,
+) -> list[Figure]:
+    return asyncio.run(_main(rounds, seconds, clients, commands))
 
 
-def _load_main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.bench_modbus")
-    parser.add_argument("--load", nargs=4, metavar=("PORT", "UNIT", "SECONDS", "CLIENTS"))
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_modbus", __doc__)
+    parser.add_argument(
+        "--rounds",
+        type=positive_int,
+        metavar="N",
+        default=ROUNDS,
+        help="read rounds on each server (the best counts)",
+    )
+    parser.add_argument(
+        "--round-seconds",
+        type=positive_float,
+        metavar="S",
+        default=ROUND_S,
+        help="seconds per read round",
+    )
+    parser.add_argument(
+        "--clients", type=positive_int, metavar="N", default=CLIENTS, help="concurrent readers"
+    )
+    parser.add_argument(
+        "--commands",
+        type=positive_int,
+        metavar="N",
+        default=COMMANDS,
+        help="FC6 commands for the latency",
+    )
+    parser.add_argument(
+        "--load",
+        nargs=4,
+        metavar=("PORT", "UNIT", "SECONDS", "CLIENTS"),
+        help="be the load generator the benchmark starts in a child process, and only that",
+    )
     args = parser.parse_args(argv)
-    port, unit, seconds, clients = args.load
-    result = asyncio.run(_load(int(port), int(unit), float(seconds), int(clients)))
-    sys.stdout.write(json.dumps(result) + "\n")
+    if args.load is not None:
+        port, unit, seconds, clients = args.load
+        result = asyncio.run(_load(int(port), int(unit), float(seconds), int(clients)))
+        sys.stdout.write(json.dumps(result) + "\n")
+        return 0
+    print_figures(run(args.rounds, args.round_seconds, args.clients, args.commands))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(_load_main(sys.argv[1:]))
+    raise SystemExit(main())

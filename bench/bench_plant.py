@@ -44,7 +44,6 @@ by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import dataclasses
 import json
@@ -64,7 +63,7 @@ from typing import Any, Final
 from adapters.profibus.dp import DataExchange, build_request
 from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
 from adapters.profibus.timing import BITS_PER_CHAR, BusParams
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_float
 from bench.plant import PIN_ENV, canbus
 from tests.support.net import free_port
 
@@ -801,21 +800,49 @@ def _not_up(prefix: str, drives: int, exc: StartupFailed) -> Figure:
     )
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.bench_plant")
-    parser.add_argument("--seconds", type=float, default=MEASURE)
-    parser.add_argument("--profibus", type=int, default=PROFIBUS_SLAVES)
-    parser.add_argument("--devicenet", type=int, default=DEVICENET_NODES)
-    parser.add_argument("--canopen", type=int, default=CANOPEN_NODES)
-    parser.add_argument("--modbus-clients", type=int, default=MODBUS_CLIENTS)
-    parser.add_argument("--modbus-rate", type=float, default=MODBUS_RATE)
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser(
+        "bench_plant",
+        __doc__,
+        epilog=(
+            f"make bench (python -m bench) runs it with these sizes for {MEASURE:g} s "
+            f"(BENCH_PLANT_SECONDS overrides; python -m bench --short: {SHORT_MEASURE:g} s), "
+            "and in two parts if the whole plant does not come up."
+        ),
+    )
+    parser.add_argument(
+        "--seconds", type=positive_float, metavar="S", default=MEASURE, help="seconds measured"
+    )
+    parser.add_argument(
+        "--profibus", type=int, metavar="N", default=PROFIBUS_SLAVES, help="CFW700 DP slaves"
+    )
+    parser.add_argument(
+        "--devicenet", type=int, metavar="N", default=DEVICENET_NODES, help="CFW-08 nodes"
+    )
+    parser.add_argument(
+        "--canopen", type=int, metavar="N", default=CANOPEN_NODES, help="CiA 402 nodes"
+    )
+    parser.add_argument(
+        "--modbus-clients",
+        type=int,
+        metavar="N",
+        default=MODBUS_CLIENTS,
+        help="Modbus TCP clients polling every drive",
+    )
+    parser.add_argument(
+        "--modbus-rate",
+        type=positive_float,
+        metavar="HZ",
+        default=MODBUS_RATE,
+        help="polls per second of each drive by each client",
+    )
     parser.add_argument("--profile", help="write the gateway's cProfile stats here")
     parser.add_argument(
         "--pin",
         action="store_true",
         help="the gateway on one CPU, the simulators and clients on another",
     )
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     plant = Plant(
         profibus=args.profibus,
         devicenet=args.devicenet,

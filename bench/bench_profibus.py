@@ -45,6 +45,9 @@ the master could sustain on a real line: the Felser estimate of a DP cycle,
 T = (380 + 300 x slaves + 11 x bytes) x t_bit + 75 us (bytes: all the I/O bytes of the
 slaves), against the same estimate plus the master's turnaround for every message cycle,
 at 500 and 187.5 kbit/s.
+
+``python -m bench profibus``, or alone: ``python -m bench.bench_profibus [--slaves N ...]
+[--timing-slaves N ...] [--rounds N] [--seconds S]``.
 """
 
 from __future__ import annotations
@@ -84,7 +87,7 @@ from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.timing import BusParams
-from bench.common import Figure
+from bench.common import Figure, arg_parser, id_range, positive_float, positive_int, print_figures
 
 SIZE: Final = 8  # bytes in and out per slave (4 words)
 OUTPUTS: Final = bytes(range(SIZE))  # what the master sends every slave
@@ -96,6 +99,8 @@ WINDOW: Final = 0.05  # s: a round's rate is its best window this long (see Wind
 SETTLE: Final = 0.2  # s of exchange before a master round is measured
 REPLY_TIMEOUT: Final = 2.0  # s: a bare requester gives up (a benchmark never hangs)
 TARGET: Final = "ratio >= 0.66"
+SLAVE_COUNTS: Final = (1, 32)  # message-cycle cases (:func:`measure`)
+TIMING_SLAVE_COUNTS: Final = (1, 8)  # line timing cases (:func:`measure_timing`)
 # On a pty the baud rate means nothing; 12 Mbit/s keeps TSYN (2.75 us) out of the figures.
 BUS: Final = BusParams.for_baudrate(12000000, master_address=MASTER, latency=0.05, gc_period=0.1)
 
@@ -512,9 +517,17 @@ class Case:
     peer_check: float  # blocking requester against the master's other end
 
 
-def measure(slaves: int, where: Placement | None = None) -> Case:
+def measure(
+    slaves: int,
+    where: Placement | None = None,
+    rounds: int | None = None,
+    seconds: float | None = None,
+) -> Case:
     """Alternating rounds; ``where``: the CPU placement of every round (see the module
-    docstring; None leaves it to the scheduler)."""
+    docstring; None leaves it to the scheduler); ``rounds`` of ``seconds`` each side
+    (:data:`ROUNDS`, :data:`MEASURE` when None)."""
+    rounds = ROUNDS if rounds is None else rounds
+    seconds = MEASURE if seconds is None else seconds
     frames = exchange_frames(slaves)
     runs: list[MasterRun] = []
     loop_raw: list[RawRun] = []
@@ -526,12 +539,12 @@ def measure(slaves: int, where: Placement | None = None) -> Case:
         _open_raw(raw_path) as raw,
         _child(_serve_slaves, slaves, where=where) as path,
     ):
-        for _ in range(ROUNDS):
-            loop_raw.append(asyncio.run(loop_round_trips(raw, frames, REPLY_LEN, MEASURE)))
-            runs.append(asyncio.run(run_master(path, slaves, MEASURE)))
-            blocking_raw.append(blocking_round_trips(raw, frames, REPLY_LEN, MEASURE / 2))
+        for _ in range(rounds):
+            loop_raw.append(asyncio.run(loop_round_trips(raw, frames, REPLY_LEN, seconds)))
+            runs.append(asyncio.run(run_master(path, slaves, seconds)))
+            blocking_raw.append(blocking_round_trips(raw, frames, REPLY_LEN, seconds / 2))
             with _open_raw(path) as peer:
-                peer_check.append(blocking_round_trips(peer, frames, REPLY_LEN, MEASURE / 2))
+                peer_check.append(blocking_round_trips(peer, frames, REPLY_LEN, seconds / 2))
     median = statistics.median
     return Case(
         MasterRun(
@@ -782,10 +795,12 @@ def _placed(where: Placement | None) -> str:
     return f"requesters on CPU {min(where.requester)}, responders on CPU {min(where.responder)}"
 
 
-def _case_figures(slaves: int, case: Case, where: Placement | None = None) -> list[Figure]:
+def _case_figures(
+    slaves: int, case: Case, where: Placement | None = None, rounds: int | None = None
+) -> list[Figure]:
     sizes = (
         f"{REQUEST_LEN} B request, {REPLY_LEN} B reply; {_placed(where)}; median of "
-        f"{ROUNDS} rounds, each its best {WINDOW:g} s window"
+        f"{ROUNDS if rounds is None else rounds} rounds, each its best {WINDOW:g} s window"
     )
     return [
         Figure(
@@ -854,15 +869,68 @@ def _line_figures(turnaround: dict[int, float]) -> list[Figure]:
     return figures
 
 
-def run() -> list[Figure]:
+def run(
+    slave_counts: tuple[int, ...] = SLAVE_COUNTS,
+    timing_slave_counts: tuple[int, ...] = TIMING_SLAVE_COUNTS,
+    rounds: int | None = None,
+    seconds: float | None = None,
+) -> list[Figure]:
+    """Every figure; ``rounds`` and ``seconds`` are the message-cycle cases' (:data:`ROUNDS`
+    and :data:`MEASURE` when None; the line timing cases keep theirs)."""
     figures: list[Figure] = []
     turnaround: dict[int, float] = {}
     where = placement()
-    for slaves in (1, 8):
+    for slaves in timing_slave_counts:
         figures += _timing_figures(slaves, measure_timing(slaves, where))
-    for slaves in (1, 32):
-        case = measure(slaves, where)
+    for slaves in slave_counts:
+        case = measure(slaves, where, rounds, seconds)
         turnaround[slaves] = case.master.turnaround
-        figures += _case_figures(slaves, case, where)
+        figures += _case_figures(slaves, case, where, rounds)
         figures.append(_engine_figure(slaves, asyncio.run(engine_cost(slaves))))
     return figures + _line_figures(turnaround)
+
+
+# Slave addresses FIRST..FIRST + N - 1, at most 125 (EN 50170 / IEC 61158: DP slaves 0-125)
+_slave_count = id_range(1, 126 - FIRST, f"slave counts (addresses {FIRST}..{FIRST}+N-1)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_profibus", __doc__)
+    parser.add_argument(
+        "--slaves",
+        type=_slave_count,
+        nargs="*",
+        metavar="N",
+        default=list(SLAVE_COUNTS),
+        help="echo slaves of each message-cycle case (none: no such case)",
+    )
+    parser.add_argument(
+        "--timing-slaves",
+        type=_slave_count,
+        nargs="*",
+        metavar="N",
+        default=list(TIMING_SLAVE_COUNTS),
+        help="echo slaves of each line timing case (none: no such case)",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=positive_int,
+        metavar="N",
+        default=ROUNDS,
+        help="rounds of each side per message-cycle case (the median counts)",
+    )
+    parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        default=MEASURE,
+        help="seconds measured per message-cycle round",
+    )
+    args = parser.parse_args(argv)
+    figures = run(tuple(args.slaves), tuple(args.timing_slaves), args.rounds, args.seconds)
+    print_figures(figures)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

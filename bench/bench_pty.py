@@ -25,7 +25,6 @@ Figures:
 
 from __future__ import annotations
 
-import argparse
 import os
 import resource
 import statistics
@@ -37,7 +36,7 @@ from collections.abc import Iterator
 from typing import Final
 
 from adapters.profibus.timing import BITS_PER_CHAR
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_int
 
 TELEGRAM: Final = 14  # bytes each way: SD3 Data_Exchange of 4 I/O words (bench_plant)
 BAUD: Final = 1_500_000
@@ -146,10 +145,12 @@ def run(exchanges: int = EXCHANGES) -> Iterator[Figure]:
     )
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.bench_pty", description=__doc__)
-    parser.add_argument("--exchanges", type=int, default=EXCHANGES)
-    args = parser.parse_args()
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_pty", __doc__)
+    parser.add_argument(
+        "--exchanges", type=positive_int, metavar="N", default=EXCHANGES, help="round trips"
+    )
+    args = parser.parse_args(argv)
     for fig in run(args.exchanges):
         print(fig.line(), flush=True)
     return 0

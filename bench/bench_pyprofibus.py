@@ -29,6 +29,10 @@ Each round: the master starts, brings its slaves to data exchange, exchanges
 :data:`SETTLE` s, then :data:`MEASURE` s measured: exchanges (a Data_Exchange answered
 with inputs) and the master process's CPU time (``time.process_time``) over that stretch.
 A figure is the median of :data:`ROUNDS` rounds.
+
+``python -m bench pyprofibus``, or alone: ``python -m bench.bench_pyprofibus [--slaves N ...]
+[--rounds N] [--seconds S]`` (``master ...`` is our master process, which the bench starts
+itself).
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from bench.common import Figure
+from bench.common import Figure, arg_parser, id_range, positive_float, positive_int, print_figures
 
 PYPROFIBUS: Final = ("pyprofibus==1.13", "pyserial")  # it imports pyserial, undeclared
 FIRST: Final = 3  # the first slave address (as bench_profibus)
@@ -260,12 +264,13 @@ def simulator(slaves: int, cpus: set[int] | None) -> Iterator[str]:
         _stop(proc)
 
 
-def run_master(cmd: list[str], cpus: set[int] | None) -> Round:
-    """One round of a master process; it prints one JSON line with its figures."""
+def run_master(cmd: list[str], cpus: set[int] | None, seconds: float = MEASURE) -> Round:
+    """One round of a master process (``seconds`` measured); it prints one JSON line with
+    its figures."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _pin(proc.pid, cpus)
-        end = time.monotonic() + START_TIMEOUT + SETTLE + MEASURE
+        end = time.monotonic() + START_TIMEOUT + SETTLE + seconds
         line = ""
         while not line.startswith("{"):  # pyprofibus prints its warnings to stdout
             line = _read_line(proc, max(0.0, end - time.monotonic()))
@@ -277,7 +282,7 @@ def run_master(cmd: list[str], cpus: set[int] | None) -> Round:
     return Round(**result)
 
 
-def _ours(port: str, slaves: int, timed: bool) -> list[str]:
+def _ours(port: str, slaves: int, timed: bool, seconds: float = MEASURE) -> list[str]:
     return [
         sys.executable,
         "-m",
@@ -286,11 +291,15 @@ def _ours(port: str, slaves: int, timed: bool) -> list[str]:
         port,
         str(slaves),
         "--timed" if timed else "--untimed",
+        "--seconds",
+        repr(seconds),
     ]
 
 
-def _theirs(python: Path, script: Path, port: str, slaves: int) -> list[str]:
-    args = (port, slaves, FIRST, SIZE, SETTLE, MEASURE)
+def _theirs(
+    python: Path, script: Path, port: str, slaves: int, seconds: float = MEASURE
+) -> list[str]:
+    args = (port, slaves, FIRST, SIZE, SETTLE, seconds)
     return [str(python), str(script), *map(str, args)]
 
 
@@ -298,22 +307,18 @@ def _theirs(python: Path, script: Path, port: str, slaves: int) -> list[str]:
 # our master, as its own process
 
 
-async def our_round(port: str, slaves: int, timed: bool) -> Round:
+async def our_round(port: str, slaves: int, timed: bool, seconds: float | None = None) -> Round:
+    """One round of our master, ``seconds`` measured (:data:`MEASURE` when None)."""
     from bench import bench_profibus as ours
 
     bus = ours.TIMED_BUS if timed else ours.BUS
-    run = await ours.run_master(port, slaves, MEASURE, bus, settle=SETTLE)
+    seconds = MEASURE if seconds is None else seconds
+    run = await ours.run_master(port, slaves, seconds, bus, settle=SETTLE)
     return Round(run.exchanges, run.seconds, run.cpu)
 
 
-def master_main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.bench_pyprofibus master")
-    parser.add_argument("port")
-    parser.add_argument("slaves", type=int)
-    parser.add_argument("--timed", action="store_true")
-    parser.add_argument("--untimed", dest="timed", action="store_false")
-    args = parser.parse_args(argv)
-    r = asyncio.run(our_round(args.port, args.slaves, args.timed))
+def _master(args: argparse.Namespace) -> int:
+    r = asyncio.run(our_round(args.port, args.slaves, args.timed, args.seconds))
     print(json.dumps({"exchanges": r.exchanges, "seconds": r.seconds, "cpu": r.cpu}), flush=True)
     return 0
 
@@ -322,22 +327,25 @@ def master_main(argv: list[str]) -> int:
 # figures
 
 
-def compare(python: Path, script: Path, slaves: int) -> dict[str, list[Round]]:
+def compare(
+    python: Path, script: Path, slaves: int, count: int = ROUNDS, seconds: float = MEASURE
+) -> dict[str, list[Round]]:
+    """``count`` rounds of every master, ``seconds`` measured each."""
     placement = _cpus()
     master_cpus, sim_cpus = placement if placement is not None else (None, None)
     rounds: dict[str, list[Round]] = {mode: [] for mode in MODES}
     with simulator(slaves, sim_cpus) as port:
-        for _ in range(ROUNDS):
+        for _ in range(count):
             for mode in MODES:
                 if mode == "pyprofibus":
-                    cmd = _theirs(python, script, port, slaves)
+                    cmd = _theirs(python, script, port, slaves, seconds)
                 else:
-                    cmd = _ours(port, slaves, mode == "ours_timed")
-                rounds[mode].append(run_master(cmd, master_cpus))
+                    cmd = _ours(port, slaves, mode == "ours_timed", seconds)
+                rounds[mode].append(run_master(cmd, master_cpus, seconds))
     return rounds
 
 
-def _figures(slaves: int, rounds: dict[str, list[Round]]) -> list[Figure]:
+def _figures(slaves: int, rounds: dict[str, list[Round]], seconds: float = MEASURE) -> list[Figure]:
     median = statistics.median
     rate = {m: median(r.rate for r in rs) for m, rs in rounds.items()}
     cpu = {m: _median_cpu(rs) * 1e6 for m, rs in rounds.items()}
@@ -347,8 +355,8 @@ def _figures(slaves: int, rounds: dict[str, list[Round]]) -> list[Figure]:
     overlapped = sum(r.overlapped for r in theirs)
     cond = (
         f"{slaves} echo slave(s), 8 bytes I/O, drive-gateway's simulator in its own process on "
-        f"a pty; each master its own process on one CPU; median of {ROUNDS} rounds of "
-        f"{MEASURE:g} s"
+        f"a pty; each master its own process on one CPU; median of "
+        f"{len(rounds['pyprofibus'])} rounds of {seconds:g} s"
     )
     if any(empty.values()):
         cond += f"; rounds without an exchange (left out of the CPU medians): {empty}"
@@ -408,7 +416,9 @@ def _median_cpu(rounds: list[Round]) -> float:
     return statistics.median(values) if values else float("nan")
 
 
-def run() -> list[Figure]:
+def run(
+    slave_counts: tuple[int, ...] = SLAVE_COUNTS, rounds: int = ROUNDS, seconds: float = MEASURE
+) -> list[Figure]:
     where = Path(tempfile.mkdtemp(prefix="drive-gateway-pyprofibus-"))
     try:
         try:
@@ -420,15 +430,54 @@ def run() -> list[Figure]:
         script = where / "pyprofibus_master.py"
         script.write_text(PYPROFIBUS_MASTER)
         figures: list[Figure] = []
-        for slaves in SLAVE_COUNTS:
-            figures += _figures(slaves, compare(python, script, slaves))
+        for slaves in slave_counts:
+            figures += _figures(slaves, compare(python, script, slaves, rounds, seconds), seconds)
         return figures
     finally:
         shutil.rmtree(where, ignore_errors=True)
 
 
+def main(argv: list[str] | None = None) -> int:
+    slave_count = id_range(1, 126 - FIRST, f"slave counts (addresses {FIRST}..{FIRST}+N-1)")
+    parser = arg_parser("bench_pyprofibus", __doc__)
+    parser.add_argument(
+        "--slaves",
+        type=slave_count,
+        nargs="+",
+        metavar="N",
+        default=list(SLAVE_COUNTS),
+        help="echo slaves, one comparison per count",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=positive_int,
+        metavar="N",
+        default=ROUNDS,
+        help="rounds of each master (the median counts)",
+    )
+    parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        default=MEASURE,
+        help="seconds measured per round",
+    )
+    sub = parser.add_subparsers(dest="command", title="the bench's own child process")
+    what = "our master for one round on PORT, its figures as one JSON line (the bench starts it)"
+    master = sub.add_parser("master", help=what, description=what)
+    master.add_argument("port", help="the simulator's pty")
+    master.add_argument("slaves", type=slave_count, help=f"echo slaves at {FIRST}..{FIRST}+N-1")
+    master.add_argument("--timed", action="store_true", help="500 kbit/s line timing kept")
+    master.add_argument("--untimed", dest="timed", action="store_false", help="timing off")
+    master.add_argument(
+        "--seconds", type=positive_float, metavar="S", default=MEASURE, help="seconds measured"
+    )
+    args = parser.parse_args(argv)
+    if args.command == "master":
+        return _master(args)
+    print_figures(run(tuple(args.slaves), args.rounds, args.seconds))
+    return 0
+
+
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["master"]:
-        raise SystemExit(master_main(sys.argv[2:]))
-    for fig in run():
-        print(fig.line(), flush=True)
+    raise SystemExit(main())

@@ -15,6 +15,9 @@ median of its windows. The issue's target: the cycle figures unchanged within no
 (ratio to the reference of the same run), and the daemon's CPU cost per client.
 
 Everything runs on 127.0.0.1 and ends by itself (bounded windows, a bounded start and stop).
+
+``python -m bench web``, or alone: ``python -m bench.bench_web [--clients N] [--window S]
+[--rounds N]``.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ import aiohttp
 from prometheus_client.parser import text_string_to_metric_families
 from pymodbus.client import AsyncModbusTcpClient
 
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
 
 CLIENTS = 20
 WINDOW = 20.0  # s per window
@@ -127,7 +130,8 @@ async def wait_online(http: aiohttp.ClientSession, demo: Demo) -> None:
     while time.monotonic() < deadline:
         with contextlib.suppress(aiohttp.ClientError, OSError):
             health = await get_json(http, f"{demo.url}api/health")
-            if health["online"] == health["drives"] == 5:
+            # every drive of the demo (7 since its CANopen line), however many it has
+            if health["drives"] > 0 and health["online"] == health["drives"]:
                 return
         await asyncio.sleep(0.5)
     raise RuntimeError("the demo daemon did not bring its drives online")
@@ -158,10 +162,10 @@ async def bus_counts(http: aiohttp.ClientSession, demo: Demo) -> dict[str, dict[
     return {b["name"]: b["figures"] for b in buses["buses"]}
 
 
-async def measure(http: aiohttp.ClientSession, demo: Demo) -> Window:
+async def measure(http: aiohttp.ClientSession, demo: Demo, window: float = WINDOW) -> Window:
     before = await bus_counts(http, demo)
     cpu0, t0 = cpu_seconds(demo.pid), time.monotonic()
-    await asyncio.sleep(WINDOW)
+    await asyncio.sleep(window)
     after = await bus_counts(http, demo)
     cpu1, t1 = cpu_seconds(demo.pid), time.monotonic()
     span = t1 - t0
@@ -186,15 +190,17 @@ async def page(http: aiohttp.ClientSession, demo: Demo, counts: list[int], i: in
                 break
 
 
-async def with_clients(http: aiohttp.ClientSession, demo: Demo) -> Window:
-    counts = [0] * CLIENTS
-    tasks = [asyncio.create_task(page(http, demo, counts, i)) for i in range(CLIENTS)]
+async def with_clients(
+    http: aiohttp.ClientSession, demo: Demo, clients: int = CLIENTS, seconds: float = WINDOW
+) -> Window:
+    counts = [0] * clients
+    tasks = [asyncio.create_task(page(http, demo, counts, i)) for i in range(clients)]
     try:
         await asyncio.sleep(SETTLE)
         start = list(counts)
-        window = await measure(http, demo)
+        window = await measure(http, demo, seconds)
         got = [c - s for c, s in zip(counts, start, strict=True)]
-        window.messages_per_client_s = statistics.mean(got) / WINDOW
+        window.messages_per_client_s = statistics.mean(got) / seconds
         return window
     finally:
         for task in tasks:
@@ -216,7 +222,7 @@ def _median(windows: list[Window], name: str) -> float:
     return statistics.median(values)
 
 
-async def _run() -> list[Figure]:
+async def _run(clients: int, seconds: float, rounds: int) -> list[Figure]:
     demo = Demo()
     demo.start()
     stop = asyncio.Event()
@@ -227,15 +233,15 @@ async def _run() -> list[Figure]:
             await asyncio.sleep(SETTLE)
             without: list[Window] = []
             with_: list[Window] = []
-            for _ in range(ROUNDS):
-                without.append(await measure(http, demo))
-                with_.append(await with_clients(http, demo))
+            for _ in range(rounds):
+                without.append(await measure(http, demo, seconds))
+                with_.append(await with_clients(http, demo, clients, seconds))
             lost = await dropped(http, demo)
             stop.set()
             await load
     finally:
         demo.stop()
-    note = f"{CLIENTS} WebSocket clients, {ROUNDS} windows of {WINDOW:g} s each side, medians"
+    note = f"{clients} WebSocket clients, {rounds} windows of {seconds:g} s each side, medians"
     cpu_with, cpu_without = _median(with_, "cpu_pct"), _median(without, "cpu_pct")
     spread = max(w.cpu_pct for w in without) - min(w.cpu_pct for w in without)
     return [
@@ -266,7 +272,7 @@ async def _run() -> list[Figure]:
         Figure("web_daemon_cpu_pct", cpu_with, "% of a core", cpu_without, None, note),
         Figure(
             "web_daemon_cpu_pct_per_client",
-            (cpu_with - cpu_without) / CLIENTS,
+            (cpu_with - cpu_without) / clients,
             "% of a core",
             None,
             None,
@@ -292,10 +298,29 @@ async def _run() -> list[Figure]:
     ]
 
 
-def run() -> list[Figure]:
-    return asyncio.run(_run())
+def run(clients: int = CLIENTS, seconds: float = WINDOW, rounds: int = ROUNDS) -> list[Figure]:
+    return asyncio.run(_run(clients, seconds, rounds))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_web", __doc__)
+    parser.add_argument(
+        "--clients", type=positive_int, metavar="N", default=CLIENTS, help="WebSocket clients"
+    )
+    parser.add_argument(
+        "--window", type=positive_float, metavar="S", default=WINDOW, help="seconds per window"
+    )
+    parser.add_argument(
+        "--rounds",
+        type=positive_int,
+        metavar="N",
+        default=ROUNDS,
+        help="windows with the clients (and as many without)",
+    )
+    args = parser.parse_args(argv)
+    print_figures(run(args.clients, args.window, args.rounds))
+    return 0
 
 
 if __name__ == "__main__":
-    for fig in run():
-        print(fig.line())
+    raise SystemExit(main())

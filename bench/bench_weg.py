@@ -7,7 +7,7 @@ the time of one ``inputs`` call on a repeated telegram, against the general deco
 profile, 4 words (the plant's drives) and 6 words with current, alarm, fault and speed
 mapped. Each is the best of several rounds (the machine's noise only ever slows one down).
 
-``python -m bench weg``.
+``python -m bench weg``, or alone: ``python -m bench.bench_weg [--rounds N] [--calls N]``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import timeit
 
 from adapters.profibus.weg.cfw700 import Cfw700Profile
 from adapters.profibus.weg.options import WegOptions
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_int, print_figures
 from gateway.config import DriveConfig
 from gateway.model import DesiredCommand, Device
 
@@ -32,11 +32,11 @@ CASES = {
 }
 
 
-def _best_us(call: object) -> float:
-    return min(timeit.repeat(call, number=CALLS, repeat=ROUNDS)) / CALLS * 1e6  # type: ignore[arg-type]
+def _best_us(call: object, rounds: int, calls: int) -> float:
+    return min(timeit.repeat(call, number=calls, repeat=rounds)) / calls * 1e6  # type: ignore[arg-type]
 
 
-def run() -> list[Figure]:
+def run(rounds: int = ROUNDS, calls: int = CALLS) -> list[Figure]:
     figures = []
     for name, (options, words) in CASES.items():
         drive = DriveConfig(id="d1", bus="pb", device=Device.CFW700, address=5, options=options)
@@ -44,8 +44,8 @@ def run() -> list[Figure]:
         profile.outputs(DesiredCommand(run=True, speed_rpm=450.0), 0.0)
         data = struct.pack(f">{len(words)}H", *words)
         profile.inputs(data, 0.0)
-        fast = _best_us(lambda p=profile, d=data: p.inputs(d, 0.0))
-        general = _best_us(lambda p=profile, d=data: p._decode_inputs(d))
+        fast = _best_us(lambda p=profile, d=data: p.inputs(d, 0.0), rounds, calls)
+        general = _best_us(lambda p=profile, d=data: p._decode_inputs(d), rounds, calls)
         figures.append(
             Figure(
                 f"weg_inputs_repeated_{name}",
@@ -59,6 +59,16 @@ def run() -> list[Figure]:
     return figures
 
 
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_weg", __doc__)
+    parser.add_argument(
+        "--rounds", type=positive_int, default=ROUNDS, help="timeit rounds (the best counts)"
+    )
+    parser.add_argument("--calls", type=positive_int, default=CALLS, help="calls per round")
+    args = parser.parse_args(argv)
+    print_figures(run(args.rounds, args.calls))
+    return 0
+
+
 if __name__ == "__main__":
-    for figure in run():
-        print(figure.line())
+    raise SystemExit(main())

@@ -26,7 +26,8 @@
   alone; the gateway adds the hand-over to its loop and its own work). Also the round
   trip of a command query, seen by the client.
 
-Run: ``.venv/bin/python -m bench zenoh``. Everything stays on 127.0.0.1.
+Run: ``.venv/bin/python -m bench zenoh``, or alone: ``python -m bench.bench_zenoh
+[--seconds S] [--commands N]``. Everything stays on 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from typing import Any
 
 import zenoh
 
-from bench.common import Figure
+from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
 from gateway.adapter import Capabilities
 from gateway.config import Config, ZenohSection
 from gateway.daemon import Runtime
@@ -173,12 +174,14 @@ def _publisher(
     )
 
 
-def _raw_phase(session: zenoh.Session, part: str, congestion: zenoh.CongestionControl) -> int:
-    """Raw puts of the same payload, one publisher per drive, for FANOUT_SECONDS; puts made."""
+def _raw_phase(
+    session: zenoh.Session, part: str, congestion: zenoh.CongestionControl, seconds: float
+) -> int:
+    """Raw puts of the same payload, one publisher per drive, for ``seconds``; puts made."""
     state = _hub().state("d0")
     payload = encode_state(state)
     pubs = list(_publishers(session, part, congestion).values())
-    end = time.monotonic() + FANOUT_SECONDS
+    end = time.monotonic() + seconds
     i = 0
     while time.monotonic() < end:
         for _ in range(100):
@@ -197,11 +200,11 @@ def _last_word(session: zenoh.Session, part: str, payload: bytes) -> None:
     pub.undeclare()
 
 
-def _floor_phase(session: zenoh.Session) -> int:
-    """hub.update, encode_state and a DROP put inline, for FANOUT_SECONDS; updates made."""
+def _floor_phase(session: zenoh.Session, seconds: float) -> int:
+    """hub.update, encode_state and a DROP put inline, for ``seconds``; updates made."""
     hub = _hub()
     pubs = _publishers(session, "floor", zenoh.CongestionControl.DROP)
-    end = time.monotonic() + FANOUT_SECONDS
+    end = time.monotonic() + seconds
     n = 0
     while time.monotonic() < end:
         for _ in range(100):
@@ -214,7 +217,7 @@ def _floor_phase(session: zenoh.Session) -> int:
     return n
 
 
-async def _naive_phase(session: zenoh.Session) -> int:
+async def _naive_phase(session: zenoh.Session, seconds: float) -> int:
     """The least a front end must do: hub -> subscription -> to_json -> put, on the loop."""
     hub = _hub()
     pubs = _publishers(session, "naive", zenoh.CongestionControl.DROP)
@@ -226,7 +229,7 @@ async def _naive_phase(session: zenoh.Session) -> int:
                     pubs[state.id].put(json.dumps(state.to_json()).encode())
 
         task = asyncio.create_task(bridge())
-        n = await _gateway_phase(hub)
+        n = await _gateway_phase(hub, seconds)
         await asyncio.sleep(0.1)
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
@@ -237,10 +240,10 @@ async def _naive_phase(session: zenoh.Session) -> int:
     return n
 
 
-async def _gateway_phase(hub: Hub) -> int:
-    """hub.update flat out on every drive for FANOUT_SECONDS; returns the updates made."""
+async def _gateway_phase(hub: Hub, seconds: float) -> int:
+    """hub.update flat out on every drive for ``seconds``; returns the updates made."""
     loop = asyncio.get_running_loop()
-    end = loop.time() + FANOUT_SECONDS
+    end = loop.time() + seconds
     n = 0
     while loop.time() < end:
         n = _line_cycle(hub, n)
@@ -259,7 +262,7 @@ def _line_cycle(hub: Hub, n: int) -> int:
     return n
 
 
-async def _hub_alone() -> float:
+async def _hub_alone(seconds: float) -> float:
     """The ceiling: hub.update with a conflating subscription drained, no front end."""
     hub = _hub()
     loop = asyncio.get_running_loop()
@@ -272,7 +275,7 @@ async def _hub_alone() -> float:
 
         drainer = asyncio.create_task(drain())
         start = loop.time()
-        end = start + FANOUT_SECONDS
+        end = start + seconds
         n = 0
         while loop.time() < end:
             n = _line_cycle(hub, n)
@@ -284,7 +287,10 @@ async def _hub_alone() -> float:
     return rate
 
 
-async def _fanout() -> list[Figure]:
+async def _fanout(seconds: float | None = None) -> list[Figure]:
+    """The state fan-out figures, each phase ``seconds`` long (:data:`FANOUT_SECONDS` when
+    None)."""
+    seconds = FANOUT_SECONDS if seconds is None else seconds
     hub = _hub()
     gw_endpoint, raw_endpoint = _free_endpoint(), _free_endpoint()
     fe, task = await _serve(hub, gw_endpoint)
@@ -293,11 +299,11 @@ async def _fanout() -> list[Figure]:
     peer = Peer("count", gw_endpoint, raw_endpoint)
     try:
         await asyncio.to_thread(_ask_ready, peer)
-        _raw_phase(raw, "rawblock", zenoh.CongestionControl.BLOCK)
-        _floor_phase(raw)
-        await _naive_phase(raw)
-        raw_puts = _raw_phase(raw, "raw", REFERENCE_QOS)  # next to the gateway's run
-        updates = await _gateway_phase(hub)
+        _raw_phase(raw, "rawblock", zenoh.CongestionControl.BLOCK, seconds)
+        _floor_phase(raw, seconds)
+        await _naive_phase(raw, seconds)
+        raw_puts = _raw_phase(raw, "raw", REFERENCE_QOS, seconds)  # next to the gateway's run
+        updates = await _gateway_phase(hub, seconds)
         await asyncio.to_thread(peer.write, "report")
         report = json.loads(await asyncio.to_thread(peer.read))
     finally:
@@ -305,7 +311,7 @@ async def _fanout() -> list[Figure]:
         raw_ping.undeclare()
         raw.close()
         await _stop(task)
-    ceiling = await _hub_alone()
+    ceiling = await _hub_alone(seconds)
     gw, rw, nv, fl = report["gateway"], report["raw"], report["naive"], report["floor"]
     gw_rate = gw["n"] / gw["seconds"]
     raw_rate = rw["n"] / rw["seconds"]
@@ -313,7 +319,7 @@ async def _fanout() -> list[Figure]:
     naive_rate = nv["n"] / nv["seconds"]
     floor_rate = fl["n"] / fl["seconds"]
     note = (
-        f"{DRIVES} drives; {updates} hub updates in {FANOUT_SECONDS:g} s, {gw['n']} states "
+        f"{DRIVES} drives; {updates} hub updates in {seconds:g} s, {gw['n']} states "
         f"delivered ({fe.worker.replaced} replaced in the I/O slot); raw: {rw['n']} of "
         f"{raw_puts} puts of the same {len(encode_state(hub.state('d0')))}-byte payload "
         "delivered, put with zenoh-python's default QoS (CongestionControl.DROP), as the "
@@ -369,7 +375,7 @@ def _latencies_ms(sent: dict[str, float], arrived: dict[float, float]) -> list[f
     return [(arrived[float(rpm)] - t) * 1000 for rpm, t in sent.items() if float(rpm) in arrived]
 
 
-async def _commands() -> list[Figure]:
+async def _commands(commands: int = COMMANDS) -> list[Figure]:
     hub = _hub()
     endpoint, raw_endpoint = _free_endpoint(), _free_endpoint()
     _, task = await _serve(hub, endpoint)
@@ -388,7 +394,7 @@ async def _commands() -> list[Figure]:
     raw = _session(listen=(raw_endpoint,))
     raw_ping = _ping(raw)
     raw_sub = raw.declare_subscriber(f"{PREFIX}/raw/command", on_raw)
-    peer = Peer("command", endpoint, raw_endpoint)
+    peer = Peer("command", endpoint, raw_endpoint, str(commands))
     try:
         await asyncio.to_thread(_ask_ready, peer)
         await asyncio.to_thread(peer.write, "go")
@@ -403,7 +409,7 @@ async def _commands() -> list[Figure]:
     raw_latencies = _latencies_ms(report["raw_sent"], raw_arrived)
     rtt: list[float] = report["query_ms"]
     note = (
-        f"{len(latencies)} of {COMMANDS} commands arrived; reference: {len(raw_latencies)} "
+        f"{len(latencies)} of {commands} commands arrived; reference: {len(raw_latencies)} "
         "of the same puts, sent between them, to a plain subscriber's callback in the "
         "gateway's process (Zenoh and the host alone)"
     )
@@ -433,11 +439,52 @@ async def _commands() -> list[Figure]:
     ]
 
 
-def run() -> list[Figure]:
+def run(seconds: float = FANOUT_SECONDS, commands: int = COMMANDS) -> list[Figure]:
     async def main() -> list[Figure]:
-        return [*(await _fanout()), *(await _commands())]
+        return [*(await _fanout(seconds)), *(await _commands(commands))]
 
     return asyncio.run(main())
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench_zenoh", __doc__)
+    parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        default=FANOUT_SECONDS,
+        help="seconds of each state fan-out phase",
+    )
+    parser.add_argument(
+        "--commands",
+        type=positive_int,
+        metavar="N",
+        default=COMMANDS,
+        help=f"commands put for the latency, one every {COMMAND_PERIOD * 1000:g} ms",
+    )
+    # the other process of the benchmark (Peer), started by the benchmark itself
+    peers = parser.add_subparsers(
+        dest="peer",
+        metavar="{count,command}",
+        title="peer modes (the benchmark starts these itself)",
+    )
+    for mode, what in (
+        ("count", "count the states of every run (the subscriber the benchmark starts)"),
+        ("command", "put the commands and queries (the client the benchmark starts)"),
+    ):
+        peer = peers.add_parser(mode, help=what, description=what)
+        peer.add_argument("gw_endpoint", help="the gateway's Zenoh endpoint")
+        peer.add_argument("raw_endpoint", help="the reference session's endpoint")
+        if mode == "command":
+            peer.add_argument("commands", type=positive_int, nargs="?", default=COMMANDS)
+    args = parser.parse_args(argv)
+    if args.peer == "count":
+        _peer_count(args.gw_endpoint, args.raw_endpoint)
+    elif args.peer == "command":
+        _peer_command(args.gw_endpoint, args.raw_endpoint, args.commands)
+    else:
+        print_figures(run(args.seconds, args.commands))
+    return 0
 
 
 # ---------------------------------------------------------------- the other process
@@ -504,7 +551,7 @@ def _peer_count(gw_endpoint: str, raw_endpoint: str) -> None:
     session.close()
 
 
-def _peer_command(endpoint: str, raw_endpoint: str) -> None:
+def _peer_command(endpoint: str, raw_endpoint: str, commands: int = COMMANDS) -> None:
     session = _session(connect=(endpoint, raw_endpoint))
     key, raw_key = f"{PREFIX}/drives/d0/command", f"{PREFIX}/raw/command"
     _settle(session, f"{PREFIX}/gateway/health")
@@ -513,7 +560,7 @@ def _peer_command(endpoint: str, raw_endpoint: str) -> None:
     sys.stdin.readline()
     sent: dict[str, float] = {}
     raw_sent: dict[str, float] = {}
-    for i in range(1, COMMANDS + 1):
+    for i in range(1, commands + 1):
         payload = json.dumps({"run": True, "speed_rpm": float(i)}).encode()
         for to, times in ((key, sent), (raw_key, raw_sent)):  # one period: one of each
             times[str(float(i))] = time.monotonic()
@@ -532,8 +579,4 @@ def _peer_command(endpoint: str, raw_endpoint: str) -> None:
 
 
 if __name__ == "__main__":
-    mode, *rest = sys.argv[1:]
-    if mode == "count":
-        _peer_count(*rest)
-    else:
-        _peer_command(*rest)
+    raise SystemExit(main())

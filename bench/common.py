@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 
 
@@ -28,3 +30,74 @@ class Figure:
 
     def line(self) -> str:
         return json.dumps(self.to_json())
+
+
+def first_paragraph(doc: str | None) -> str:
+    """The first paragraph of a module's docstring, for its ``--help``."""
+    return " ".join((doc or "").strip().split("\n\n", 1)[0].split())
+
+
+class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default in its help, but for a flag or an unset option."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or isinstance(action.default, bool):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def arg_parser(
+    module: str,
+    doc: str | None,
+    epilog: str = "make bench (python -m bench) runs it with the defaults.",
+) -> argparse.ArgumentParser:
+    """The command line of ``python -m bench.<module>``: the description is the first
+    paragraph of the module's docstring, every option's help shows its default (the value
+    ``make bench`` runs with), and a bad option exits 2 with argparse's message before
+    anything starts."""
+    return argparse.ArgumentParser(
+        prog=f"python -m bench.{module}",
+        description=first_paragraph(doc),
+        epilog=epilog,
+        formatter_class=_ShowDefaults,
+    )
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1 (a count of rounds, nodes, calls)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 1 or more")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a number of seconds > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number above 0")
+    return value
+
+
+def id_range(low: int, high: int, what: str) -> Callable[[str], int]:
+    """An argparse type: a count or address within ``low``-``high`` (``what`` names it)."""
+
+    def parse(text: str) -> int:
+        value = positive_int(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text!r}: {what} are {low}-{high}")
+        return value
+
+    return parse
+
+
+def print_figures(figures: Iterable[Figure]) -> None:
+    """One JSON line per figure on stdout, as ``python -m bench`` prints them."""
+    for figure in figures:
+        print(figure.line(), flush=True)
