@@ -576,11 +576,7 @@ _STOPPED_DESIRED = DesiredCommand()
 
 
 LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
-    frame_in=FrameIn,
-    bus_error=BusErrorIn,
-    bad_frame=BadFrame,
-    link_down=LinkDown,
-    tx_failed=TxFailed,
+    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
 )
 """The master's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
 

@@ -774,11 +774,7 @@ def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
 
 
 LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
-    frame_in=FrameIn,
-    bus_error=BusErrorIn,
-    bad_frame=BadFrame,
-    link_down=LinkDown,
-    tx_failed=TxFailed,
+    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
 )
 """The scanner's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
 

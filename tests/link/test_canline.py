@@ -3,7 +3,7 @@ engine's events, send failures, and the bounded leave loop on a scripted link.""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -24,41 +24,17 @@ class Frame:
     data: bytes = b""
 
 
-# an engine's own event classes, as the adapters bring theirs
-@dataclass(frozen=True)
-class FrameIn:
-    frame: Frame
+Event = tuple[Any, ...]
 
 
-@dataclass(frozen=True)
-class BusErrorIn:
-    conditions: frozenset[LineCondition]
+def tagged(kind: str) -> Callable[..., Event]:
+    """An engine's event constructor: here a tuple of its kind and its arguments."""
+    return lambda *args: (kind, *args)
 
 
-@dataclass(frozen=True)
-class BadFrame:
-    reason: str
-
-
-@dataclass(frozen=True)
-class LinkDown:
-    reason: str
-
-
-@dataclass(frozen=True)
-class TxFailed:
-    reason: str
-    dropped: int = 0
-
-
-Event = FrameIn | BusErrorIn | BadFrame | LinkDown | TxFailed
-EVENTS: LinkEvents[Frame, Event] = LinkEvents(
-    frame_in=FrameIn,
-    bus_error=BusErrorIn,
-    bad_frame=BadFrame,
-    link_down=LinkDown,
-    tx_failed=TxFailed,
-)
+FrameIn, BusErrorIn, BadFrame = tagged("frame in"), tagged("bus error"), tagged("bad frame")
+LinkDown, TxFailed = tagged("link down"), tagged("tx failed")
+EVENTS: LinkEvents[Frame, Event] = LinkEvents(FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed)
 
 
 class Line(CanLine[Frame, Event, Any]):
@@ -187,6 +163,11 @@ def driver(engine: Leaving, link: Link, line: Line, clock: Clock) -> CanDriver[F
     return CanDriver(engine, cast(Any, link), line, clock)
 
 
+async def leave(engine: Leaving, link: Link, bound: float, longest_wait: float) -> None:
+    d = driver(engine, link, Line(), link.clock)
+    await leave_line(d, engine.leave, lambda: engine.done, bound=bound, longest_wait=longest_wait)
+
+
 async def test_leaving_sends_the_start_and_steps_until_the_engine_is_done() -> None:
     clock, line = Clock(), Line()
     engine = Leaving([Frame(0x600), Frame(0x601), "unplugged"])
@@ -218,13 +199,7 @@ async def test_leaving_ends_at_the_bound_without_an_answer() -> None:
     clock = Clock()
     engine = Leaving([Frame(0x600)])
     link = Link(clock, [])
-    await leave_line(
-        driver(engine, link, Line(), clock),
-        engine.leave,
-        lambda: engine.done,
-        bound=0.5,
-        longest_wait=0.1875,
-    )
+    await leave(engine, link, bound=0.5, longest_wait=0.1875)
     assert not engine.done
     # at most longest_wait a wait, and never past the engine's deadline (every 0.25 s)
     assert link.waits == [0.1875, 0.0625, 0.1875, 0.0625]
@@ -237,13 +212,7 @@ async def test_an_engine_done_at_once_is_not_waited_for() -> None:
     engine = Leaving([])
     engine.done = True
     link = Link(clock, [])
-    await leave_line(
-        driver(engine, link, Line(), clock),
-        engine.leave,
-        lambda: engine.done,
-        bound=1.0,
-        longest_wait=0.05,
-    )
+    await leave(engine, link, bound=1.0, longest_wait=0.05)
     assert link.waits == [] and link.sent == [] and engine.steps == []
 
 
