@@ -16,7 +16,6 @@ it comes back stopped. A fault reset is one edge of controlword bit 7 (rule 2).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
 import time
@@ -27,7 +26,7 @@ from typing import Any, ClassVar
 from adapters.canopen import cia402
 from adapters.canopen.codes import abort_message, emcy_text, error_register_texts
 from adapters.canopen.frames import CanFrame
-from adapters.canopen.link import CanOpenBus, Link, LinkConfig, LinkEvent
+from adapters.canopen.link import CanOpenBus, Link, LinkConfig
 from adapters.canopen.master import (
     Action,
     BadFrame,
@@ -61,8 +60,9 @@ from adapters.canopen.options import (
 )
 from adapters.canopen.plan import node_config
 from adapters.canopen.profile import readings, want
-from adapters.link.can import CanLinks, RxBad, RxError, RxFailed, RxFrame, SendResult
-from adapters.link.candriver import CanDriver, CanProtocol
+from adapters.link.can import CanLinks
+from adapters.link.candriver import CanDriver
+from adapters.link.canline import CanLine, LinkEvents, act_quietly, leave_line
 from adapters.link.config import missing_options, unsimulated
 from gateway.adapter import (
     Capabilities,
@@ -244,38 +244,23 @@ class CanOpenAdapter:
     ) -> None:
         """Leave the line cleanly (docs/devices.md, "Leaving the line"): each drive's
         consumer of the gateway's heartbeat switched off by SDO, bounded by the SDO
-        timeout, while SYNC, RPDOs (the shutdown stop) and the heartbeat go on; then the
-        last RPDOs, a SYNC and NMT enter pre-operational."""
+        timeout, while SYNC, RPDOs (the shutdown stop: the wishes refreshed each pass) and
+        the heartbeat go on; then the last RPDOs, a SYNC and NMT enter pre-operational."""
         if not link.is_open:
             return
-        now = self.clock()
-        self._refresh(now)  # the wish as the shutdown stop left it
-        driver.discard()
-        self._act_quietly(driver, now, engine.release(now))
-        driver.flush(now)
-        bound = now + self.options.sdo_timeout + LEAVE_MARGIN
-        while not engine.released and (now := self.clock()) < bound:
-            self._refresh(now)
-            deadline = engine.next_deadline()
-            wait = LEAVE_WAIT if deadline is None else deadline - now
-            events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
-            now = self.clock()
-            for event in events:
-                self._act_quietly(driver, now, engine.step(now, _event(event)))
-            self._act_quietly(driver, now, engine.step(now))
-            driver.flush(now)
+        await leave_line(
+            driver,
+            engine.release,
+            lambda: engine.released,
+            bound=self.options.sdo_timeout + LEAVE_MARGIN,
+            longest_wait=LEAVE_WAIT,
+            before_step=self._refresh,
+        )
         now = self.clock()
         self._refresh(now)
-        self._act_quietly(driver, now, engine.leave(now))
+        act_quietly(driver, now, engine.leave(now))
         driver.flush(now)
         await asyncio.sleep(LEAVE_WAIT)
-
-    @staticmethod
-    def _act_quietly(
-        driver: CanDriver[CanFrame, Event, Action], now: float, actions: list[Action]
-    ) -> None:
-        with contextlib.suppress(AdapterError):
-            driver.act(now, actions)
 
     def _stop_pending(self) -> None:
         for fut in self._pending.values():
@@ -590,30 +575,29 @@ class CanOpenAdapter:
 _STOPPED_DESIRED = DesiredCommand()
 
 
-class _Line(CanProtocol[CanFrame, Event, Action]):
-    """The master's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`)."""
+LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
+    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
+)
+"""The master's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
+
+
+class _Line(CanLine[CanFrame, Event, Action]):
+    """The master's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`):
+    the link's events as the master's (:class:`~adapters.link.canline.CanLine`), its frames
+    and reports, the refresh of the wishes once per cycle."""
 
     def __init__(self, adapter: CanOpenAdapter) -> None:
+        super().__init__(LINK_EVENTS)
         self.adapter = adapter
         self._handlers = adapter._handlers
 
-    # every frame received and every action pass here: exact type tests first (the
-    # engine's and the link's classes are final dataclasses), no call in between
-    def event(self, received: LinkEvent) -> Event:
-        if type(received) is RxFrame:
-            return FrameIn(received.frame)
-        return _event(received)
-
+    # every action passes here: exact type tests first (the engine's classes are final
+    # dataclasses), no call in between
     def frame(self, action: Action) -> CanFrame | None:
         return action.frame if type(action) is Send else None
 
     def handle(self, now: float, action: Action) -> None:
         self._handlers[type(action)](now, action)
-
-    def send_failed(self, result: SendResult) -> list[Event]:
-        error = result.error or ""
-        failed: list[Event] = [LinkDown(error)] if result.link_down else []
-        return [*failed, TxFailed(error, result.dropped)]
 
     def before_step(self, now: float) -> None:
         self.adapter._before_step(now)
@@ -627,15 +611,3 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
     def hold_until(self, now: float) -> float | None:
         engine = self.adapter.engine
         return None if engine is None else engine.hold_until(now)
-
-
-def _event(event: LinkEvent) -> Event:
-    if isinstance(event, RxFrame):
-        return FrameIn(event.frame)
-    if isinstance(event, RxError):
-        return BusErrorIn(event.conditions)
-    if isinstance(event, RxBad):
-        return BadFrame(event.reason)
-    if isinstance(event, RxFailed):
-        return LinkDown(event.reason) if event.link_down else BadFrame(event.reason)
-    raise TypeError(event)

@@ -29,9 +29,6 @@ from adapters.devicenet.link import (
     Link,
     LinkConfig,
     LinkEvent,
-    RxBad,
-    RxError,
-    RxFailed,
     RxFrame,
 )
 from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus
@@ -73,8 +70,9 @@ from adapters.devicenet.scanner.probe import (
     ProbeConfig,
     Progress,
 )
-from adapters.link.can import CanLinks, SendResult
-from adapters.link.candriver import CanDriver, CanProtocol
+from adapters.link.can import CanLinks
+from adapters.link.candriver import CanDriver
+from adapters.link.canline import CanLine, LinkEvents, leave_line
 from adapters.link.config import missing_options, unsimulated
 from gateway.adapter import (
     EventKind,
@@ -382,29 +380,12 @@ class DeviceNetAdapter:
         """Release every node (fact sheet 2.10 step 8), bounded."""
         if not link.is_open or not engine.online:
             return
-        now = self.clock()
-        driver.discard()
-        self._act_quietly(driver, now, engine.leave(now))
-        driver.flush(now)
         # the Releases go out request_spacing apart, each answered within explicit_timeout
         spread = len(engine.nodes) * engine.config.request_spacing
-        bound = now + max(LEAVE_BOUND, spread + self.options.explicit_timeout)
-        while not engine.left and self.clock() < bound:
-            deadline = engine.next_deadline()
-            wait = LEAVE_WAIT if deadline is None else deadline - self.clock()
-            events = await link.receive(min(max(wait, 0.0), LEAVE_WAIT))
-            now = self.clock()
-            for event in events:
-                self._act_quietly(driver, now, engine.step(now, _event(event)))
-            self._act_quietly(driver, now, engine.step(now))
-            driver.flush(now)
-
-    @staticmethod
-    def _act_quietly(
-        driver: CanDriver[CanFrame, Event, Action], now: float, actions: list[Action]
-    ) -> None:
-        with contextlib.suppress(AdapterError):
-            driver.act(now, actions)
+        bound = max(LEAVE_BOUND, spread + self.options.explicit_timeout)
+        await leave_line(
+            driver, engine.leave, lambda: engine.left, bound=bound, longest_wait=LEAVE_WAIT
+        )
 
     # ------------------------------------------------------------ actions
 
@@ -792,25 +773,26 @@ def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
     )
 
 
-class _Line(CanProtocol[CanFrame, Event, Action]):
-    """The scanner's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`)."""
+LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
+    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
+)
+"""The scanner's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
+
+
+class _Line(CanLine[CanFrame, Event, Action]):
+    """The scanner's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`):
+    the link's events as the scanner's (:class:`~adapters.link.canline.CanLine`), its
+    frames and reports, the poll-time output refresh and the ADR probe."""
 
     def __init__(self, adapter: DeviceNetAdapter) -> None:
+        super().__init__(LINK_EVENTS)
         self.adapter = adapter
-
-    def event(self, received: LinkEvent) -> Event:
-        return _event(received)
 
     def frame(self, action: Action) -> CanFrame | None:
         return action.frame if isinstance(action, Send) else None
 
     def handle(self, now: float, action: Action) -> None:
         self.adapter._handle(now, action)
-
-    def send_failed(self, result: SendResult) -> list[Event]:
-        error = result.error or ""
-        failed: list[Event] = [LinkDown(error)] if result.link_down else []
-        return [*failed, TxFailed(error, result.dropped)]
 
     def before_step(self, now: float) -> None:
         self.adapter._before_step(now)
@@ -829,15 +811,3 @@ class _Line(CanProtocol[CanFrame, Event, Action]):
     def hold_until(self, now: float) -> float | None:
         engine = self.adapter.engine
         return engine.hold_until(now) if engine is not None else None
-
-
-def _event(event: LinkEvent) -> Event:
-    if isinstance(event, RxFrame):
-        return FrameIn(event.frame)
-    if isinstance(event, RxError):
-        return BusErrorIn(event.conditions)
-    if isinstance(event, RxBad):
-        return BadFrame(event.reason)
-    if isinstance(event, RxFailed):
-        return LinkDown(event.reason) if event.link_down else BadFrame(event.reason)
-    raise TypeError(event)

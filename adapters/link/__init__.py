@@ -12,7 +12,9 @@
   when it has a file descriptor; by python-can's ``Notifier(loop=...)`` thread otherwise),
   opened through a :class:`~.can.CanLinks` factory; :mod:`.canerror` decodes SocketCAN error
   frames.
-* :mod:`.candriver`: the driver loop of a frame engine on a CAN link.
+* :mod:`.candriver`: the driver loop of a frame engine on a CAN link; :mod:`.canline`: what
+  the CAN adapters' lines share (link events as the engine's, send failures, the bounded
+  leave loop).
 
 Nothing here knows a fieldbus protocol: the bus adapters bring their codecs, engines and
 events, and this package never imports them (tests/test_layering.py).
