@@ -44,8 +44,6 @@ class LineContext:
         self.leaving = False
         self.touched: Node | None = None  # the node an event step concerns
         self.soonest: float | None = 0.0  # see Scanner.next_deadline
-        # the next timer step ticks every node (wake_all); else only those due or busy
-        self.all_due = True
         self.request_slot = 0.0  # no Allocate/Release before this (request_spacing)
         self.tx_hold_until = 0.0
         self.tx_backoff = config.tx_backoff_min
@@ -62,11 +60,12 @@ class LineContext:
             if self.soonest is None or t < self.soonest:
                 self.soonest = t
 
-    def wake_all(self) -> None:
-        """Something that may let any node go on (a request queued, a window freed, an
-        output changed): a timer step at once, and one that ticks every node."""
+    def wake(self) -> None:
+        """Something that may let a node go on (a request queued, a window freed, an
+        output changed): a timer step at once. It ticks every node that is not steady
+        (:class:`~adapters.devicenet.scanner.timers.SteadyTimers`), which every node that
+        can go on is: a steady node has nothing to send but its polls."""
         self.soonest = 0.0
-        self.all_due = True
 
     # ------------------------------------------------------------ send hold
 

@@ -127,7 +127,7 @@ class Scanner:
             self._on_event(now, event)
             self._after_event(now, event)
             if before >= self.config.bringup_window > schedule.bringups():
-                ctx.wake_all()  # a bring-up ended: a waiting node may start its own
+                ctx.wake()  # a bring-up ended: a waiting node may start its own
         return ctx.take()
 
     def next_deadline(self) -> float | None:
@@ -172,8 +172,8 @@ class Scanner:
                 f"node {mac} consumes {node.cfg.consumed_size} bytes, not {len(raw)}"
             )
         if raw != node.output and node.cfg.io is IoKind.COS:
-            self._ctx.wake_all()  # a change of state goes out at once
-        node.output = raw
+            self._ctx.wake()  # a change of state goes out at once
+        node.output = raw  # (a change-of-state node is never steady: every timer step ticks it)
 
     def submit(self, mac: int, body: Request) -> int:
         """Queue an explicit request; its :class:`ExplicitResult` carries the token."""
@@ -182,7 +182,9 @@ class Scanner:
             raise NodeUnavailable(f"node {mac} is not in the scan list")
         if node.phase is not Phase.ONLINE or self._ctx.leaving:
             raise NodeUnavailable(f"node {mac} is {node.phase.value}")
-        return self.jobs.submit(node, body)
+        token = self.jobs.submit(node, body)
+        self._timers.track(node)  # not steady now: every timer step ticks it
+        return token
 
     def leave(self, now: float) -> list[Action]:
         """Shutdown: Release every allocated node (fact sheet 2.10 step 8)."""
@@ -253,16 +255,13 @@ class Scanner:
         ctx.soonest = self._all_deadlines()
         if self.phase is LinePhase.ONLINE:
             self._timers.rebuild()
-            ctx.all_due = False
 
     def _lazy_step(self, now: float) -> bool:
         """Whether a timer step may look only at the nodes due or busy
-        (:class:`SteadyTimers`): an online line, not leaving, no send hold, and nothing
-        since the last full pass that asked for every node to be ticked."""
+        (:class:`SteadyTimers`): an online line, not leaving, no send hold."""
         ctx = self._ctx
         return (
             self.lazy_timers
-            and not ctx.all_due
             and self.phase is LinePhase.ONLINE
             and not ctx.leaving
             and now >= ctx.tx_hold_until

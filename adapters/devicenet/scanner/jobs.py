@@ -61,7 +61,7 @@ class ExplicitJobs:
         """Queue an external request; its :class:`ExplicitResult` carries the token."""
         token = next(self._tokens)
         node.queue.append(Pending(body, token=token))
-        self.ctx.wake_all()
+        self.ctx.wake()
         return token
 
     def tick(self, node: Node, now: float) -> None:

@@ -69,7 +69,7 @@ class Scheduler:
         full = not self.explicit_free()
         self.explicit_busy.discard(mac)
         if full:
-            self.ctx.wake_all()  # the next step ticks every waiting node
+            self.ctx.wake()  # the next step ticks every waiting node
 
     # ------------------------------------------------------------ poll cycle
 

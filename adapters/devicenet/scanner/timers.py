@@ -13,11 +13,13 @@ idle times, pushed when a node becomes steady and corrected when it comes to the
 before. On a line of 63 polled nodes a timer step then looks at the one or two nodes due
 or busy instead of all 63 twice (their ticks, then their deadlines).
 
-It holds only what the engine tells it: after every tick or frame of a node
-(:meth:`track`), and a full rebuild after every full pass (:meth:`rebuild`). Whatever
-changes nodes other than the one a step concerns (a request submitted, the explicit or
-bring-up window freed, a change-of-state output, the line's own events) makes the engine
-take the full pass, as it always did (docs/architecture.md, "DeviceNet scanner").
+It holds only what the engine tells it: after every tick or frame of a node and every
+request submitted to it (:meth:`track`), and a full rebuild after every full pass
+(:meth:`rebuild`). What frees a node to go on without touching it (the explicit or
+bring-up window freed, a change-of-state output) only asks for a timer step
+(:meth:`LineContext.wake`): every node such a change concerns is not steady, and so
+ticked. The line's own events (bus errors, send failures, link down), a send hold and
+the leave take the full pass, as before (docs/architecture.md, "DeviceNet scanner").
 """
 
 from __future__ import annotations
