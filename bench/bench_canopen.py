@@ -67,7 +67,14 @@ import canopen
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.options import min_sync_period
 from adapters.canopen.sim.node import DEFAULT_EDS
-from bench.common import Figure, arg_parser, id_range, positive_float, print_figures
+from bench.common import (
+    Figure,
+    add_counts,
+    add_number,
+    arg_parser,
+    id_range,
+    print_figures,
+)
 from bench.plant import canbus
 from gateway.config import Config, parse
 from gateway.daemon import build_hub
@@ -454,21 +461,14 @@ def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float | None = None
 
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench_canopen", __doc__)
-    parser.add_argument(
+    add_counts(
+        parser,
         "--nodes",
-        type=id_range(1, 127, "CANopen node counts (node ids 1..N)"),
-        nargs="+",
-        metavar="N",
-        default=list(NODE_COUNTS),
-        help="simulated CiA 402 drives, one case per count",
+        id_range(1, 127, "CANopen node counts (node ids 1..N)"),
+        NODE_COUNTS,
+        "simulated CiA 402 drives, one case per count",
     )
-    parser.add_argument(
-        "--seconds",
-        type=positive_float,
-        metavar="S",
-        default=MEASURE,
-        help="seconds measured per case",
-    )
+    add_number(parser, "--seconds", MEASURE, "seconds measured per case")
     args = parser.parse_args(argv)
     print_figures(run(tuple(args.nodes), args.seconds))
     return 0

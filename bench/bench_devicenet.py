@@ -27,7 +27,14 @@ from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim import SimRunner
 from adapters.devicenet.sim.simulated import sim_configs
-from bench.common import Figure, arg_parser, id_range, positive_float, print_figures
+from bench.common import (
+    Figure,
+    add_counts,
+    add_number,
+    arg_parser,
+    id_range,
+    print_figures,
+)
 from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.model import CommState
@@ -224,21 +231,14 @@ def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float = MEASURE) ->
 
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench_devicenet", __doc__)
-    parser.add_argument(
+    add_counts(
+        parser,
         "--nodes",
-        type=id_range(1, 63, "DeviceNet node counts (MAC IDs 1..N)"),
-        nargs="+",
-        metavar="N",
-        default=list(NODE_COUNTS),
-        help="simulated CFW-08s, one case per count",
+        id_range(1, 63, "DeviceNet node counts (MAC IDs 1..N)"),
+        NODE_COUNTS,
+        "simulated CFW-08s, one case per count",
     )
-    parser.add_argument(
-        "--seconds",
-        type=positive_float,
-        metavar="S",
-        default=MEASURE,
-        help="seconds measured per case",
-    )
+    add_number(parser, "--seconds", MEASURE, "seconds measured per case")
     args = parser.parse_args(argv)
     print_figures(run(tuple(args.nodes), args.seconds))
     return 0

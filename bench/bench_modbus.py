@@ -32,7 +32,7 @@ from pathlib import Path
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
+from bench.common import Figure, add_number, arg_parser, positive_int, print_figures
 from gateway.config import load
 from gateway.daemon import Daemon
 from gateway.modbus.frontend import ModbusFrontEnd
@@ -295,30 +295,12 @@ def run(
 
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench_modbus", __doc__)
-    parser.add_argument(
-        "--rounds",
-        type=positive_int,
-        metavar="N",
-        default=ROUNDS,
-        help="read rounds on each server (the best counts)",
-    )
-    parser.add_argument(
-        "--round-seconds",
-        type=positive_float,
-        metavar="S",
-        default=ROUND_S,
-        help="seconds per read round",
-    )
+    add_number(parser, "--rounds", ROUNDS, "read rounds on each server (the best counts)")
+    add_number(parser, "--round-seconds", ROUND_S, "seconds per read round")
     parser.add_argument(
         "--clients", type=positive_int, metavar="N", default=CLIENTS, help="concurrent readers"
     )
-    parser.add_argument(
-        "--commands",
-        type=positive_int,
-        metavar="N",
-        default=COMMANDS,
-        help="FC6 commands for the latency",
-    )
+    add_number(parser, "--commands", COMMANDS, "FC6 commands for the latency")
     parser.add_argument(
         "--load",
         nargs=4,

@@ -87,7 +87,14 @@ from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.timing import BusParams
-from bench.common import Figure, arg_parser, id_range, positive_float, positive_int, print_figures
+from bench.common import (
+    Figure,
+    add_counts,
+    add_number,
+    arg_parser,
+    id_range,
+    print_figures,
+)
 
 SIZE: Final = 8  # bytes in and out per slave (4 words)
 OUTPUTS: Final = bytes(range(SIZE))  # what the master sends every slave
@@ -896,36 +903,26 @@ _slave_count = id_range(1, 126 - FIRST, f"slave counts (addresses {FIRST}..{FIRS
 
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench_profibus", __doc__)
-    parser.add_argument(
+    add_counts(
+        parser,
         "--slaves",
-        type=_slave_count,
-        nargs="*",
-        metavar="N",
-        default=list(SLAVE_COUNTS),
-        help="echo slaves of each message-cycle case (none: no such case)",
+        _slave_count,
+        SLAVE_COUNTS,
+        "echo slaves of each message-cycle case (none: no such case)",
+        may_be_empty=True,
     )
-    parser.add_argument(
+    add_counts(
+        parser,
         "--timing-slaves",
-        type=_slave_count,
-        nargs="*",
-        metavar="N",
-        default=list(TIMING_SLAVE_COUNTS),
-        help="echo slaves of each line timing case (none: no such case)",
+        _slave_count,
+        TIMING_SLAVE_COUNTS,
+        "echo slaves of each line timing case (none: no such case)",
+        may_be_empty=True,
     )
-    parser.add_argument(
-        "--rounds",
-        type=positive_int,
-        metavar="N",
-        default=ROUNDS,
-        help="rounds of each side per message-cycle case (the median counts)",
+    add_number(
+        parser, "--rounds", ROUNDS, "rounds of each side per message-cycle case (the median counts)"
     )
-    parser.add_argument(
-        "--seconds",
-        type=positive_float,
-        metavar="S",
-        default=MEASURE,
-        help="seconds measured per message-cycle round",
-    )
+    add_number(parser, "--seconds", MEASURE, "seconds measured per message-cycle round")
     args = parser.parse_args(argv)
     figures = run(tuple(args.slaves), tuple(args.timing_slaves), args.rounds, args.seconds)
     print_figures(figures)

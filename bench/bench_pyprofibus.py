@@ -54,7 +54,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from bench.common import Figure, arg_parser, id_range, positive_float, positive_int, print_figures
+from bench.common import (
+    Figure,
+    add_counts,
+    add_number,
+    arg_parser,
+    id_range,
+    positive_float,
+    print_figures,
+)
 
 PYPROFIBUS: Final = ("pyprofibus==1.13", "pyserial")  # it imports pyserial, undeclared
 FIRST: Final = 3  # the first slave address (as bench_profibus)
@@ -440,28 +448,11 @@ def run(
 def main(argv: list[str] | None = None) -> int:
     slave_count = id_range(1, 126 - FIRST, f"slave counts (addresses {FIRST}..{FIRST}+N-1)")
     parser = arg_parser("bench_pyprofibus", __doc__)
-    parser.add_argument(
-        "--slaves",
-        type=slave_count,
-        nargs="+",
-        metavar="N",
-        default=list(SLAVE_COUNTS),
-        help="echo slaves, one comparison per count",
+    add_counts(
+        parser, "--slaves", slave_count, SLAVE_COUNTS, "echo slaves, one comparison per count"
     )
-    parser.add_argument(
-        "--rounds",
-        type=positive_int,
-        metavar="N",
-        default=ROUNDS,
-        help="rounds of each master (the median counts)",
-    )
-    parser.add_argument(
-        "--seconds",
-        type=positive_float,
-        metavar="S",
-        default=MEASURE,
-        help="seconds measured per round",
-    )
+    add_number(parser, "--rounds", ROUNDS, "rounds of each master (the median counts)")
+    add_number(parser, "--seconds", MEASURE, "seconds measured per round")
     sub = parser.add_subparsers(dest="command", title="the bench's own child process")
     what = "our master for one round on PORT, its figures as one JSON line (the bench starts it)"
     master = sub.add_parser("master", help=what, description=what)

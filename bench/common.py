@@ -97,6 +97,44 @@ def id_range(low: int, high: int, what: str) -> Callable[[str], int]:
     return parse
 
 
+def add_counts(
+    parser: argparse.ArgumentParser,
+    flag: str,
+    parse: Callable[[str], int],
+    default: Iterable[int],
+    help: str,
+    *,
+    may_be_empty: bool = False,
+) -> None:
+    """An option taking one count per case (nodes, slaves); ``may_be_empty``: none at all
+    skips those cases."""
+    parser.add_argument(
+        flag,
+        type=parse,
+        nargs="*" if may_be_empty else "+",
+        metavar="N",
+        default=list(default),
+        help=help,
+    )
+
+
+def add_number(
+    parser: argparse.ArgumentParser,
+    flag: str,
+    default: float,
+    help: str,
+) -> None:
+    """An option taking one number: seconds when ``default`` is a float, else a count."""
+    seconds = isinstance(default, float)
+    parser.add_argument(
+        flag,
+        type=positive_float if seconds else positive_int,
+        metavar="S" if seconds else "N",
+        default=default,
+        help=help,
+    )
+
+
 def print_figures(figures: Iterable[Figure]) -> None:
     """One JSON line per figure on stdout, as ``python -m bench`` prints them."""
     for figure in figures:
