@@ -16,6 +16,9 @@ from gateway.errors import FrameEncodeError
 MAX_ARBITRATION_ID = 0x7FF  # 11-bit identifier (fact sheet 2.1, 2.13)
 MAX_DATA_LENGTH = 8  # classic CAN (fact sheet 2.13)
 
+_new = object.__new__  # from_bus builds a checked frame without checking it again
+_set = object.__setattr__
+
 
 @dataclass(frozen=True, slots=True)
 class CanFrame:
@@ -46,6 +49,16 @@ class CanFrame:
     ) -> CanFrame:
         """A frame as received; anything DeviceNet cannot carry is an :class:`InvalidCanFrame`."""
         raw = bytes(data)
+        if (
+            not is_extended_id
+            and type(arbitration_id) is int
+            and 0 <= arbitration_id <= MAX_ARBITRATION_ID
+            and len(raw) <= MAX_DATA_LENGTH
+        ):  # every frame received: one test for the usual case (checked once, not twice)
+            frame = _new(cls)
+            _set(frame, "arbitration_id", arbitration_id)
+            _set(frame, "data", raw)
+            return frame
         if is_extended_id:
             raise InvalidCanFrame("extended (29-bit) identifier", raw)
         if (

@@ -125,6 +125,28 @@ def test_63_nodes_come_online_and_are_polled() -> None:
     assert lin.scanner.node_diagnostics(63)["poll_timeouts"] == 0
 
 
+def test_unanswered_polls_time_out_and_the_cycle_goes_on() -> None:
+    """Two of five nodes fall silent: each of their polls times out after
+    ``response_timeout`` (counted for them alone), and the poll cycles go on, the
+    others' polls answered, until inactivity (4 x EPR) takes the two offline."""
+    lin = line(2, 3, 4, 5, 6)
+    lin.run(0.3)
+    assert sorted(ups(lin)) == [2, 3, 4, 5, 6]
+    cycles = lin.scanner.line.cycles
+    answered = {m: len(lin.inputs(m)) for m in (2, 4, 6)}
+    for mac in (3, 5):
+        lin.sims[mac].power_off()
+    lin.run(0.15)  # under 4 x EPR (0.2 s): still online, polled, unanswered
+    timeouts = {m: lin.scanner.node_diagnostics(m)["poll_timeouts"] for m in (2, 3, 4, 5, 6)}
+    assert timeouts[2] == timeouts[4] == timeouts[6] == 0
+    # a cycle lasts one response_timeout (0.01 s) when a poll goes unanswered
+    assert timeouts[3] == timeouts[5] >= 5
+    assert lin.scanner.line.cycles - cycles >= 5
+    assert all(len(lin.inputs(m)) > answered[m] + 5 for m in (2, 4, 6))
+    lin.run(0.1)
+    assert sorted(d.mac for d in lin.take(NodeDown)) == [3, 5]
+
+
 def test_outputs_reach_the_drive() -> None:
     lin = line(3)
     lin.outputs[3] = Out21(run_fwd=True, net_ctrl=True, net_ref=True, speed_rpm=600).encode()

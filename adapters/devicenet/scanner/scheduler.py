@@ -82,10 +82,13 @@ class Scheduler:
         """Poll timeouts, the start of a cycle when due, and the polls the window allows."""
         ctx = self.ctx
         timeout = ctx.config.response_timeout
-        for mac, sent in list(self.in_flight.items()):
-            if now >= sent + timeout:
-                del self.in_flight[mac]
-                ctx.nodes[mac].figures.poll_timeouts += 1
+        in_flight = self.in_flight
+        while in_flight:  # oldest first (sent in this order): the timed out ones lead
+            mac = next(iter(in_flight))
+            if now < in_flight[mac] + timeout:
+                break
+            del in_flight[mac]
+            ctx.nodes[mac].figures.poll_timeouts += 1
         if self.cycle_started is None and now >= self.cycle_due and ctx.tx_ok(now):
             self.cycle_due = now + ctx.config.poll_interval
             macs = [
@@ -100,6 +103,7 @@ class Scheduler:
             node = ctx.nodes[self.poll_queue.popleft()]
             if node.phase is Phase.ONLINE:
                 ctx.send_io(node, node.output)
+                self.in_flight.pop(node.mac, None)  # (never there: kept in send order)
                 self.in_flight[node.mac] = now
         if self.cycle_started is not None and not self.poll_queue and not self.in_flight:
             self._cycle_done(now - self.cycle_started)
@@ -179,7 +183,8 @@ class Scheduler:
         """After a received frame: the polls it allows, and their deadlines folded in."""
         ctx = self.ctx
         self.polls(now)
-        timeout = ctx.config.response_timeout
-        ctx.fold(sent + timeout for sent in self.in_flight.values())
+        in_flight = self.in_flight
+        if in_flight:  # the oldest poll's timeout is the soonest of them
+            ctx.fold((in_flight[next(iter(in_flight))] + ctx.config.response_timeout,))
         if self.cycle_started is None:
             ctx.fold((ctx.gated(self.cycle_due),))
