@@ -67,14 +67,7 @@ import canopen
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.options import min_sync_period
 from adapters.canopen.sim.node import DEFAULT_EDS
-from bench.common import (
-    Figure,
-    add_counts,
-    add_number,
-    arg_parser,
-    id_range,
-    print_figures,
-)
+from bench.common import Figure, id_range, node_counts_main
 from bench.plant import canbus
 from gateway.config import Config, parse
 from gateway.daemon import build_hub
@@ -460,18 +453,16 @@ def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float | None = None
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = arg_parser("bench_canopen", __doc__)
-    add_counts(
-        parser,
-        "--nodes",
-        id_range(1, 127, "CANopen node counts (node ids 1..N)"),
-        NODE_COUNTS,
-        "simulated CiA 402 drives, one case per count",
+    return node_counts_main(
+        argv,
+        "bench_canopen",
+        __doc__,
+        ids=id_range(1, 127, "CANopen node counts (node ids 1..N)"),
+        counts=NODE_COUNTS,
+        what="simulated CiA 402 drives, one case per count",
+        seconds=MEASURE,
+        run=run,
     )
-    add_number(parser, "--seconds", MEASURE, "seconds measured per case")
-    args = parser.parse_args(argv)
-    print_figures(run(tuple(args.nodes), args.seconds))
-    return 0
 
 
 if __name__ == "__main__":

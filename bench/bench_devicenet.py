@@ -27,14 +27,7 @@ from adapters.devicenet.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim import SimRunner
 from adapters.devicenet.sim.simulated import sim_configs
-from bench.common import (
-    Figure,
-    add_counts,
-    add_number,
-    arg_parser,
-    id_range,
-    print_figures,
-)
+from bench.common import Figure, id_range, node_counts_main
 from gateway.config import parse
 from gateway.daemon import build_hub
 from gateway.model import CommState
@@ -230,18 +223,16 @@ def run(node_counts: tuple[int, ...] = NODE_COUNTS, seconds: float = MEASURE) ->
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = arg_parser("bench_devicenet", __doc__)
-    add_counts(
-        parser,
-        "--nodes",
-        id_range(1, 63, "DeviceNet node counts (MAC IDs 1..N)"),
-        NODE_COUNTS,
-        "simulated CFW-08s, one case per count",
+    return node_counts_main(
+        argv,
+        "bench_devicenet",
+        __doc__,
+        ids=id_range(1, 63, "DeviceNet node counts (MAC IDs 1..N)"),
+        counts=NODE_COUNTS,
+        what="simulated CFW-08s, one case per count",
+        seconds=MEASURE,
+        run=run,
     )
-    add_number(parser, "--seconds", MEASURE, "seconds measured per case")
-    args = parser.parse_args(argv)
-    print_figures(run(tuple(args.nodes), args.seconds))
-    return 0
 
 
 if __name__ == "__main__":

@@ -135,6 +135,27 @@ def add_number(
     )
 
 
+def node_counts_main(
+    argv: list[str] | None,
+    module: str,
+    doc: str | None,
+    *,
+    ids: Callable[[str], int],
+    counts: Iterable[int],
+    what: str,
+    seconds: float,
+    run: Callable[[tuple[int, ...], float], list[Figure]],
+) -> int:
+    """The command line of a bench with one case per node count (``--nodes``, ``--seconds``):
+    parse it, run, print the figures."""
+    parser = arg_parser(module, doc)
+    add_counts(parser, "--nodes", ids, counts, what)
+    add_number(parser, "--seconds", seconds, "seconds measured per case")
+    args = parser.parse_args(argv)
+    print_figures(run(tuple(args.nodes), args.seconds))
+    return 0
+
+
 def print_figures(figures: Iterable[Figure]) -> None:
     """One JSON line per figure on stdout, as ``python -m bench`` prints them."""
     for figure in figures:

@@ -16,6 +16,7 @@ from adapters.canopen.errors import (
     SdoDecodeError,
 )
 from gateway.errors import FrameDecodeError, FrameEncodeError, GatewayError
+from tests.support.canframes import DATA, IDENTIFIERS, carried
 
 
 def h(text: str) -> bytes:
@@ -400,32 +401,13 @@ def test_can_frame_from_bus() -> None:
         f.CanFrame.from_bus(0x185, b"", is_extended_id=True)
 
 
-class _Id(int):
-    """An int subclass (an IntEnum-like identifier): not the short cut's type, still valid."""
-
-
-@given(
-    st.one_of(
-        st.integers(-2, 0x802),
-        st.booleans(),
-        st.integers(0, 0x7FF).map(_Id),
-        st.just(389.0),
-    ),
-    st.binary(max_size=9).flatmap(lambda b: st.sampled_from([b, bytearray(b)])),
-    st.booleans(),
-)
+@given(IDENTIFIERS, DATA, st.booleans())
 def test_from_bus_short_cut_is_the_checked_constructor(
     cob_id: object, data: bytes | bytearray, extended: bool
 ) -> None:
     """``from_bus``'s one-test path for the usual frame against the checked constructor:
     the same frame, or InvalidCobId for what CANopen cannot carry."""
-    valid = (
-        not extended
-        and isinstance(cob_id, int)
-        and not isinstance(cob_id, bool)
-        and 0 <= cob_id <= f.MAX_COB_ID
-        and len(data) <= f.MAX_DATA_LENGTH
-    )
+    valid = carried(cob_id, data, extended)
     if not valid:
         with pytest.raises(InvalidCobId):
             f.CanFrame.from_bus(cob_id, data, is_extended_id=extended)  # type: ignore[arg-type]

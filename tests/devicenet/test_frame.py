@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanFrame
 from adapters.devicenet.frame import CanFrame
 from gateway.errors import FrameDecodeError, FrameEncodeError
+from tests.support.canframes import DATA, IDENTIFIERS, carried
 
 
 def test_frame_keeps_id_and_bytes():
@@ -54,30 +55,11 @@ def test_from_bus_raises_only_typed_errors(arbitration_id, data, extended):
     assert (frame.arbitration_id, frame.data) == (arbitration_id, data)
 
 
-class _Id(int):
-    """An int subclass: not the plain int the one-test path takes."""
-
-
-@given(
-    st.one_of(
-        st.integers(-2, 0x802),
-        st.booleans(),
-        st.integers(0, 0x7FF).map(_Id),
-        st.just(1110.0),
-    ),
-    st.binary(max_size=9).flatmap(lambda b: st.sampled_from([b, bytearray(b)])),
-    st.booleans(),
-)
+@given(IDENTIFIERS, DATA, st.booleans())
 def test_from_bus_short_cut_is_the_checked_constructor(arbitration_id, data, extended):
     """``from_bus``'s one-test path for the usual frame against the checked constructor:
     the same frame, or InvalidCanFrame for what DeviceNet cannot carry."""
-    valid = (
-        not extended
-        and isinstance(arbitration_id, int)
-        and not isinstance(arbitration_id, bool)
-        and 0 <= arbitration_id <= 0x7FF
-        and len(data) <= 8
-    )
+    valid = carried(arbitration_id, data, extended)
     if not valid:
         with pytest.raises(InvalidCanFrame):
             CanFrame.from_bus(arbitration_id, data, is_extended_id=extended)
