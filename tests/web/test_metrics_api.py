@@ -71,8 +71,11 @@ async def test_every_documented_metric_is_there_and_the_counters_move() -> None:
         )
         assert reply.json()["accepted"] is False
         await demo.command("cfw11", {"run": True, "speed_rpm": 600})
-        await demo.wait_for("cfw11", lambda s: s.running)
-        await asyncio.sleep(0.1)  # a few more bus cycles
+        # running, and the reference reported back: bus cycles went by since the first scrape
+        await demo.wait_for(
+            "cfw11",
+            lambda s: s.running and s.speed_ref_rpm is not None and abs(s.speed_ref_rpm - 600) < 1,
+        )
         second = await scrape(demo)
         moved = {
             "drive_gateway_modbus_requests": (),
