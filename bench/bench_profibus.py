@@ -60,6 +60,7 @@ import itertools
 import math
 import multiprocessing
 import os
+import resource
 import select
 import statistics
 import termios
@@ -94,6 +95,7 @@ from bench.common import (
     arg_parser,
     id_range,
     print_figures,
+    sleep_cpu,
 )
 
 SIZE: Final = 8  # bytes in and out per slave (4 words)
@@ -402,6 +404,7 @@ class MasterRun:
     exchanges: int = 0  # in the measured stretch
     seconds: float = 0.0  # the measured stretch, wall
     cpu: float = 0.0  # s, this process's CPU time over the measured stretch
+    sleeps: float = math.nan  # the loop thread's sleeps (voluntary switches) per exchange
 
 
 def _params(slaves: int) -> list[SlaveParams]:
@@ -451,8 +454,10 @@ async def run_master(
         measured = windows = Windows()
         windows.tick(exchanges)
         first, cpu, wall = exchanges, time.process_time(), time.perf_counter()
+        switches = _sleeps()
         await asyncio.sleep(duration)
         cpu, done = time.process_time() - cpu, exchanges - first
+        switches = _sleeps() - switches
         wall = time.perf_counter() - wall
         windows = None
     finally:
@@ -467,7 +472,15 @@ async def run_master(
         done,
         wall,
         cpu,
+        switches / done if done else math.nan,
     )
+
+
+def _sleeps() -> int:
+    """The times this thread (the loop's) went to sleep so far: its voluntary context
+    switches (getrusage(2), RUSAGE_THREAD on Linux, the process elsewhere)."""
+    who = getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)
+    return resource.getrusage(who).ru_nvcsw
 
 
 def _time_lateness(driver: LineDriver) -> list[float]:
@@ -592,6 +605,8 @@ class TimingCase:
     paced: MasterRun
     paced_untimed: MasterRun
     paced_lateness: list[float]
+    # s: CPU per blocking sleep of TSYN here, beyond the call (median, one per round)
+    sleep: float = math.nan
 
 
 def measure_timing(slaves: int, where: Placement | None = None) -> TimingCase:
@@ -599,6 +614,7 @@ def measure_timing(slaves: int, where: Placement | None = None) -> TimingCase:
     rounds; the same against slaves paced like the line, whose replies come when a real
     line's would (the master idles for the request's and the reply's line time)."""
     runs: dict[str, list[MasterRun]] = collections.defaultdict(list)
+    sleeps: list[float] = []
     with (
         _pinned(where),
         _child(_serve_slaves, slaves, where=where) as path,
@@ -612,6 +628,8 @@ def measure_timing(slaves: int, where: Placement | None = None) -> TimingCase:
                 ("paced", paced, TIMED_BUS),
             ):
                 runs[name].append(asyncio.run(run_master(port, slaves, TIMING_MEASURE, bus)))
+            sleep, call = sleep_cpu()  # with the slack the driver set (precise_sleeps)
+            sleeps.append(sleep - call)
     return TimingCase(
         _median_run(runs["timed"]),
         _median_run(runs["untimed"]),
@@ -619,6 +637,7 @@ def measure_timing(slaves: int, where: Placement | None = None) -> TimingCase:
         _median_run(runs["paced"]),
         _median_run(runs["paced_untimed"]),
         [x for r in runs["paced"] for x in r.lateness],
+        statistics.median(sleeps),
     )
 
 
@@ -632,6 +651,7 @@ def _median_run(runs: list[MasterRun]) -> MasterRun:
         median(r.cpu_per_cycle for r in runs),
         median(r.turnaround for r in runs),
         median(r.cpu_per_exchange for r in runs),
+        sleeps=median(r.sleeps for r in runs),
     )
 
 
@@ -689,6 +709,7 @@ def _timing_figures(slaves: int, case: TimingCase) -> list[Figure]:
             "against the same slaves (requests sent without TSYN)",
         ),
     ]
+    figures += _floor_figures(slaves, case)
     for lateness, kind in ((case.lateness, ""), (case.paced_lateness, "paced_")):
         for q, label in ((0.5, "p50"), (0.99, "p99"), (0.999, "p99_9")):
             figures.append(
@@ -701,6 +722,52 @@ def _timing_figures(slaves: int, case: TimingCase) -> list[Figure]:
                     f"{', slaves paced like the line' if kind else ''}); never negative",
                 )
             )
+    return figures
+
+
+def _floor_figures(slaves: int, case: TimingCase) -> list[Figure]:
+    """The least timed CPU per exchange this host allows a master that does not spin.
+
+    Keeping the line's timing, the master sleeps more often per exchange than with timing
+    off: TSYN after the reply (paced slaves), or the rest of the request's line time (a
+    pty's unpaced reply comes early), where timing off may find the reply already in.
+    A master whose only extra cost was those sleeps would need the untimed CPU plus the
+    extra sleeps (voluntary switches of the loop thread, counted in the rounds) times
+    the CPU of one sleep (:func:`bench.common.sleep_cpu`, measured in the same rounds);
+    that is the reference of the ``..._against_floor`` figures, and the ``..._floor``
+    figures are the timed/untimed ratio it gives."""
+    sleep = case.sleep
+    figures: list[Figure] = []
+    for kind, timed, untimed in (
+        ("", case.timed, case.untimed),
+        ("paced_", case.paced, case.paced_untimed),
+    ):
+        extra = max(0.0, timed.sleeps - untimed.sleeps)
+        least = untimed.cpu_per_exchange + extra * sleep
+        note = (
+            f"{'slaves paced like the line; ' if kind else 'unpaced slaves; '}sleeps per "
+            f"exchange {timed.sleeps:.2f} with timing, {untimed.sleeps:.2f} without; one "
+            f"sleep {sleep * 1e6:.1f} us of CPU on this host (select(2) of TSYN, beyond the "
+            "call, median of the rounds); the floor = timing off's CPU + the extra sleeps' "
+            "CPU, the least a master that does not spin can need here"
+        )
+        figures.append(
+            Figure(
+                f"profibus_{kind}timed_cpu_against_floor_{slaves}_slaves",
+                timed.cpu_per_exchange * 1e6,
+                "us",
+                reference=least * 1e6,
+                note=f"timed CPU per exchange against the floor: {note}",
+            )
+        )
+        figures.append(
+            Figure(
+                f"profibus_{kind}timing_ratio_floor_{slaves}_slaves",
+                least / untimed.cpu_per_exchange,
+                "ratio",
+                note=f"the least the {TIMING_TARGET!r} ratio can be here: {note}",
+            )
+        )
     return figures
 
 

@@ -19,6 +19,9 @@ Figures:
   bytes without a line time of its own.
 - ``pty_requester_cpu_us``: CPU of the requester per exchange (utime + stime), the floor of
   a master's CPU per exchange on a pty.
+- ``host_sleep_cpu_us``: the CPU a process is charged per blocking sleep of 66 us (TSYN at
+  500 kbit/s), against the same call without a wait (:func:`bench.common.sleep_cpu`):
+  what the host charges for one more sleep and wake, whatever the code.
 
 ``python -m bench.bench_pty [--exchanges N]``.
 """
@@ -35,8 +38,9 @@ import tty
 from collections.abc import Iterator
 from typing import Final
 
+from adapters.link.timer import precise_sleeps
 from adapters.profibus.timing import BITS_PER_CHAR
-from bench.common import Figure, arg_parser, positive_int
+from bench.common import SLEEP, Figure, arg_parser, positive_int, sleep_cpu
 
 TELEGRAM: Final = 14  # bytes each way: SD3 Data_Exchange of 4 I/O words (bench_plant)
 BAUD: Final = 1_500_000
@@ -142,6 +146,18 @@ def run(exchanges: int = EXCHANGES) -> Iterator[Figure]:
         "us",
         None,
         note="CPU per exchange of the bare requester: a master's floor on a pty",
+    )
+    precise_sleeps()  # the stream driver's timer slack (1 us)
+    sleep, call = sleep_cpu(SLEEP, max(50, exchanges // 10))
+    yield Figure(
+        "host_sleep_cpu_us",
+        sleep * 1e6,
+        "us",
+        call * 1e6,
+        note=f"CPU charged to a process per select(2) sleep of {SLEEP * 1e6:.0f} us (TSYN at "
+        "500 kbit/s) on this host, timer slack 1 us; reference: the same call without a "
+        "wait. Keeping line timing without spinning costs a master one such sleep more per "
+        "exchange than keeping none (bench_profibus's timing ratio floors)",
     )
 
 

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import select
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
+from typing import Final
 
 
 @dataclass(frozen=True)
@@ -30,6 +34,33 @@ class Figure:
 
     def line(self) -> str:
         return json.dumps(self.to_json())
+
+
+SLEEP: Final = 66e-6  # s: TSYN at 500 kbit/s (33 bit times), the idle time slept per exchange
+
+
+def sleep_cpu(wait: float = SLEEP, count: int = 500) -> tuple[float, float]:
+    """The CPU time (s) this process is charged per blocking ``select(2)`` sleep of
+    ``wait`` s, and per the same call with no wait: ``(sleep, call)``.
+
+    The sleep waits on a pipe nobody writes, as the stream driver waits on its port for an
+    idle time. What the sleep costs beyond the call is the kernel's (and, in a virtual
+    machine, the hypervisor's) price of going to sleep and waking, charged to the process
+    whatever its code: with line timing kept, a master that does not spin sleeps once more
+    per exchange than one that keeps no timing. The caller sets the timer slack it runs
+    with (the stream driver sets 1 us: :func:`adapters.link.timer.precise_sleeps`)."""
+    read, write = os.pipe()
+    try:
+        costs = []
+        for timeout in (wait, 0.0):
+            start = time.process_time()
+            for _ in range(count):
+                select.select([read], [], [], timeout)
+            costs.append((time.process_time() - start) / count)
+    finally:
+        os.close(read)
+        os.close(write)
+    return costs[0], costs[1]
 
 
 def first_paragraph(doc: str | None) -> str:

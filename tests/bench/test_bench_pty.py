@@ -4,9 +4,12 @@ and the echo process ends."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from bench import bench_pty
+from bench.common import sleep_cpu
 
 
 def test_felser_exchange_time_at_1_5_mbit() -> None:
@@ -21,7 +24,17 @@ def test_a_tiny_run_gives_every_figure() -> None:
         "pty_round_trip_p99_us",
         "pty_round_trip_vs_budget",
         "pty_requester_cpu_us",
+        "host_sleep_cpu_us",
     }
     assert figures["pty_round_trip_p50_us"].value > 0
     assert figures["pty_round_trip_p50_us"].reference == pytest.approx(352 / 1.5)
     assert figures["pty_round_trip_vs_budget"].reference == pytest.approx(0.05 * 352 / 1.5)
+
+
+def test_the_sleep_figure_sleeps_each_time_for_the_wait_given() -> None:
+    # a select(2) never returns before its timeout with nothing to read: 20 sleeps of
+    # 2 ms take 40 ms at least, and the call without a wait does not sleep at all
+    start = time.monotonic()
+    sleep, call = sleep_cpu(0.002, 20)
+    assert time.monotonic() - start >= 20 * 0.002
+    assert sleep >= 0 and call >= 0
