@@ -471,6 +471,19 @@ def _gc_figure(pauses: list[list[float]], window: float) -> Figure:
     )
 
 
+def _line_errors(lines: list[dict[str, int]] | None) -> str:
+    """The Profibus lines' error counters, summed, for a note (a long cycle of a line
+    that repeats requests is the protocol's, not the host's)."""
+    if not lines:
+        return ""
+    total: dict[str, int] = {}
+    for counters in lines:
+        for name, count in counters.items():
+            total[name] = total.get(name, 0) + count
+    listed = ", ".join(f"{name} {count}" for name, count in total.items())
+    return f"; the line's errors over the whole run (come-up included): {listed}"
+
+
 def _jitter_p99(cycles: list[float]) -> tuple[float, float]:
     """(median cycle, p99 of |cycle - median|), seconds."""
     median = statistics.median(cycles)
@@ -579,6 +592,7 @@ def measure(plant: Plant) -> list[Figure]:
         doc = _read_json(record) or {}
         cycles = doc.get("cycles", {"profibus": [], "devicenet": [], "canopen": []})
         gc_pauses = [p for p in doc.get("gc", []) if t0 <= p[0] < t1]
+        profibus_errors = doc.get("profibus_errors", [])
         pbsim = _read_json(tmp / "profibus-sim.json")
         canlog, broker = _broker_log(tmp, "canbus")
         colog, cobroker = _broker_log(tmp, "canopen-bus")
@@ -599,6 +613,7 @@ def measure(plant: Plant) -> list[Figure]:
         others=others,
         gc_pauses=gc_pauses,
         come_up=(started, online_at),
+        profibus_errors=profibus_errors,
     )
 
 
@@ -620,6 +635,7 @@ def _figures(
     others: dict[str, float],
     gc_pauses: list[list[float]],
     come_up: tuple[float, float] | None = None,
+    profibus_errors: list[dict[str, int]] | None = None,
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
@@ -655,6 +671,7 @@ def _figures(
         request, reply = exchange_bits()
         pb = _cycles_in(cycles["profibus"], t0, t1)
         extra += f"; {len(pb) * plant.profibus / (t1 - t0):.0f} Data_Exchange/s"
+        extra += _line_errors(profibus_errors)
         figures += _line_figures(
             f"profibus_{plant.profibus}_slaves_1500k",
             pb,

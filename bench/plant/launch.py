@@ -12,7 +12,8 @@
   ``Master._cycle``), as (monotonic end time, seconds) pairs, and twice a
   second the number of drives online; written at ``--record`` (the status part every
   0.5 s, the cycles when the daemon ends), and every garbage collection's pause. The
-  recording is a list append per cycle and per collection;
+  recording is a list append per cycle and per collection; at the end also each Profibus
+  line's error counters (retries, timeouts, bad telegrams: whole run, come-up included);
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
 
 The daemon is the real one (``gateway.daemon.Daemon``), set up as ``drive-gateway run``
@@ -37,6 +38,7 @@ from bench.plant import canbus, pin_from_env
 
 CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": [], "canopen": []}
 GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
+PROFIBUS_LINES: list[Any] = []  # each Profibus master's LineFigures (its error counters)
 
 
 def _hook_gc() -> None:
@@ -70,6 +72,7 @@ def _hook_cycles() -> None:
     def line_figures_init(self: LineFigures, *args: Any, **kwargs: Any) -> None:
         init(self, *args, **kwargs)
         self.cycle = RecordingSamples()
+        PROFIBUS_LINES.append(self)
 
     LineFigures.__init__ = line_figures_init  # type: ignore[method-assign]
 
@@ -109,6 +112,7 @@ def _write(path: str, online: dict[str, int], total: int, final: bool) -> None:
     if final:
         doc["cycles"] = CYCLES
         doc["gc"] = GC_PAUSES
+        doc["profibus_errors"] = [line.counters() for line in PROFIBUS_LINES]
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         json.dump(doc, f)

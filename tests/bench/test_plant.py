@@ -5,6 +5,7 @@ the paced pty, the clients are answered, and every process ends."""
 from __future__ import annotations
 
 import math
+import re
 import socket
 import threading
 from pathlib import Path
@@ -129,6 +130,17 @@ def test_a_tiny_plant_runs_and_stops() -> None:
         cycle = figures[f"plant_{line}_cycle"]
         assert not math.isnan(cycle.value)
         assert cycle.reference is not None and cycle.reference > 0
+    # the launcher hands over the Profibus line's error counters for the cycle's note
+    assert re.search(
+        r"errors over the whole run .*retries \d+, timeouts \d+",
+        figures["plant_profibus_2_slaves_1500k_cycle"].note,
+    )
     modbus = figures["plant_modbus_poll_rate"]
     assert modbus.value > 0 and "0 exceptions" in modbus.note
     assert "6 of 6 drives seen" in figures["plant_zenoh_states"].note
+
+
+def test_the_line_errors_of_every_profibus_line_are_summed() -> None:
+    lines = [{"retries": 2, "timeouts": 1}, {"retries": 3, "timeouts": 0}]
+    assert bench_plant._line_errors(lines).endswith("retries 5, timeouts 1")
+    assert bench_plant._line_errors([]) == ""
