@@ -38,7 +38,9 @@ on a machine shared with other work.
 Line timing honoured against timing off (:func:`measure_timing`): the master's CPU per
 exchange at 500 kbit/s against 12 Mbit/s (TSYN 2.75 us), on the slaves above and on slaves
 paced like a 500 kbit/s line (:func:`_serve_paced`: each reply written when its last byte
-would come in on the line), and each request's lateness against its ``not_before``.
+would come in on the line), and each request's lateness against its ``not_before``. With
+each, the floor this host puts under that ratio (:func:`_floor_figures`): timing off's CPU
+plus the CPU of the extra sleeps keeping the timing takes, counted in the same rounds.
 
 From the measured turnaround (reply in -> next request out, inside the master) comes what
 the master could sustain on a real line: the Felser estimate of a DP cycle,
@@ -735,7 +737,9 @@ def _floor_figures(slaves: int, case: TimingCase) -> list[Figure]:
     extra sleeps (voluntary switches of the loop thread, counted in the rounds) times
     the CPU of one sleep (:func:`bench.common.sleep_cpu`, measured in the same rounds);
     that is the reference of the ``..._against_floor`` figures, and the ``..._floor``
-    figures are the timed/untimed ratio it gives."""
+    figures are the timed/untimed ratio it gives. The sleep is timed at TSYN's length;
+    the unpaced case's extra sleep lasts about 300 us and costs more on the test machine,
+    so its floor is on the low side (docs/decisions.md)."""
     sleep = case.sleep
     figures: list[Figure] = []
     for kind, timed, untimed in (
