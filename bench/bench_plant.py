@@ -63,7 +63,7 @@ from typing import Any, Final
 from adapters.profibus.dp import DataExchange, build_request
 from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
 from adapters.profibus.timing import BITS_PER_CHAR, BusParams
-from bench.common import Figure, arg_parser, positive_float
+from bench.common import Figure, add_number, arg_parser, positive_float, print_figures
 from bench.plant import PIN_ENV, canbus
 from tests.support.net import free_port
 
@@ -827,9 +827,7 @@ def main(argv: list[str] | None = None) -> int:
             "and in two parts if the whole plant does not come up."
         ),
     )
-    parser.add_argument(
-        "--seconds", type=positive_float, metavar="S", default=MEASURE, help="seconds measured"
-    )
+    add_number(parser, "--seconds", MEASURE, "seconds measured")
     parser.add_argument(
         "--profibus", type=int, metavar="N", default=PROFIBUS_SLAVES, help="CFW700 DP slaves"
     )
@@ -870,8 +868,7 @@ def main(argv: list[str] | None = None) -> int:
         profile=args.profile,
         pin=args.pin,
     )
-    for figure in measure(plant):
-        print(figure.line(), flush=True)
+    print_figures(measure(plant))
     return 0
 
 

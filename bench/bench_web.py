@@ -38,7 +38,7 @@ import aiohttp
 from prometheus_client.parser import text_string_to_metric_families
 from pymodbus.client import AsyncModbusTcpClient
 
-from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
+from bench.common import Figure, add_number, arg_parser, print_figures
 
 CLIENTS = 20
 WINDOW = 20.0  # s per window
@@ -304,19 +304,9 @@ def run(clients: int = CLIENTS, seconds: float = WINDOW, rounds: int = ROUNDS) -
 
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench_web", __doc__)
-    parser.add_argument(
-        "--clients", type=positive_int, metavar="N", default=CLIENTS, help="WebSocket clients"
-    )
-    parser.add_argument(
-        "--window", type=positive_float, metavar="S", default=WINDOW, help="seconds per window"
-    )
-    parser.add_argument(
-        "--rounds",
-        type=positive_int,
-        metavar="N",
-        default=ROUNDS,
-        help="windows with the clients (and as many without)",
-    )
+    add_number(parser, "--clients", CLIENTS, "WebSocket clients")
+    add_number(parser, "--window", WINDOW, "seconds per window")
+    add_number(parser, "--rounds", ROUNDS, "windows with the clients (and as many without)")
     args = parser.parse_args(argv)
     print_figures(run(args.clients, args.window, args.rounds))
     return 0
