@@ -148,6 +148,11 @@ class Capabilities:
     alarm_texts: Mapping[int, str] = field(default_factory=dict)
     reverse_refused: str | None = None
     params: ParamTable = field(default_factory=dict)
+    stop_substitutes: Mapping[str, str] = field(default_factory=dict)
+    """A stop kind the drive lacks -> the nearest one it has (safety rule 1 of
+    docs/architecture.md, "a stop is never refused"): ``"quick_stop": "coast_stop"``
+    or ``"quick_stop": "run"`` (a ramp stop). The hub applies the substitute and says
+    so once in a ``safety`` event; a stop kind listed here is never refused."""
 
 
 class HubPort(Protocol):

@@ -112,10 +112,24 @@ JSON_FIELDS: tuple[str, ...] = (
 )
 """The fixed JSON fields, in order (issue 2). Extra documented fields follow them."""
 
-EXTRA_JSON_FIELDS: tuple[str, ...] = ("control_source", "speed_base", "values", "control_client")
+EXTRA_JSON_FIELDS: tuple[str, ...] = (
+    "control_source",
+    "speed_base",
+    "values",
+    "control_client",
+    "local_control",
+    "failsafe",
+    "failsafe_text",
+    "doubtful",
+)
 """Documented additions: who is in control, which scale base the speed uses,
 named raw values (telegram words mapped to parameters the profile does not model),
-and which client of ``control_source`` is in control (safety rule 3)."""
+which client of ``control_source`` is in control (safety rule 3, an opaque label),
+whether the drive is in local control (it ignores the network's run commands),
+the drive's own reaction to a lost master (``failsafe``: true when it stops or
+faults, false when it keeps running, null when unknown; ``failsafe_text`` says
+which parameter and value), and whether frames that contradict each other were
+heard for this drive (``doubtful``: its readings may be forged or mixed)."""
 
 
 @dataclass(frozen=True)
@@ -151,6 +165,10 @@ class DriveState:
     speed_base: str | None = None
     values: Mapping[str, float | int] = field(default_factory=dict)
     control_client: str | None = None
+    local_control: bool = False
+    failsafe: bool | None = None
+    failsafe_text: str | None = None
+    doubtful: bool = False
 
     @property
     def online(self) -> bool:
@@ -238,6 +256,10 @@ class Readings(TypedDict, total=False):
     alarm_code: int | None
     speed_base: str | None
     values: Mapping[str, float | int]
+    local_control: bool
+    failsafe: bool | None
+    failsafe_text: str | None
+    doubtful: bool
 
 
 class DriveUpdate(Readings, total=False):
