@@ -10,7 +10,8 @@ Layout (see config/site.example.toml for every key)::
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path, gateway/adapter.py), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
-                         on_command_timeout, on_shutdown, writable_params, plus the adapter's keys
+                         on_command_timeout, on_shutdown, require_failsafe, writable_params,
+                         plus the adapter's keys
 
 Every error names the file, the key path and what is wrong, and one pass reports
 every error of a file (gateway/schema.py); a drive is named by its id
@@ -122,6 +123,9 @@ class DriveConfig:
     command_timeout: float | None = None
     on_command_timeout: StopAction = StopAction.RAMP_STOP
     on_shutdown: StopAction = StopAction.RAMP_STOP
+    require_failsafe: bool = False
+    """Refuse run commands while the drive's own reaction to a lost master is not known
+    to stop it (docs/safety.md, "The drive's own reaction to a lost master")."""
     writable_params: frozenset[int] = frozenset()
     writable_entries: frozenset[tuple[int, int]] = frozenset()
     """``"0x2000:1"`` entries of writable_params: that subindex of the object only."""
@@ -319,6 +323,7 @@ def _drive(t: Table, bus: str, cls: Any) -> DriveConfig:
         command_timeout=command_timeout or None,
         on_command_timeout=t.enum("on_command_timeout", StopAction, StopAction.RAMP_STOP),
         on_shutdown=t.enum("on_shutdown", StopAction, StopAction.RAMP_STOP),
+        require_failsafe=t.boolean("require_failsafe", False),
     )
     numbers, entries = writable_params(t)
     drive = replace(drive, writable_params=numbers, writable_entries=entries)

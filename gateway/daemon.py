@@ -161,6 +161,7 @@ def build_hub(config: Config, hub: Hub | None = None) -> Hub:
                 command_timeout=d.command_timeout,
                 on_command_timeout=d.on_command_timeout,
                 on_shutdown=d.on_shutdown,
+                require_failsafe=d.require_failsafe,
                 writable_params=d.writable_params,
                 writable_entries=d.writable_entries,
                 modbus_unit=d.modbus_unit,

@@ -74,6 +74,12 @@ class CommandRejected(GatewayError, ValueError):
         super().__init__(reason)
 
 
+class StopAppliedRestRefused(CommandRejected):
+    """A command that asked for less motion and for something refused: its stop part was
+    applied (a stop is never refused, safety rule 1), the rest was not; ``reason`` says
+    both."""
+
+
 class ParameterError(GatewayError):
     """A parameter access refused by the device (its own code and text) or by the gateway."""
 

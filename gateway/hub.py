@@ -32,7 +32,7 @@ import collections
 import logging
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any, Protocol, Unpack, cast
 
@@ -41,6 +41,7 @@ from gateway.errors import (
     CommandRejected,
     DriveOffline,
     ParameterNotWritable,
+    StopAppliedRestRefused,
     UnknownDrive,
 )
 from gateway.model import (
@@ -79,14 +80,55 @@ class DrivePolicy:
     writable_entries: frozenset[tuple[int, int]] = frozenset()
     """(number, subindex) pairs writable on their own (``"0x2000:1"``)."""
     modbus_unit: int | None = None
+    require_failsafe: bool = False
+    """Refuse run commands while the drive's own reaction to a lost master is not known to
+    stop it (``failsafe`` not true; docs/safety.md)."""
 
     def writable(self, number: int, subindex: int = 0) -> bool:
         """Rule 5: the config allows writes to this parameter (and subindex)."""
         return number in self.writable_params or (number, subindex) in self.writable_entries
 
 
-_TRANSITION_FIELDS = frozenset({"comm", "status", "alarm", "alarm_code", "fault_code"})
+_TRANSITION_FIELDS = frozenset(
+    {
+        "comm",
+        "status",
+        "alarm",
+        "alarm_code",
+        "fault_code",
+        "local_control",
+        "failsafe",
+        "doubtful",
+    }
+)
 """Fields whose change may raise an event or clear run (rule 1)."""
+_UNKNOWN_COMM = frozenset({CommState.OFFLINE, CommState.CONNECTING})
+"""Comm states in which nothing the drive said is current: its readings are unknown."""
+_UNKNOWN_READINGS: dict[str, Any] = {
+    "status": DriveStatus.NOT_READY,
+    "running": False,
+    "at_reference": False,
+    "alarm": False,
+    "speed_rpm": None,
+    "speed_pct": None,
+    "current_a": None,
+    "current_pct_flc": None,
+    "motor_temp_pct": None,
+    "power_kw": None,
+    "voltage_v": None,
+    "fault_code": None,
+    "fault_text": None,
+    "alarm_code": None,
+}
+"""What an offline or connecting drive publishes (docs/safety.md, "Offline drives"): never
+its last values, which would show a drive that may have stopped, or started, as it was."""
+_STOP_FIELDS: dict[str, bool] = {
+    "run": False,
+    "jog": False,
+    "quick_stop": True,
+    "coast_stop": True,
+}
+"""The command fields, and their values, that ask for less motion: never refused."""
 _HUB_FIELDS = frozenset({"seq", "ts", "control_source", "control_client"})
 """Fields the hub sets itself; an adapter's values for them are ignored."""
 
@@ -108,6 +150,7 @@ class _Drive:
     last_refresh: float = 0.0
     watchdog_expired: bool = False
     params: ParamService | None = None
+    substitutes_said: set[str] = field(default_factory=set)
 
 
 class StateSubscription:
@@ -289,6 +332,8 @@ class Hub:
         except KeyError:
             unknown = sorted(changes.keys() - STATE_FIELDS)
             raise TypeError(f"DriveState has no field(s) {unknown}") from None
+        if delta.get("comm", old.comm) in _UNKNOWN_COMM:
+            transition = _mask_unknown(current, delta) or transition
         if not delta:
             return old
         self._seq += 1
@@ -327,6 +372,13 @@ class Hub:
             self.event(drive_id, EventKind.COMM, f"comm {old.comm.value} -> {new.comm.value}")
             if new.comm is CommState.ONLINE:
                 self._clear_run(drive_id, drv, "drive came online")
+            elif old.comm is CommState.ONLINE:
+                # Rule 1, made structural: whatever the cause, a drive that comes back gets
+                # no run from before the loss.
+                self._clear_run(drive_id, drv, f"drive left online ({new.comm.value})")
+        self._on_trust_transitions(drive_id, drv, old, new)
+        if new.comm in _UNKNOWN_COMM:
+            return  # no fault or alarm news from a drive that is not heard
         if new.faulted and not old.faulted:
             kind = self._fault_event(drive_id, new)
             self._clear_run(drive_id, drv, f"drive {kind.value}")
@@ -341,6 +393,39 @@ class Hub:
             known = drv.caps.alarm_texts.get(new.alarm_code) if new.alarm_code else None
             text = f"alarm {new.alarm_code}" + (f": {known}" if known else "")
             self.event(drive_id, EventKind.ALARM, text, code=new.alarm_code)
+
+    def _on_trust_transitions(
+        self, drive_id: str, drv: _Drive, old: DriveState, new: DriveState
+    ) -> None:
+        """Local control, the drive's fail-safe reaction, doubtful readings (docs/safety.md)."""
+        if new.local_control and not old.local_control:
+            self.event(
+                drive_id,
+                EventKind.SAFETY,
+                "drive in local control: it ignores the network's run commands; "
+                "run commands are refused, stops are still sent",
+            )
+            self._clear_run(drive_id, drv, "drive in local control")
+        elif old.local_control and not new.local_control:
+            self.event(drive_id, EventKind.CONTROL, "drive back in network control")
+            self._clear_run(drive_id, drv, "drive back in network control")
+        if new.failsafe is False and old.failsafe is not False:
+            self.event(
+                drive_id,
+                EventKind.SAFETY,
+                "the drive keeps running if the gateway is lost: "
+                + (new.failsafe_text or "no reaction to a lost master"),
+                failsafe=False,
+            )
+        if new.doubtful and not old.doubtful:
+            self.event(
+                drive_id,
+                EventKind.SAFETY,
+                "readings doubtful: frames that contradict each other were heard for this "
+                "drive; run commands are refused until its readings are consistent again",
+            )
+        elif old.doubtful and not new.doubtful:
+            self.event(drive_id, EventKind.SAFETY, "readings consistent again")
 
     def _fault_event(self, drive_id: str, new: DriveState) -> EventKind:
         kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
@@ -433,8 +518,17 @@ class Hub:
             listener(drive_id)
 
     def check(self, drive_id: str, source: Source, cmd: DriveCommand, client: str = "") -> None:
-        """Raise CommandRejected (with the reason) if ``cmd`` may not be applied."""
+        """Raise CommandRejected (with the reason) if ``cmd`` may not be applied.
+
+        A command that only asks for less motion (:data:`_STOP_FIELDS`) is never refused.
+        """
         drv = self._drive(drive_id)
+        cmd = self._substituted(drive_id, drv, cmd, announce=False)
+        if _stop_part(cmd) == cmd and not cmd.is_empty:
+            return
+        self._check(drive_id, drv, source, cmd)
+
+    def _check(self, drive_id: str, drv: _Drive, source: Source, cmd: DriveCommand) -> None:
         if self.shutting_down:
             raise CommandRejected("the gateway is shutting down")
         if not drv.policy.control.admits(source):
@@ -491,18 +585,65 @@ class Hub:
         nothing for any other client (it neither takes control nor feeds it).
         """
         who = _client_text(source, client)
-        try:
-            self.check(drive_id, source, cmd, client)
-        except CommandRejected as exc:
-            self.event(
-                drive_id,
-                EventKind.COMMAND_REFUSED,
-                f"command from {who} refused: {exc.reason}",
-                source=source.value,
-                client=client,
-            )
-            raise
         drv = self._drive(drive_id)
+        cmd = self._substituted(drive_id, drv, cmd, announce=True)
+        stop = _stop_part(cmd)
+        if stop != cmd or cmd.is_empty:
+            try:
+                self._check(drive_id, drv, source, cmd)
+            except CommandRejected as exc:
+                self.event(
+                    drive_id,
+                    EventKind.COMMAND_REFUSED,
+                    f"command from {who} refused: {exc.reason}",
+                    source=source.value,
+                    client=client,
+                )
+                if stop.is_empty:
+                    raise
+                # Rule 1: a command that asks for less motion is never refused because of
+                # another field: its stop part is applied, the rest is not.
+                self._apply(drive_id, drv, source, stop, client)
+                fields_ = ", ".join(f"{k} {str(v).lower()}" for k, v in stop.to_json().items())
+                raise StopAppliedRestRefused(
+                    f"{fields_} applied; the rest of the command was refused: {exc.reason}"
+                ) from None
+        return self._apply(drive_id, drv, source, cmd, client)
+
+    def _substituted(
+        self, drive_id: str, drv: _Drive, cmd: DriveCommand, *, announce: bool
+    ) -> DriveCommand:
+        """``cmd`` with each stop kind the drive lacks replaced by the nearest one it has
+        (``Capabilities.stop_substitutes``; a stop kind only listed as unsupported becomes a
+        ramp stop). Said once per drive and kind in a ``safety`` event."""
+        subs = _stop_substitutes(drv.caps)
+        if not subs:
+            return cmd
+        changes: dict[str, Any] = {}
+        for name, sub in subs.items():
+            value = getattr(cmd, name)
+            if value is None:
+                continue
+            changes[name] = None
+            if value:
+                changes.update({"run": False, "jog": False} if sub == "run" else {sub: True})
+                if announce and name not in drv.substitutes_said:
+                    drv.substitutes_said.add(name)
+                    instead = "a ramp stop" if sub == "run" else sub
+                    self.event(
+                        drive_id,
+                        EventKind.SAFETY,
+                        f"{name} is not in the {drv.state.device.value}: {instead} applied instead",
+                        substitute=sub,
+                    )
+            elif sub != "run" and getattr(cmd, sub) is None:
+                changes[sub] = False
+        return replace(cmd, **changes) if changes else cmd
+
+    def _apply(
+        self, drive_id: str, drv: _Drive, source: Source, cmd: DriveCommand, client: str
+    ) -> DesiredCommand:
+        who = _client_text(source, client)
         if cmd.is_empty:
             self.refresh(drive_id, source, client)
             return drv.desired
@@ -654,6 +795,7 @@ def _client_text(source: Source, client: str) -> str:
 def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
     """Rule 1: a run or jog command is refused, never held, while the drive may not start."""
     state = drv.state
+    _check_trust(drive_id, drv)
     if state.faulted:
         code = "" if state.fault_code is None else f" {state.fault_code}"
         text = f" ({state.fault_text})" if state.fault_text else ""
@@ -673,6 +815,55 @@ def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
                 f"drive {drive_id} is latched in {latch}: release it ({latch} false), "
                 "then send a new run command"
             )
+
+
+def _check_trust(drive_id: str, drv: _Drive) -> None:
+    """Local control, doubtful readings, a required fail-safe reaction (docs/safety.md)."""
+    state = drv.state
+    if state.local_control:
+        raise CommandRejected(
+            f"drive {drive_id} is in local control: it ignores the network's run commands; "
+            "switch it to remote (network) control, then send a new run command"
+        )
+    if state.doubtful:
+        raise CommandRejected(
+            f"drive {drive_id}'s readings are doubtful: frames that contradict each other "
+            "were heard for it on its bus (see its events)"
+        )
+    if drv.policy.require_failsafe and state.failsafe is not True:
+        what = state.failsafe_text or "unknown"
+        raise CommandRejected(
+            f"drive {drive_id} has no known fail-safe reaction to a lost master ({what}) "
+            "and its config requires one (require_failsafe)"
+        )
+
+
+def _stop_part(cmd: DriveCommand) -> DriveCommand:
+    """The fields of ``cmd`` that ask for less motion (:data:`_STOP_FIELDS`), alone."""
+    return DriveCommand(
+        **{name: value for name, value in _STOP_FIELDS.items() if getattr(cmd, name) is value}
+    )
+
+
+def _stop_substitutes(caps: Capabilities) -> dict[str, str]:
+    subs = dict(caps.stop_substitutes)
+    for name in ("quick_stop", "coast_stop"):
+        if name in caps.unsupported:
+            subs.setdefault(name, "run")
+    return subs
+
+
+def _mask_unknown(current: Mapping[str, Any], delta: dict[str, Any]) -> bool:
+    """Put the unknown readings of an offline drive into ``delta``; True when one of
+    them is a transition field that changes."""
+    transition = False
+    for name, value in _UNKNOWN_READINGS.items():
+        if current[name] != value:
+            delta[name] = value
+            transition = transition or name in _TRANSITION_FIELDS
+        else:
+            delta.pop(name, None)
+    return transition
 
 
 _AUDITED = (*(n for n in COMMAND_FIELDS if n != "fault_reset"), "fault_reset_seq")

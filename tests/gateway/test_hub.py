@@ -8,7 +8,12 @@ from typing import Any
 import pytest
 
 from gateway.adapter import Capabilities, EventKind
-from gateway.errors import CommandRejected, ParameterError, ParameterNotWritable
+from gateway.errors import (
+    CommandRejected,
+    ParameterError,
+    ParameterNotWritable,
+    StopAppliedRestRefused,
+)
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import (
     CommState,
@@ -223,19 +228,31 @@ def test_refused_commands_change_nothing() -> None:
     hub, _ = make_hub()
     hub.submit("d", Source.ZENOH, RUN)
     before = hub.desired("d")
-    for cmd in (DriveCommand(run=False, speed_rpm=99999), DriveCommand(speed_pct=-101)):
+    for cmd in (DriveCommand(speed_rpm=99999), DriveCommand(speed_pct=-101)):
         with pytest.raises(CommandRejected, match="beyond the drive's scale"):
             hub.submit("d", Source.ZENOH, cmd)
     assert hub.desired("d") == before
 
 
+def test_a_stop_is_applied_even_beside_a_refused_field() -> None:
+    """Rule 1: a command that asks for less motion is never refused because of another
+    field: its stop part is applied, the rest is refused with the reason."""
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, RUN)
+    before = hub.desired("d")
+    with pytest.raises(StopAppliedRestRefused, match=r"run false applied.*beyond the drive"):
+        hub.submit("d", Source.ZENOH, DriveCommand(run=False, speed_rpm=99999))
+    assert hub.desired("d").run is False
+    assert hub.desired("d").speed_rpm == before.speed_rpm
+
+
 def test_capabilities_refuse_with_reason() -> None:
     hub, _ = make_hub()
     hub.set_capabilities(
-        "d", Capabilities(speed_scale=None, unsupported={"quick_stop": "no quick stop here"})
+        "d", Capabilities(speed_scale=None, unsupported={"remote": "no remote bit here"})
     )
-    with pytest.raises(CommandRejected, match="no quick stop here"):
-        hub.submit("d", Source.ZENOH, DriveCommand(quick_stop=True))
+    with pytest.raises(CommandRejected, match="no remote bit here"):
+        hub.submit("d", Source.ZENOH, DriveCommand(remote=True))
     with pytest.raises(CommandRejected, match="has no speed reference"):
         hub.submit("d", Source.ZENOH, DriveCommand(speed_rpm=1))
     hub.submit("d", Source.ZENOH, DriveCommand(run=True))

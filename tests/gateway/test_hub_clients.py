@@ -99,8 +99,11 @@ def test_a_stop_latch_clears_run_and_its_release_never_restarts(latch: str) -> N
 
 def test_run_with_a_stop_in_the_same_command_is_refused() -> None:
     hub, _ = make_hub()
+    # the stop wins: it is applied, the run is refused
     with pytest.raises(CommandRejected, match="run and quick_stop in one command"):
         hub.submit("d", Source.ZENOH, DriveCommand(run=True, quick_stop=True))
+    assert hub.desired("d").quick_stop is True and hub.desired("d").run is False
+    hub.submit("d", Source.ZENOH, DriveCommand(quick_stop=False))
     # a full command that restates released latches is fine
     hub.submit("d", Source.ZENOH, DriveCommand(run=True, quick_stop=False, coast_stop=False))
     assert hub.desired("d").run is True
