@@ -648,6 +648,8 @@ class Hub:
             self.refresh(drive_id, source, client)
             return drv.desired
         old = drv.desired
+        if not drv.policy.control.admits(source):
+            return self._apply_outside_stop(drive_id, drv, who, cmd)
         base = old
         if old.controller != (source, client) and old.source is not Source.NONE:
             # Rule 1: control passes to another client -> run needs a new run command.
@@ -672,6 +674,21 @@ class Hub:
             self._notify_command(drive_id)
             if new.controller != (drv.state.control_source, drv.state.control_client or ""):
                 self._commit(drv, drv.state)
+        return new
+
+    def _apply_outside_stop(
+        self, drive_id: str, drv: _Drive, who: str, cmd: DriveCommand
+    ) -> DesiredCommand:
+        """A stop from a source the drive's ``control`` leaves out: applied (a stop is never
+        refused), and control stays where it is (it feeds no watchdog either)."""
+        old = drv.desired
+        new = old.merged(cmd, old.source, old.client)
+        if new.quick_stop or new.coast_stop:
+            new = replace(new, run=False, jog=False)
+        drv.desired = new
+        if new != old:
+            self._audit(drive_id, who, (old.source, old.client), old, new)
+            self._notify_command(drive_id)
         return new
 
     def _audit(

@@ -8,6 +8,7 @@ never 0 pretending to be a reading.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
@@ -59,6 +60,15 @@ class Source(Enum):
     MODBUS = "modbus"
     GATEWAY = "gateway"  # a safety action of the gateway itself
     WEB = "web"  # a user of the web status page (web.commands, gateway/web)
+
+
+def client_label(raw: str) -> str:
+    """The name a client id is published under (``control_client``, events, logs): the
+    first 16 hex digits of its SHA-256. A Zenoh session id or a page id is chosen by the
+    client: published as it is, another client could copy it and become the one in control
+    (feed its watchdog, keep its run). The label cannot be turned back into the id
+    (docs/safety.md, "A copied client id")."""
+    return hashlib.sha256(raw.encode("utf-8", "surrogatepass")).hexdigest()[:16]
 
 
 class ControlMode(Enum):

@@ -15,7 +15,7 @@ import ipaddress
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from pymodbus.constants import ExcCodes
@@ -23,7 +23,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from gateway.errors import CommandRejected
 from gateway.hub import Hub
-from gateway.modbus.command import ClientMemory, HoldingWrite, build_command
+from gateway.modbus.command import ClientMemory, CommandWord, HoldingWrite, build_command
 from gateway.modbus.health import (
     GATEWAY_INPUTS,
     GatewayView,
@@ -51,7 +51,7 @@ from gateway.modbus.server import (
     FastReads,
     GatewayServer,
 )
-from gateway.model import DriveState, Source
+from gateway.model import DriveCommand, DriveState, Source
 
 if TYPE_CHECKING:
     from gateway.daemon import Runtime
@@ -159,15 +159,42 @@ class DriveUnit:
             self._apply(client, decode_holding_write(address, values, scale))
         except WriteRefused as exc:
             log.debug("unit %d (%s), client %s: %s", self.unit, self.drive_id, client, exc)
+            if address == 0 and values:
+                self._apply_stop_bits(client, values[0])
             return exc.code
         return None
+
+    def _apply_stop_bits(self, client: str, raw: int) -> None:
+        """Rule 1 (docs/safety.md): a write refused for another register still applies
+        the stops its command word asks for (run or jog 1 -> 0, quick or coast stop 1)."""
+        try:
+            word = CommandWord.from_register(raw)
+        except WriteRefused:
+            return  # reserved bits: not a command word at all
+        hub = self.shared.hub
+        last = self.shared.memory.last(client, self.unit)
+        desired = hub.desired(self.drive_id)
+        stop = DriveCommand(
+            run=False if last.run and not word.run and desired.run else None,
+            jog=False if last.jog and not word.jog and desired.jog else None,
+            quick_stop=True if word.quick_stop and not desired.quick_stop else None,
+            coast_stop=True if word.coast_stop and not desired.coast_stop else None,
+        )
+        if stop.is_empty:
+            return
+        self.shared.memory.remember(
+            client, self.unit, replace(last, run=last.run and word.run, jog=last.jog and word.jog)
+        )
+        hub.submit(self.drive_id, Source.MODBUS, stop, client)
 
     def _apply(self, client: str, write: HoldingWrite) -> None:
         hub = self.shared.hub
         memory = self.shared.memory
         last = memory.last(client, self.unit)
         if write.word is not None:
-            # Remembered even if the hub refuses it: a held run bit is never an edge later.
+            # Remembered even if the hub refuses part of it: its stop bits are always
+            # applied (the hub never refuses a stop), and a refused run or jog bit held at 1
+            # never becomes an edge later (rule 1: a refused run is never held for later).
             memory.remember(client, self.unit, write.word)
         if write.command:
             try:

@@ -32,9 +32,10 @@ import orjson
 from aiohttp import WSCloseCode, WSMsgType, web
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
+from gateway import jsontext
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
-from gateway.model import DriveCommand, Source
+from gateway.model import DriveCommand, Source, client_label
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
 from gateway.web.metrics import WebCounters, make_registry
 from gateway.web.settings import IpNetwork
@@ -368,11 +369,18 @@ class WebFrontEnd:
             return self._refuse("token", 401, "a valid token is needed (Authorization: Bearer)")
         state = self._state(request)
         page = request.headers.get("X-Page-Id", "")
-        client = f"{request.remote} {page}" if PAGE_ID.fullmatch(page) else str(request.remote)
+        # the page id is the page's own choice: only its label is published (docs/safety.md)
+        client = (
+            f"{request.remote} {client_label(page)}"
+            if PAGE_ID.fullmatch(page)
+            else str(request.remote)
+        )
         try:
             try:
-                data = orjson.loads(await request.read())
-            except (orjson.JSONDecodeError, web.HTTPRequestEntityTooLarge):
+                data = jsontext.loads(await request.read())
+            except jsontext.DuplicateKey as exc:
+                raise CommandRejected(f"the body is refused: {exc}") from None
+            except (ValueError, RecursionError, web.HTTPRequestEntityTooLarge):
                 raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
             cmd = DriveCommand.from_json(data)
         except CommandRejected as exc:
@@ -391,4 +399,4 @@ class WebFrontEnd:
             self.counters.commands["refused"] += 1
             return _json({"accepted": False, "error": exc.reason}, 409)
         self.counters.commands["accepted"] += 1
-        return _json({"accepted": True})
+        return _json({"accepted": True, "client": client})

@@ -188,7 +188,17 @@ STATE_FIELD_DOC: dict[str, str] = {
     "speed_base": "what 100 % speed is, or null",
     "values": "named raw values the profile does not model",
     "control_client": "the client in control within `control_source` (a Modbus peer address, "
-    'a Zenoh session id, "anonymous"), or null',
+    'the label of a Zenoh session id or of a web page id, "anonymous"), or null; a label is '
+    "the first 16 hex digits of the id's SHA-256, never the id itself, so no client can copy "
+    "another's",
+    "local_control": "true while the drive ignores the network's run commands (its own "
+    "status or source parameters say so): run commands are refused, stops are still sent",
+    "failsafe": "the drive's own reaction to a lost master: true when it stops or faults, "
+    "false when it keeps running, null when unknown",
+    "failsafe_text": "which parameter or setting gives `failsafe`, and its value, or null",
+    "doubtful": "true while frames that contradict each other are heard for this drive "
+    "(two answers to one request, a second producer): its readings may be forged; run "
+    "commands are refused",
 }
 """One line per DriveState JSON field; a test checks it names exactly the model's fields."""
 
@@ -304,8 +314,11 @@ def render_markdown() -> str:
         "",
         "Unknown fields, wrong types, out-of-range speeds, speed_rpm together with speed_pct, "
         "and fields the device cannot follow (a speed or direction for a soft starter) are "
-        "refused with the reason; nothing of a refused command is applied. Invalid JSON is "
-        "refused the same way.",
+        "refused with the reason; nothing of a refused command is applied, except its stop: "
+        "a command that asks for less motion (run or jog false, quick_stop or coast_stop "
+        "true) is never refused because of another field, and a stop kind the drive lacks "
+        "becomes the nearest one it has (a `safety` event says so once). Invalid JSON and "
+        "an object that names a key twice are refused the same way.",
         "",
         "## State fields",
         "",

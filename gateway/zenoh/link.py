@@ -17,6 +17,7 @@ from typing import Any
 
 import zenoh
 
+from gateway.model import client_label
 from gateway.zenoh.keys import KeyKind, KeySpace
 from gateway.zenoh.requests import MAX_PAYLOAD, Answer
 from gateway.zenoh.session import open_session
@@ -68,15 +69,17 @@ ANONYMOUS = "anonymous"
 
 
 def client_of(source_info: Any) -> str:
-    """The client behind a sample or query: its session's id from the source info
-    (``put(..., source_info=SourceInfo(publisher.id, sn))``), or :data:`ANONYMOUS`.
+    """The client behind a sample or query: the label (:func:`client_label`) of its
+    session's id from the source info (``put(..., source_info=SourceInfo(publisher.id,
+    sn))``), or :data:`ANONYMOUS`. Only the label is ever published, so no client can
+    copy another's id from the gateway's states or events.
 
     Every Zenoh client that sends no source info is the same, anonymous client to
     the gateway: they share control of a drive and feed one command watchdog.
     """
     if source_info is None:
         return ANONYMOUS
-    return str(source_info.source_id.zid)
+    return client_label(str(source_info.source_id.zid))
 
 
 CommandSink = Callable[[str, Payload, str], None]

@@ -15,6 +15,7 @@ from typing import Any
 
 import orjson
 
+from gateway import jsontext
 from gateway.adapter import ParamInfo, ParamValue
 from gateway.errors import CommandRejected, GatewayError, ParameterError
 from gateway.model import (
@@ -117,7 +118,9 @@ def decode_json(payload: bytes) -> Any:
     if len(payload) > MAX_PAYLOAD:
         raise ValueError(too_large(len(payload)))
     try:
-        return json.loads(payload.decode("utf-8"))
+        return jsontext.loads(payload.decode("utf-8"))
+    except jsontext.DuplicateKey as exc:
+        raise ValueError(f"invalid JSON: {exc}") from None
     except UnicodeDecodeError:
         raise ValueError("payload is not UTF-8") from None
     except RecursionError:

@@ -114,13 +114,13 @@ async def test_another_zenoh_sessions_empty_commands_never_feed_the_watchdog(
             with Events(gw) as events:
                 assert (await command(scada, "cfw320", {"run": True, "speed_rpm": 900}))["accepted"]
                 state = await gw.wait_for("cfw320", at_speed(900.0))
-                assert state.control_client == scada.zid
+                assert state.control_client == scada.label
                 watchdog = asyncio.create_task(events.text("cfw320", "no command from zenoh"))
                 while not watchdog.done():
                     assert (await command(other, "cfw320", {}))["accepted"]
                     await asyncio.sleep(timeout / 8)
                 event = await watchdog
-                assert f"no command from zenoh {scada.zid} for" in event.text
+                assert f"no command from zenoh {scada.label} for" in event.text
                 await gw.wait_for("cfw320", stopped)
         finally:
             scada.close()
@@ -198,10 +198,10 @@ async def test_every_accepted_command_is_in_the_audit_trail(tmp_path: Path) -> N
                 got = await inbox.auntil(lambda g: g.json()["kind"] == "command", TIMEOUT)
             body = got.json()
             assert body["kind"] == EventKind.COMMAND.value
-            assert body["source"] == "zenoh" and body["client"] == scada.zid
+            assert body["source"] == "zenoh" and body["client"] == scada.label
             assert body["changes"] == {"run": True, "speed_rpm": 600.0}
             assert body["text"] == (
-                f"command from zenoh {scada.zid} accepted: run False -> True, "
+                f"command from zenoh {scada.label} accepted: run False -> True, "
                 "speed_rpm None -> 600.0"
             )
         finally:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 from gateway.adapter import EventKind
 from gateway.model import StopAction
@@ -117,3 +118,35 @@ async def test_keepalive_feeds_the_watchdog(start_gateway: StartGateway) -> None
     assert not gw.hub.desired("d1").run
     assert not (await client.write_register(0, 0x0001, device_id=D1)).isError()
     assert not gw.hub.desired("d1").run  # a held run bit is not a new run command
+
+
+async def test_a_stop_word_with_a_stop_kind_the_drive_lacks_stops_it(
+    start_gateway: StartGateway,
+) -> None:
+    """Issue 32 item 4: run = 0 with quick stop = 1 to a drive without quick stop (the
+    CFW320) was refused whole and remembered, so the PLC's next run = 0 sent nothing."""
+    gw = await start_gateway()
+    caps = gw.hub.capabilities("d1")
+    unsupported = {**caps.unsupported, "quick_stop": "the drive has no quick stop"}
+    gw.hub.set_capabilities("d1", replace(caps, unsupported=unsupported))
+    client = await gw.client()
+    for address, value in ((1, 600), (0, 0x0000), (0, 0x0001)):
+        assert not (await client.write_register(address, value, device_id=D1)).isError()
+    assert gw.hub.desired("d1").run
+    assert not (await client.write_register(0, 0x0008, device_id=D1)).isError()  # run 0, QS 1
+    assert not gw.hub.desired("d1").run
+    assert not (await client.write_register(0, 0x0000, device_id=D1)).isError()
+    assert not gw.hub.desired("d1").run
+
+
+async def test_a_stop_bit_beside_a_refused_speed_is_applied(start_gateway: StartGateway) -> None:
+    """Issue 32 item 4: a write refused for its speed still applies the stop of its word."""
+    gw = await start_gateway()
+    client = await gw.client()
+    for address, value in ((1, 600), (0, 0x0000), (0, 0x0001)):
+        assert not (await client.write_register(address, value, device_id=D1)).isError()
+    assert gw.hub.desired("d1").run
+    reply = await client.write_registers(0, [0x0000, 60000], device_id=D1)  # speed refused
+    assert reply.isError()
+    assert not gw.hub.desired("d1").run
+    assert gw.hub.desired("d1").speed_rpm == 600

@@ -9,7 +9,7 @@ import aiohttp
 import pytest
 
 from gateway.adapter import EventKind
-from gateway.model import Source
+from gateway.model import Source, client_label
 from gateway.web.frontend import allowed
 from tests.web.harness import TOKEN, TOKEN_SHA256, small_gateway, web_section
 
@@ -50,13 +50,15 @@ async def test_a_command_with_the_token_goes_through_the_hub_as_a_web_client() -
     async with small_gateway(web_section(commands=True, token_sha256=TOKEN_SHA256)) as gw:
         with gw.hub.subscribe_events() as events:
             status, body = await post(gw.http, f"{gw.url}api/drives/d1/command", RUN, TOKEN)
-            assert (status, body) == (200, {"accepted": True})
+            me = f"127.0.0.1 {client_label('page-1')}"
+            assert (status, body) == (200, {"accepted": True, "client": me})
             desired = gw.hub.desired("d1")
             assert desired.run and desired.source is Source.WEB
-            assert desired.client == "127.0.0.1 page-1"
+            assert desired.client == me  # the page id itself is never published (issue 32)
+            assert "page-1" not in str(gw.hub.state("d1").control_client)
             audit = [e for e in events.drain() if e.kind is EventKind.COMMAND]
         assert audit and audit[0].data["source"] == "web"
-        assert "command from web 127.0.0.1 page-1 accepted" in audit[0].text
+        assert f"command from web {me} accepted" in audit[0].text
 
 
 async def test_the_safety_rules_apply_to_the_page_as_to_any_client() -> None:
@@ -119,3 +121,16 @@ async def test_the_feed_is_refused_to_a_page_of_another_site() -> None:
                 "d1",
                 "d2",
             ]
+
+
+async def test_a_command_that_names_a_key_twice_is_refused() -> None:
+    """Issue 32 item 10: {"run": false, "run": true} was taken as a run; a proxy or a
+    reviewer reading the first key sees a stop."""
+    async with small_gateway(web_section(commands=True, token_sha256=TOKEN_SHA256)) as gw:
+        url = f"{gw.url}api/drives/d1/command"
+        headers = {"Authorization": f"Bearer {TOKEN}", "X-Page-Id": "page-1"}
+        async with gw.http.post(url, data=b'{"run": false, "run": true}', headers=headers) as r:
+            body = await r.json()
+            assert r.status == 400
+            assert "'run' is given twice" in body["error"]
+        assert not gw.hub.desired("d1").run

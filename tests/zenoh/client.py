@@ -21,6 +21,8 @@ from typing import Any, Generic, TypeVar
 
 import zenoh
 
+from gateway.model import client_label
+
 T = TypeVar("T")
 
 
@@ -161,6 +163,11 @@ class Client:
     @property
     def zid(self) -> str:
         return str(self.session.zid())
+
+    @property
+    def label(self) -> str:
+        """The name the gateway gives this client (control_client, events)."""
+        return client_label(self.zid)
 
     def _source_info(self) -> Any:
         if self._id is None:

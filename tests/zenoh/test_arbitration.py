@@ -142,14 +142,17 @@ async def test_control_any_last_writer_wins_and_the_state_says_who(start: Any) -
 
 async def test_control_zenoh_refuses_modbus_commands(start: Any) -> None:
     gw: Both = await start("zenoh")
-    assert await gw.word(0x0000) == DEVICE_FAILURE
+    assert await gw.word(0x0000) is None  # a stop is never refused (issue 32)
+    assert gw.daemon.hub.desired("d1").source.value == "none"  # and takes no control
     assert await gw.word(0x0001) == DEVICE_FAILURE
     assert not gw.daemon.hub.desired("d1").run
     assert await gw.command({"run": True, "speed_rpm": 600}) == {"accepted": True}
     regs = await gw.registers(lambda r: r[14] == SOURCE_CODES["zenoh"] and r[0] & 0b100 != 0)
     assert regs[15] == 1  # control mode "zenoh"
-    assert await gw.word(0x0000) == DEVICE_FAILURE  # a Modbus stop is refused too
-    assert gw.daemon.hub.desired("d1").run
+    # a Modbus stop is applied (a stop is never refused, issue 32); control stays with Zenoh
+    assert await gw.word(0x0000) is None
+    assert not gw.daemon.hub.desired("d1").run
+    assert gw.daemon.hub.desired("d1").source.value == "zenoh"
 
 
 async def test_control_modbus_refuses_zenoh_commands(start: Any) -> None:
@@ -164,10 +167,14 @@ async def test_control_modbus_refuses_zenoh_commands(start: Any) -> None:
     assert regs[15] == 2  # control mode "modbus"
     with gw.zenoh.subscribe(f"{PREFIX}/drives/d1/events") as events:
         await gw.zenoh.settled(PREFIX)
-        gw.zenoh.put(COMMAND, {"run": False})  # a put is refused the same way, as an event
+        gw.zenoh.put(COMMAND, {"run": True})  # a put is refused the same way, as an event
         event = await events.auntil(lambda e: e.json()["kind"] == "command_refused")
-    assert "takes commands from modbus only" in event.json()["text"]
-    assert gw.daemon.hub.desired("d1").run
+        assert "takes commands from modbus only" in event.json()["text"]
+        assert gw.daemon.hub.desired("d1").run
+        gw.zenoh.put(COMMAND, {"run": False})  # a stop is never refused (issue 32)
+        await events.auntil(lambda e: e.json()["kind"] == "command")
+    assert not gw.daemon.hub.desired("d1").run
+    assert gw.daemon.hub.desired("d1").source.value == "modbus"
 
 
 @pytest.mark.parametrize("control", ["any", "zenoh", "modbus"])

@@ -10,6 +10,7 @@ const S = {
   offset: 0,              // server clock - browser clock, s
   span: 600,
   pageId: (crypto.randomUUID ? crypto.randomUUID() : String(Math.random()).slice(2)).slice(0, 36),
+  client: "",  // this page's label in control_client, from its first accepted command
   dirty: new Set(),
 };
 const MAX_EVENTS = 100;
@@ -144,6 +145,7 @@ async function command(id, body) {
       body: JSON.stringify(body),
     });
     const answer = await r.json();
+    if (answer.client) S.client = answer.client;  // this page's published label
     if (result && Object.keys(body).length) {
       result.textContent = answer.accepted ? ` ${id}: accepted` : ` ${id}: refused: ${answer.error}`;
     }
@@ -156,7 +158,7 @@ function keepAlive() {
   // The command watchdog (command_timeout) is fed by the client in control: this page.
   if (!S.commands) return;
   for (const d of S.drives.values()) {
-    if (d.control_source === "web" && d.control_client && d.control_client.endsWith(" " + S.pageId)) {
+    if (d.control_source === "web" && S.client && d.control_client === S.client) {
       command(d.id, {});
     }
   }
