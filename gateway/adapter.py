@@ -198,7 +198,9 @@ class AdapterClass(Protocol):
     """The class-level side of an adapter: its schema and its constructor. An adapter may
     also define ``check_bus(table, bus_options, drive_options)``, a classmethod raising a
     ConfigError for a rule across the bus's drives (the config reader calls it once the
-    drives are read)."""
+    drives are read), and ``safety_warnings(bus, drive)``, a classmethod returning what
+    ``check-config`` warns of a drive's safety settings (a reaction to a lost master
+    switched off; docs/safety.md): see :func:`safety_warnings`."""
 
     devices: ClassVar[frozenset[Device]]
     address_range: ClassVar[tuple[int, int]]
@@ -267,6 +269,17 @@ def load_adapter(name: str) -> AdapterClass:
     _check_class_side(name, cls)
     result: AdapterClass = cls
     return result
+
+
+def safety_warnings(bus: BusConfig, drive: DriveConfig) -> list[str]:
+    """What the drive's adapter warns of its safety settings, read from the config alone
+    (``check-config``; nothing is opened): each a line naming the drive, the key or the
+    drive's parameter, and what follows from it."""
+    cls = load_adapter(bus.adapter)
+    hook = getattr(cls, "safety_warnings", None)
+    if not callable(hook):
+        return []
+    return [str(w) for w in hook(bus, drive)]
 
 
 def _check_class_side(name: str, cls: object) -> None:

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from gateway import __version__
+from gateway.adapter import safety_warnings
 from gateway.config import DEFAULT_CONFIG, Config, load
 from gateway.errors import ConfigError, ConfigErrors
 from gateway.loader import load_optional
@@ -236,6 +237,11 @@ def cmd_check_config(args: argparse.Namespace) -> int:
                 f"  {d.id:<16} {d.device.value:<8} address {d.address:<4} "
                 f"modbus unit {unit:<4} control {d.control.value}"
             )
+    warnings = [w for bus in config.buses for d in bus.drives for w in safety_warnings(bus, d)]
+    if warnings:
+        print(f"safety warnings ({len(warnings)}; docs/safety.md):")
+        for warning in warnings:
+            print(f"  {warning}")
     if todo:
         print(f"left to fill in ({len(todo)}):")
         for item in todo:

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from gateway import __version__
-from gateway.adapter import DriveAdapter, load_adapter
+from gateway.adapter import DriveAdapter, EventKind, load_adapter
 from gateway.config import BusConfig, Config, load
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.hub import DrivePolicy, Hub
@@ -472,12 +472,30 @@ class Daemon:
             await asyncio.wait_for(self._wait_stopped(), bound)
             log.info("all drives stopped")
         except TimeoutError:
-            still = [s.id for s in self.hub.states() if s.online and s.running]
-            log.warning("shutdown bound %.1f s reached; still running: %s", bound, still)
+            self._left_turning(bound)
         # Adapters first (they leave their buses cleanly on cancellation), then the rest.
         await self._cancel(self._adapter_tasks)
         await self._cancel([t for t in self._tasks if t not in self._adapter_tasks])
         log.info("drive-gateway stopped")
+
+    def _left_turning(self, bound: float) -> None:
+        """The shutdown bound passed with drives still turning (docs/safety.md, "Shutdown"):
+        the gateway does not wait on (systemd's stop timeout would end it mid-way); it says
+        which drives, and leaves each to the stop it was sent and to its own reaction to a
+        lost master."""
+        still = [s for s in self.hub.states() if s.online and s.running]
+        log.warning(
+            "shutdown bound %.1f s reached; still running: %s", bound, [s.id for s in still]
+        )
+        for state in still:
+            speed = "" if state.speed_rpm is None else f" at {state.speed_rpm:g} rpm"
+            self.hub.event(
+                state.id,
+                EventKind.SAFETY,
+                f"still turning{speed} after the shutdown bound ({bound:g} s): the gateway "
+                "leaves the bus with the stop sent; the drive's own reaction to a lost master "
+                f"follows ({state.failsafe_text or 'not known to the gateway'})",
+            )
 
     async def _wait_stopped(self) -> None:
         with self.hub.subscribe_states() as sub:

@@ -130,7 +130,7 @@ def render() -> str:
         "### Status bits (input register 0)",
         "",
         *_table(("bit", "name", "set when"), [(b.bit, f"`{b.name}`", b.doc) for b in STATUS_BITS]),
-        "Bits 8-15 are reserved and read 0.",
+        "Bits 11-15 are reserved and read 0.",
         "",
         "### Status codes (input register 1)",
         "",

@@ -111,8 +111,28 @@ STATUS_BITS: tuple[StatusBit, ...] = (
     StatusBit(5, "faulted", "faulted, or tripped (soft starter)", lambda s: s.faulted),
     StatusBit(6, "alarm", "an alarm (warning) is active", lambda s: s.alarm),
     StatusBit(7, "remote", "the drive takes its commands from the network", lambda s: s.remote),
+    StatusBit(
+        8,
+        "local_control",
+        "the drive ignores the network's run commands (local control): runs are refused, "
+        "stops are still sent",
+        lambda s: s.local_control,
+    ),
+    StatusBit(
+        9,
+        "no_failsafe",
+        "the drive keeps running if the gateway is lost (its comm-loss reaction is off)",
+        lambda s: s.failsafe is False,
+    ),
+    StatusBit(
+        10,
+        "doubtful",
+        "frames that contradict each other were heard for this drive: its readings may be "
+        "forged; runs are refused",
+        lambda s: s.doubtful,
+    ),
 )
-"""Input register 0. Bits 8-15 are reserved and read 0."""
+"""Input register 0. Bits 11-15 are reserved and read 0."""
 
 
 def status_flags(state: DriveState) -> int:

@@ -32,11 +32,13 @@ TIMEOUT = scaled(30.0)  # a bound on waits for events: tests/support/timing.py
 RUN, REVERSE, RESET, QUICK_STOP, COAST_STOP = 0x01, 0x02, 0x04, 0x08, 0x10  # docs/modbus-map.md
 
 
-def header(modbus_port: int, client_endpoint: str, tick: float = 0.01) -> str:
+def header(
+    modbus_port: int, client_endpoint: str, tick: float = 0.01, shutdown_timeout: float = 3.0
+) -> str:
     """The [gateway], [zenoh] and [modbus] tables of an end-to-end config."""
     return f"""
 [gateway]
-shutdown_timeout = 3.0
+shutdown_timeout = {shutdown_timeout}
 tick = {tick}
 [zenoh]
 prefix = "{PREFIX}"
@@ -145,14 +147,18 @@ async def for_each(
 
 @contextlib.asynccontextmanager
 async def running_gateway(
-    tmp_path: Path, buses: Callable[[], str], drives: list[str], tick: float = 0.01
+    tmp_path: Path,
+    buses: Callable[[], str],
+    drives: list[str],
+    tick: float = 0.01,
+    shutdown_timeout: float = 3.0,
 ) -> AsyncIterator[Gateway]:
     """Start the daemon on ``header + buses()``; yield once every drive in ``drives`` is online."""
     cfg = tmp_path / "gateway.toml"
     modbus_port = free_port()
     client_endpoint = zenoh_endpoint()
     client = Client(client_endpoint, asyncio.get_running_loop(), listen=True)
-    cfg.write_text(header(modbus_port, client_endpoint, tick) + buses())
+    cfg.write_text(header(modbus_port, client_endpoint, tick, shutdown_timeout) + buses())
     config = load(cfg).with_overrides(zenoh_endpoint=zenoh_endpoint())
     daemon = Daemon(config, notifier=Notifier({}))
     task = asyncio.create_task(daemon.run())
@@ -172,5 +178,5 @@ async def running_gateway(
         modbus.close()
         daemon.request_stop()
         with contextlib.suppress(Exception):
-            await asyncio.wait_for(task, 10)
+            await asyncio.wait_for(task, shutdown_timeout + 10)
         client.close()

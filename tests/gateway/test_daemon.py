@@ -161,6 +161,7 @@ def test_shutdown_is_bounded_when_a_drive_does_not_stop(tmp_path: Path, notify_s
     assert proc.returncode == 0, err
     assert "gateway shutting down: ramp_stop applied" in err
     assert "shutdown bound 0.5 s reached; still running: ['d1']" in err
+    assert "still turning" in err and "the drive's own reaction to a lost master" in err
     assert "all drives stopped" not in err
     assert state_file.read_text().splitlines() == ["started", "left the bus"]
 

@@ -370,3 +370,14 @@ def test_access_policy() -> None:
     assert policy.holding_read_refusal(1, 0, 2) is None
     assert policy.holding_read_refusal(1, 0, 3) is ExceptionCode.ILLEGAL_DATA_ADDRESS
     assert policy.holding_read_refusal(0, 0, 1) is ExceptionCode.ILLEGAL_DATA_ADDRESS
+
+
+def test_the_safety_flags_of_issue_32_are_status_bits_8_to_10() -> None:
+    from gateway.modbus.map import status_flags
+    from gateway.model import CommState, Device, DriveState
+
+    base = DriveState(id="d", device=Device.CFW11, bus="b", address=1, comm=CommState.ONLINE)
+    assert status_flags(base.changed(local_control=True)) & 0x0700 == 0x0100
+    assert status_flags(base.changed(failsafe=False)) & 0x0700 == 0x0200
+    assert status_flags(base.changed(failsafe=None)) & 0x0700 == 0
+    assert status_flags(base.changed(doubtful=True)) & 0x0700 == 0x0400

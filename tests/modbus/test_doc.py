@@ -64,6 +64,7 @@ def test_tables_are_contiguous_and_consistent() -> None:
     assert [h.name for h in DRIVE_HOLDINGS[:3]] == ["command", "speed_ref_rpm", "speed_ref_pct"]
     assert [b.name for b in STATUS_BITS] == [
         "online", "ready", "running", "reverse", "at_reference", "faulted", "alarm", "remote",
+        "local_control", "no_failsafe", "doubtful",
     ]  # fmt: skip
     assert [b.name for b in COMMAND_BITS] == [
         "run", "reverse", "fault_reset", "quick_stop", "coast_stop", "jog",

@@ -162,11 +162,17 @@ async def demo_gateway(
     drives: Mapping[str, Mapping[str, Any]] | None = None,
     *,
     wait_for: tuple[str, ...] = DRIVES,
+    shutdown_timeout: float = 3.0,
     **bus_overrides: Any,
 ) -> AsyncIterator[Gateway]:
     """The daemon on the demo's buses (simulated), every drive in ``wait_for`` online."""
     buses = demo_buses(new_channel(), drives, **bus_overrides)
-    async with running_gateway(tmp_path, lambda: toml_buses(buses), list(wait_for)) as gw:
+    async with running_gateway(
+        tmp_path,
+        lambda: toml_buses(buses),
+        list(wait_for),
+        shutdown_timeout=shutdown_timeout,
+    ) as gw:
         yield gw
 
 

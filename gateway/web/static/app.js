@@ -69,7 +69,7 @@ function renderDrive(d) {
   cell(tr, "device").textContent = d.device;
   cell(tr, "where").textContent = `${d.bus} / ${d.address}`;
   cell(tr, "comm").replaceChildren(badge(d.comm));
-  cell(tr, "status").replaceChildren(badge(d.status));
+  cell(tr, "status").replaceChildren(badge(d.status), ...safetyBadges(d));
   const speed = cell(tr, "speed"); speed.className = "num"; speed.textContent = num(d.speed_rpm, 1);
   const ref = cell(tr, "ref"); ref.className = "num"; ref.textContent = num(d.speed_ref_rpm, 1);
   const current = cell(tr, "current"); current.className = "num";
@@ -87,6 +87,21 @@ function renderDrive(d) {
   cell(tr, "age").dataset.ts = d.ts;
   cell(tr, "age").textContent = ageText(d.ts);
   if (S.commands) renderCommands(tr, d);
+}
+
+// Issue 32: what limits the gateway's command of a drive, said beside its status.
+function safetyBadges(d) {
+  const out = [];
+  const add = (cls, text, title) => {
+    const b = badge(cls); b.textContent = text; b.title = title; b.dataset.safety = cls;
+    out.push(b);
+  };
+  if (d.local_control) add("local", "local", "the drive ignores the network's run commands");
+  if (d.failsafe === false) {
+    add("no-failsafe", "no fail-safe", "keeps running if the gateway is lost: " + (d.failsafe_text || ""));
+  }
+  if (d.doubtful) add("doubtful", "doubtful", "frames that contradict each other were heard");
+  return out;
 }
 
 function renderAges() {
