@@ -662,6 +662,8 @@ class Hub:
                 client=client,
             )
         new = base.merged(cmd, source, client)
+        if cmd.run is False and cmd.jog is None:
+            new = replace(new, jog=False)  # a stop ends a jog too
         if cmd.fault_reset or new.quick_stop or new.coast_stop:
             # Rules 1 and 2: a reset is one edge and the drive does not restart by itself;
             # a quick stop or coast stop ends a run, and its release never restarts one.
@@ -683,6 +685,8 @@ class Hub:
         refused), and control stays where it is (it feeds no watchdog either)."""
         old = drv.desired
         new = old.merged(cmd, old.source, old.client)
+        if cmd.run is False and cmd.jog is None:
+            new = replace(new, jog=False)
         if new.quick_stop or new.coast_stop:
             new = replace(new, run=False, jog=False)
         drv.desired = new

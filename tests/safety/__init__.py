@@ -1,0 +1,1 @@
+"""Stateful model checks of the safety rules, one per device kind (docs/safety.md)."""
