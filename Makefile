@@ -52,10 +52,12 @@ test-vcan: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench
 
-# The soak run: minutes, not in CI; SOAK_SECONDS bounds it (docs/reliability.md).
+# The soak run: minutes, not in CI; SOAK_SECONDS bounds it (docs/reliability.md); then the
+# safety model checks (tests/safety) with many more examples (docs/safety.md).
 SOAK_SECONDS ?= 180
 soak: $(STAMP)
 	SOAK_SECONDS=$(SOAK_SECONDS) $(BIN)/python -m pytest -q -m slow tests/reliability
+	DRIVE_GATEWAY_SOAK=1 $(BIN)/python -m pytest -q tests/safety
 
 # A production install (as root): PREFIX/venv with the runtime dependencies only, the unit,
 # /etc/drive-gateway/site.toml, the user, completions and man page; it prints the next steps
