@@ -4,21 +4,25 @@ All methods run on the event loop's thread. Time comes from an injected
 monotonic clock (watchdogs) and wall clock (timestamps), so the safety rules are
 tested by stepping :meth:`Hub.tick` with a fake clock.
 
-Safety rules (ARCHITECTURE.md, docs/reliability.md) enforced here:
+Safety rules (docs/architecture.md, "Safety rules"; docs/safety.md) enforced here:
 
 1. No unintended start: a drive runs only on a run command given after the last
-   of these: the gateway started; the drive came (back) online; a fault or trip
-   ended, however it ended (the gateway's reset, the keypad, an auto-reset, a
-   power cycle); a quick stop or coast stop was given or released; control
-   passed to another client; the command watchdog acted. Each of these clears
-   the desired ``run`` (and ``jog``). A run command that arrives while the drive
-   is faulted or tripped, latched in quick stop or coast stop, or not online is
-   refused with the reason, never held for later.
+   of these: the gateway started; the drive came (back) online or left online; a
+   fault or trip ended, however it ended; a quick stop or coast stop was given or
+   released; control passed to another client, or to the drive's local control and
+   back; the command watchdog acted. Each of these clears the desired ``run`` (and
+   ``jog``). A run command that arrives while the drive is faulted or tripped, latched
+   in quick stop or coast stop, not online, in local control, doubtful, or (with
+   ``require_failsafe``) without a known fail-safe reaction is refused with the
+   reason, never held for later. A stop is never refused: the stop part of a command
+   is applied whatever else holds, and a stop kind the drive lacks becomes the nearest
+   one it has. An offline drive's readings are unknown, never its last values.
 2. Fault reset is an edge: each request bumps ``fault_reset_seq`` once.
 3. Control belongs to a client (a source and the client's id within it: a Modbus
-   peer address, a Zenoh session id), not to a protocol. The command watchdog
-   is fed only by the client in control; a client that stops refreshing within
-   ``command_timeout`` gets ``on_command_timeout`` applied (ramp stop, coast, hold).
+   peer address, the label of a Zenoh session id), not to a protocol. The command
+   watchdog is fed only by the client in control; a client that stops refreshing
+   within ``command_timeout`` gets ``on_command_timeout`` applied (ramp stop, coast,
+   hold).
 
 Every accepted command that changes the desired command is written to the log
 and to the drive's events (the audit trail); repeated identical refusals are
