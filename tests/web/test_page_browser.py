@@ -251,3 +251,18 @@ async def test_with_commands_on_a_user_with_the_token_commands_from_the_page(pag
             timeout=WAIT_MS,
         )
         await screenshot(page, "commands-on")
+
+
+async def test_local_control_no_failsafe_and_doubtful_show_beside_the_status(page: Page) -> None:
+    """Issue 32 items 5, 6, 12: what limits the gateway's command of a drive is on the page."""
+    async with small_gateway(web_section(), drives=("d1", "d2")) as gw:
+        await open_page(page, gw.url, 2)
+        gw.hub.update("d1", local_control=True, failsafe=False, failsafe_text="P0313 = 0")
+        gw.hub.update("d2", doubtful=True)
+        status = '#drives-body tr[data-drive="{}"] td[data-col="status"] [data-safety="{}"]'
+        for drive, kind in (("d1", "local"), ("d1", "no-failsafe"), ("d2", "doubtful")):
+            await page.wait_for_selector(status.format(drive, kind), timeout=WAIT_MS)
+        title = await page.locator(status.format("d1", "no-failsafe")).get_attribute("title")
+        assert title is not None and "P0313 = 0" in title
+        assert await page.locator(status.format("d2", "local")).count() == 0
+        await screenshot(page, "safety-badges")
