@@ -127,6 +127,40 @@ async def test_another_zenoh_sessions_empty_commands_never_feed_the_watchdog(
             other.close()
 
 
+async def test_a_session_that_takes_the_published_client_id_is_another_client(
+    tmp_path: Path,
+) -> None:
+    """Issue 32 item 9: a session opened with the id the state published as the controller's
+    fed its watchdog, and the drive kept turning after its controller left."""
+    timeout = scaled(1.5)
+    drives = {"cfw320": {"command_timeout": timeout}}
+    async with demo_gateway(tmp_path, drives) as gw:
+        scada = zenoh_client(gw)
+        try:
+            with Events(gw) as events:
+                assert (await command(scada, "cfw320", {"run": True, "speed_rpm": 900}))["accepted"]
+                state = await gw.wait_for("cfw320", at_speed(900.0))
+                published = state.control_client
+                assert published is not None and published != scada.zid
+                endpoint = gw.daemon.runtime.config.zenoh.listen[0]
+                copier = Client(
+                    endpoint, asyncio.get_running_loop(), identified=True, zid=published
+                )
+                try:
+                    assert copier.zid == published  # Zenoh took the copied id
+                    watchdog = asyncio.create_task(events.text("cfw320", "no command from zenoh"))
+                    while not watchdog.done():
+                        assert (await command(copier, "cfw320", {}))["accepted"]
+                        await asyncio.sleep(timeout / 8)
+                    event = await watchdog
+                    assert f"no command from zenoh {scada.label} for" in event.text
+                    await gw.wait_for("cfw320", stopped)
+                finally:
+                    copier.close()
+        finally:
+            scada.close()
+
+
 async def test_a_command_from_another_modbus_client_takes_control_and_stops(
     tmp_path: Path,
 ) -> None:

@@ -26,9 +26,12 @@ from gateway.model import client_label
 T = TypeVar("T")
 
 
-def client_config(endpoint: str, listen: bool = False, rcvbuf: int | None = None) -> zenoh.Config:
+def client_config(
+    endpoint: str, listen: bool = False, rcvbuf: int | None = None, zid: str | None = None
+) -> zenoh.Config:
     """Connect to ``endpoint`` (or, ``listen`` true, listen on it for the gateway to connect);
-    ``rcvbuf``: a small TCP receive buffer, to make a slow subscriber."""
+    ``rcvbuf``: a small TCP receive buffer, to make a slow subscriber; ``zid``: the session
+    id to take (hex), as any Zenoh client may choose its own."""
     doc: dict[str, Any] = {
         "mode": "peer",
         "listen": {"endpoints": [endpoint] if listen else []},
@@ -43,6 +46,8 @@ def client_config(endpoint: str, listen: bool = False, rcvbuf: int | None = None
     }
     if rcvbuf is not None:
         doc["transport"] = {"link": {"tcp": {"so_rcvbuf": rcvbuf}}}
+    if zid is not None:
+        doc["id"] = zid
     return zenoh.Config.from_json5(json.dumps(doc))
 
 
@@ -152,9 +157,11 @@ class Client:
         listen: bool = False,
         rcvbuf: int | None = None,
         identified: bool = False,
+        *,
+        zid: str | None = None,
     ) -> None:
         self.loop = loop
-        self.session = zenoh.open(client_config(endpoint, listen, rcvbuf))
+        self.session = zenoh.open(client_config(endpoint, listen, rcvbuf, zid))
         # identified: puts and queries carry a source info with this session's id, so
         # the gateway tells this client from others (safety rule 3); else anonymous
         if identified:
