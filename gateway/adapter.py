@@ -148,6 +148,9 @@ class Capabilities:
     alarm_texts: Mapping[int, str] = field(default_factory=dict)
     reverse_refused: str | None = None
     params: ParamTable = field(default_factory=dict)
+    run_needs_ready: bool = False
+    """A run command while the drive is ``not_ready`` is refused (a soft starter that is not
+    ready does not keep a start for later: docs/safety.md)."""
     stop_substitutes: Mapping[str, str] = field(default_factory=dict)
     """A stop kind the drive lacks -> the nearest one it has (safety rule 1 of
     docs/architecture.md, "a stop is never refused"): ``"quick_stop": "coast_stop"``

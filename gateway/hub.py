@@ -106,6 +106,9 @@ _TRANSITION_FIELDS = frozenset(
     }
 )
 """Fields whose change may raise an event or clear run (rule 1)."""
+_READY_STATUSES = frozenset(
+    {DriveStatus.READY, DriveStatus.STARTING, DriveStatus.RUNNING, DriveStatus.STOPPING}
+)
 _UNKNOWN_COMM = frozenset({CommState.OFFLINE, CommState.CONNECTING})
 """Comm states in which nothing the drive said is current: its readings are unknown."""
 _UNKNOWN_READINGS: dict[str, Any] = {
@@ -383,6 +386,10 @@ class Hub:
         self._on_trust_transitions(drive_id, drv, old, new)
         if new.comm in _UNKNOWN_COMM:
             return  # no fault or alarm news from a drive that is not heard
+        if new.status is DriveStatus.NOT_READY and old.status in _READY_STATUSES and old.online:
+            # Rule 1: what made it not ready (a reset input opened, undervoltage, an enable
+            # taken away) must not start it again by itself when it ends.
+            self._clear_run(drive_id, drv, "drive became not ready")
         if new.faulted and not old.faulted:
             kind = self._fault_event(drive_id, new)
             self._clear_run(drive_id, drv, f"drive {kind.value}")
@@ -821,6 +828,11 @@ def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
     """Rule 1: a run or jog command is refused, never held, while the drive may not start."""
     state = drv.state
     _check_trust(drive_id, drv)
+    if drv.caps.run_needs_ready and state.status is DriveStatus.NOT_READY:
+        raise CommandRejected(
+            f"drive {drive_id} is not ready: send the run command when it is ready "
+            "(a run given now would not be kept for later)"
+        )
     if state.faulted:
         code = "" if state.fault_code is None else f" {state.fault_code}"
         text = f" ({state.fault_text})" if state.fault_text else ""

@@ -5,7 +5,12 @@ Keys (all optional)::
     mode = "basic" | "extended" | "parameter"   GSD operating mode (guide 4.1)
     flc_a = 52.0            motor full load current in A: current_a = %FLC x flc_a
     motor_set = "remote_input" | "primary" | "secondary"   control word bits 2-3 (4.2)
-    comm_timeout = 10       s, 0-100: communication timeout in the GSD user data (3.3)
+    comm_timeout = 10       s, 0-100: communication timeout in the GSD user data (3.3);
+                            0 leaves the starter running when the master is lost (not fail-safe)
+    network_comms = "soft_trip_and_log" | "trip_starter" | "warn_and_log" | "log_only"
+                            what parameter 6-13 Network Communications is set to on the starter
+                            (2.3, 3.3; the gateway cannot read it): its reaction to a lost
+                            master, published as ``failsafe`` (unset: unknown)
     request_period = 0.1    s between data requests in the round robin (4.3)
     param_timeout = 2.0     s to wait for a parameter read/write answer (4.4)
     reset_pulse = 0.2       s the reset bit stays set for one reset request
@@ -24,8 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
+from adapters.mcd600.failsafe import NETWORK_COMMS_NAMES, failsafe_warning
 from adapters.mcd600.layout import Mode
-from adapters.mcd600.simparams import PARAM_DEFS
+from adapters.mcd600.simparams import PARAM_DEFS, NetworkCommsAction
 from adapters.mcd600.words import MotorSet
 
 if TYPE_CHECKING:
@@ -51,6 +57,7 @@ class Mcd600Options:
     flc_a: float | None = None
     motor_set: MotorSet = MotorSet.REMOTE_INPUT
     comm_timeout: int = 10
+    network_comms: NetworkCommsAction | None = None  # 6-13 as the site states it
     request_period: float = 0.1
     param_timeout: float = 2.0
     reset_pulse: float = 0.2
@@ -68,6 +75,13 @@ class Mcd600Options:
     @property
     def group_mask(self) -> int:
         return 1 << (self.group - 1) if self.group else 0
+
+
+def safety_warning(options: Mcd600Options, watchdog: float) -> str | None:
+    """``check-config``'s line for a starter with these options on a line whose DP watchdog
+    for it is ``watchdog`` s (0: off), or None when it stops by itself once the master is
+    gone (guide 3.3; :func:`adapters.mcd600.failsafe.failsafe_warning`)."""
+    return failsafe_warning(options.comm_timeout, options.network_comms, watchdog)
 
 
 def user_prm_data(options: Mcd600Options) -> bytes:
@@ -99,6 +113,7 @@ def parse_options(table: Table, drive: DriveConfig) -> Mcd600Options:
         comm_timeout=table.integer(
             "comm_timeout", d.comm_timeout, minimum=0, maximum=COMM_TIMEOUT_MAX
         ),
+        network_comms=_network_comms(table),
         request_period=table.number("request_period", d.request_period, minimum=0.0, maximum=60.0),
         param_timeout=table.number("param_timeout", d.param_timeout, minimum=0.01, maximum=60.0),
         reset_pulse=table.number("reset_pulse", d.reset_pulse, minimum=0.0, maximum=5.0),
@@ -110,6 +125,11 @@ def parse_options(table: Table, drive: DriveConfig) -> Mcd600Options:
             "sim_time_scale", d.sim_time_scale, minimum=0.01, maximum=SIM_TIME_SCALE_MAX
         ),
     )
+
+
+def _network_comms(table: Table) -> NetworkCommsAction | None:
+    name = table.string("network_comms", None, choices=list(NETWORK_COMMS_NAMES))
+    return None if name is None else NETWORK_COMMS_NAMES[name]
 
 
 def _sim_params(table: Table) -> tuple[tuple[int, int], ...]:

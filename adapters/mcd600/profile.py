@@ -5,10 +5,20 @@ tables are cited next to each use. One :class:`Mcd600Profile` per configured sta
 keeps no state shared with other instances.
 
 What the common model gets from a soft starter: status (ready, starting, running, stopping,
-tripped, not ready), running, remote (network is the command source), alarm (warning),
+tripped, not ready), running, remote (network is the command source) and local_control
+(it is not: the starter ignores the card's commands, guide 3.3), alarm (warning),
 current in %FLC every cycle and in A when ``flc_a`` is configured, the trip code and text;
 in extended and parameter modes also motor temperature, power, voltage and the other
 monitoring values (``values``). Speed fields stay None: a soft starter has no speed.
+At connect: ``failsafe``/``failsafe_text``, the starter's reaction to a lost master from
+its config (:mod:`adapters.mcd600.failsafe`; the card cannot be asked).
+
+No start by itself (docs/safety.md, issue 32 item 3): start is a level on the wire (4.2
+byte 1 bit 0) and the starter acts on it whenever it can (1.3: "a máquina pode entrar em
+funcionamento sem aviso"). The profile sends start only on a run it saw go from off to on
+after the last of: (re)connection, a trip, a quick/coast stop, a status of not ready (reset
+input open, 3.3 note; restart delay), the starter out of network control (3.3). The latch
+(``_run_armed``) clears on each of these and re-arms only when ``desired.run`` is seen off.
 """
 
 from __future__ import annotations
@@ -20,8 +30,14 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from adapters.mcd600.diag import ExtDiag
+from adapters.mcd600.failsafe import failsafe_of
 from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
-from adapters.mcd600.options import Mcd600Options, parse_options, user_prm_data
+from adapters.mcd600.options import (
+    Mcd600Options,
+    parse_options,
+    safety_warning,
+    user_prm_data,
+)
 from adapters.mcd600.params import ParamChannel
 from adapters.mcd600.poller import DataPoller
 from adapters.mcd600.programming import IDLE, PARAM_NUMBER_MAX, PARAM_VALUE_MAX, ParamRequest
@@ -58,6 +74,11 @@ UNSUPPORTED: Final[Mapping[str, str]] = MappingProxyType(
 )
 """Commands the starter cannot do (speed is refused by the missing speed scale)."""
 
+STOP_SUBSTITUTES: Final[Mapping[str, str]] = MappingProxyType({"quick_stop": "coast_stop"})
+"""The card's only fast stop is byte 0 bit 4, "parada rápida (parada por inércia)": a coast
+(guide 4.2 table 2). A quick stop is that coast stop (the hub says so once, issue 32 item 4);
+the soft starter has no faster controlled ramp than its soft stop."""
+
 NEEDS_PARAMETER_MODE = (
     'MCD 600 parameter access needs mode = "parameter" (the PROFIBUS card reads and writes '
     "parameters only through the programming structure of the cyclic data, guide 4.4; "
@@ -72,6 +93,9 @@ class Mcd600Profile(DpProfileBase):
     addresses: ClassVar[AddressRange] = AddressRange(
         1, 125, "MCD 600 PROFIBUS manual 7.2 Configurações: Faixa de endereços 1-125"
     )
+    failsafe_needs_watchdog: ClassVar[bool] = True
+    """Guide 3.3 l.171: the comm timeout starts when the card leaves data exchange, which
+    only the DP watchdog makes it do (the adapter publishes failsafe false with it off)."""
     sees_every_diag: ClassVar[bool] = True
     """Every diagnosis read comes here, even bytes equal to the last ones: after a reset the
     card clears its telegram (5.1.1) without raising the alert, so the same trip again is
@@ -95,6 +119,13 @@ class Mcd600Profile(DpProfileBase):
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Mcd600Options:
         return parse_options(table, drive)
+
+    @classmethod
+    def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
+        """``check-config``: the starter's reaction to a lost master from the config alone
+        (comm_timeout, network_comms and the DP watchdog: :func:`.options.safety_warning`)."""
+        text = safety_warning(_options_of(drive), watchdog)
+        return [] if text is None else [text]
 
     def __init__(self, drive: DriveConfig, options: Mcd600Options | None = None) -> None:
         self.drive_id = drive.id
@@ -136,13 +167,28 @@ class Mcd600Profile(DpProfileBase):
         )
 
     def capabilities(self) -> Capabilities:
-        return Capabilities(speed_scale=None, unsupported=dict(UNSUPPORTED))
+        return Capabilities(
+            speed_scale=None,
+            unsupported=dict(UNSUPPORTED),
+            stop_substitutes=dict(STOP_SUBSTITUTES),
+            run_needs_ready=True,  # a not-ready starter keeps no start for later (item 3)
+        )
 
     async def on_connect(self, channel: RecordChannel, event: EventSink) -> Readings:
         """Nothing to read at start-up (no DP-V1, no speed scale): start from a clean slate,
-        keeping a trip code the start-up diagnosis may already have given."""
+        keeping a trip code the start-up diagnosis may already have given. The reaction to
+        a lost master comes from the config (comm_timeout, network_comms; guide 3.3)."""
         self._reset_command_state()
-        return {}
+        failsafe, text = failsafe_of(self.options.comm_timeout, self.options.network_comms)
+        return {"failsafe": failsafe, "failsafe_text": text}
+
+    def unconfigured_outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The telegram before the starter is configured (first output after any
+        (re)connection): built fresh, a stop (start 0, soft stop as set on the starter,
+        no reset, 4.2), no data request, programming idle. Nothing of the command state is
+        touched, so it arms nothing."""
+        control = ControlWord(motor_set=self.options.motor_set)
+        return OutputTelegram(control, 0, IDLE).encode(self.layout)
 
     def on_comm_lost(self) -> None:
         self._params.fail(DriveOffline(f"MCD 600 {self.drive_id}: communication lost"))
@@ -218,6 +264,11 @@ class Mcd600Profile(DpProfileBase):
     def _status_changes(self, st: StatusWord) -> Readings:
         status = self._map_status(st)
         self._status = status
+        if status is DriveStatus.NOT_READY or not st.network_control:
+            # 3.3: not ready (reset input open, restart delay) or out of network control,
+            # the starter would act on a start held from before when it can again (start is
+            # a level, 4.2): like a trip, it needs a run seen off and on afterwards.
+            self._run_armed = False
         pct = round(st.current_pct_flc, 2)
         flc = self.options.flc_a
         return {
@@ -225,6 +276,7 @@ class Mcd600Profile(DpProfileBase):
             "running": st.active,
             "at_reference": status is DriveStatus.RUNNING,  # up to line speed (bypass)
             "remote": st.network_control,
+            "local_control": not st.network_control,  # 3.3: 1-1 Command Source not Network
             "alarm": st.warning,
             "current_pct_flc": pct,
             "current_a": None if flc is None else round(pct * flc / 100.0, 2),

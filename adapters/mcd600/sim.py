@@ -6,6 +6,15 @@ card's installation guide:
 
 * network commands are obeyed only when parameter 1-1 Command Source is Network and the
   reset input is closed (3.3); a start needs control word byte 0 bit 4 = 0 (4.2);
+* start is a level (4.2 byte 1 bit 0 "0 = Parada, 1 = Partida"): a start the master still
+  sends starts the starter whenever it becomes ready again (after the reset input closes
+  again, after a trip is reset at the keypad or by auto-reset, after 1-1 is set back to
+  Network). The guide warns of exactly this (1.3: "a máquina pode entrar em funcionamento
+  sem aviso"); the gateway's profile must not rely on the starter to refuse it;
+* the reset input (3.3 note, :meth:`set_reset_input`): while it is open ("ativa") the
+  starter does not operate: status not ready, a running motor coasts; opening it also
+  resets a trip whose condition is gone (it is the starter's reset switch; our reading,
+  the guide names it only);
 * the communication timeout from Set_Prm (3.3, 0-100 s, 0 = keep the state) forces the
   reaction of parameter 6-13 once the master has been gone that long;
 * Global_Control (6): Clear makes the starter quick stop; Sync holds the outputs until the
@@ -357,6 +366,19 @@ class Mcd600Sim(SimDeviceBase):
         else:
             self._tripped_at = at  # the condition is still there: try again after the delay
 
+    def set_reset_input(self, closed: bool, now: float) -> None:
+        """The starter's RESET input (guide 3.3 note). Opening it ("entrada de reset
+        ativa") resets a trip whose condition is gone, as the keypad's Reset does, and the
+        starter does not operate while it is open (not ready; an active starter stops, the
+        motor coasts). Closing it makes the starter ready again: a start still sent by the
+        master then starts it (start is a level, 4.2)."""
+        self.tick(now)
+        opened = self.reset_input_closed and not closed
+        self.reset_input_closed = closed
+        if opened and self._reset():
+            log.info("MCD 600 sim: trip reset by the reset input")
+        self._advance(0.0)
+
     def keypad_change(self, number: int, value: int) -> None:
         """Someone changes a parameter on the starter's keypad (5.1.2)."""
         self.params.set(number, value)  # ValueError for an unknown number or bad value
@@ -390,6 +412,7 @@ class Mcd600Sim(SimDeviceBase):
         if code is not None and not self.starter.tripped:
             self.starter.trip(code)  # an injected condition trips again until reset
         self.starter.available = self.reset_input_closed
+        self.starter.apply_availability()  # at once, also when no time passes
         self.starter.advance(dt * self.time_scale, self.settings())
 
     def _comm_deadline(self) -> float | None:

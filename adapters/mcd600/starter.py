@@ -158,7 +158,7 @@ class SoftStarter:
             dt -= step
 
     def _step(self, dt: float, s: StarterSettings) -> None:
-        self._availability()
+        self.apply_availability()
         self.motor.advance(dt)
         self.elapsed += dt
         handler = _STEPS.get(self.state)
@@ -168,7 +168,11 @@ class SoftStarter:
             self.current_a = 0.0
         self._thermal(dt, s)
 
-    def _availability(self) -> None:
+    def apply_availability(self) -> None:
+        """The reset input (guide 3.3 note: "se a entrada de reset estiver ativa, o soft
+        starter não opera"): open, a ready starter is not ready and an active one stops
+        (output off, the motor coasts); closed again, a not ready starter is ready. A trip
+        stays a trip either way."""
         if self.available and self.state is StarterState.NOT_READY:
             self.state = StarterState.READY
         elif not self.available and self.state is StarterState.READY:

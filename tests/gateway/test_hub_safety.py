@@ -199,3 +199,24 @@ def test_failsafe_false_is_said_and_a_site_may_require_it() -> None:
     hub.update("d", failsafe=True, failsafe_text="P0313 = 1: ramp stop")
     hub.submit("d", Source.ZENOH, RUN)
     assert hub.desired("d").run is True
+
+
+def test_a_drive_that_becomes_not_ready_loses_its_run() -> None:
+    """Rule 1: a reset input opened, an enable taken away: when it ends, nothing restarts."""
+    hub, _ = make_hub()
+    hub.submit("d", Source.ZENOH, RUN)
+    hub.update("d", status=DriveStatus.RUNNING, running=True)
+    hub.update("d", status=DriveStatus.NOT_READY, running=False)
+    assert hub.desired("d").run is False
+    hub.update("d", status=DriveStatus.READY)
+    assert hub.desired("d").run is False
+
+
+def test_a_drive_that_needs_ready_refuses_a_run_while_not_ready() -> None:
+    hub, _ = make_hub()
+    hub.set_capabilities("d", Capabilities(run_needs_ready=True))
+    hub.update("d", status=DriveStatus.NOT_READY)
+    with pytest.raises(CommandRejected, match="is not ready"):
+        hub.submit("d", Source.ZENOH, DriveCommand(run=True))
+    hub.update("d", status=DriveStatus.READY)
+    hub.submit("d", Source.ZENOH, DriveCommand(run=True))

@@ -286,7 +286,8 @@ async def test_connection_keeps_the_start_up_diagnosis_and_comm_loss_forgets_it(
     control(profile, DesiredCommand())
     assert control(profile, DesiredCommand(run=True)).start
     profile.on_ext_diag(bytes.fromhex("03 13 00"))  # read by the master before data exchange
-    assert await profile.on_connect(_NoChannel(), _no_event) == {}
+    changes = await profile.on_connect(_NoChannel(), _no_event)  # no bus read: the config's
+    assert set(changes) == {"failsafe", "failsafe_text"}  # reaction to a lost master (3.3)
     assert not control(profile, DesiredCommand(run=True)).start  # run must be renewed
     assert profile.inputs(bytes.fromhex("40 04"), 1.0)["fault_code"] == 19
     profile.on_comm_lost()
