@@ -4,10 +4,17 @@ One master engine (:mod:`.master`) on one serial link (:mod:`.link`, :mod:`.driv
 device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive:
 
 * start-up states -> comm "connecting"; absent -> "offline" (one event);
-* data exchange reached -> outputs at a safe value (the profile's outputs for a stopped
-  command), then ``profile.on_connect`` (scales, start-up parameters) through a DP-V1
-  :class:`RecordChannel`; a failure leaves the drive "not configured" (comm connecting, an
-  event, retried with back-off), success sets the capabilities and makes it configured;
+* data exchange reached -> outputs at a safe value (the profile's ``unconfigured_outputs``
+  where it has that hook: the WEG drives' stop in both data profiles; else its outputs for
+  a stopped command), then ``profile.on_connect`` (scales, start-up parameters) through a
+  DP-V1 :class:`RecordChannel`; a failure leaves the drive "not configured" (comm
+  connecting, an event, retried with back-off, the same safe outputs), success sets the
+  capabilities and makes it configured. An ``on_connect`` failure whose exception has
+  ``reparameterise = True`` (a parameter the slave takes only without cyclic data was
+  written) takes the slave out of data exchange and parameterises it again;
+* a profile with ``failsafe_needs_watchdog = True`` (the drive's reaction to a lost master
+  relies on the DP watchdog) is published ``failsafe`` false while its watchdog is 0 (off);
+  ``safety_warnings`` (``check-config``) asks the profile's hook of the same name;
 * configured: every cycle inputs -> ``profile.inputs`` -> ``hub.update(comm=online, ...)``
   and ``profile.outputs(hub.desired(id))`` -> the next Data_Exchange;
 * extended diagnosis (changed) -> ``profile.on_ext_diag`` -> hub events (every read, empty
@@ -84,6 +91,8 @@ CONNECT_BACKOFF: Final = (2.0, 60.0)  # s, between on_connect attempts of a driv
 CONTROL_CHECK: Final = 0.1  # s between checks of lost northbound control
 CODES_RETRY: Final = 1.0  # s before reading a profile's fault codes again after a failure
 LEAVE_MARGIN: Final = 0.01  # s after the last Clear before the port is closed
+MAX_REPARAMETERISE: Final = 2  # restarts asked by on_connect in a row before it is a failure
+WATCHDOG_OFF: Final = "watchdog = 0: the DP watchdog is off, the drive never sees the master go"
 
 CONNECTING_STATES: Final = frozenset(
     {
@@ -132,6 +141,8 @@ class _Drive:
     last_ext: bytes = b""
     absent_reported: bool = False
     connect_error: str | None = None
+    watchdog: float = 0.0  # the slave's DP watchdog, s (0: off)
+    reparameterised: int = 0  # restarts on_connect asked for since the last success
 
     @property
     def id(self) -> str:
@@ -191,6 +202,20 @@ class ProfibusAdapter:
         return opts.parse_drive_options(table, drive, profile_options, builtin, telegram)
 
     @classmethod
+    def safety_warnings(cls, bus: BusConfig, drive: DriveConfig) -> list[str]:
+        """``check-config``: what the drive's profile says of its safety settings from the
+        config alone (its ``safety_warnings(drive, watchdog)`` hook, given the profile's
+        options and the slave's DP watchdog; the WEG drives: watchdog 0 and P0313)."""
+        hook = getattr(cls.profile_class(drive.device), "safety_warnings", None)
+        if not callable(hook):
+            return []
+        bus_options = bus.options if isinstance(bus.options, opts.BusOptions) else None
+        drive_options = drive.options if isinstance(drive.options, opts.DriveOptions) else None
+        watchdog = _watchdog_of(bus_options or opts.BusOptions(), drive_options)
+        inner, _ = opts.profile_config(drive)
+        return [f"drive {drive.id}: {text}" for text in hook(inner, watchdog)]
+
+    @classmethod
     def profile_class(cls, device: Device) -> ProfileFactory:
         try:
             target = cls.profiles[device]
@@ -221,12 +246,10 @@ class ProfibusAdapter:
                 self._overrides[d.id] = override
             profile: DpProfile = self.profile_class(d.device)(inner)
             setup = _overridden(profile.setup(), override)
-            drive = _Drive(config=inner, profile=profile, setup=setup)
+            watchdog = _watchdog_of(self.options, drive_opts)
+            drive = _Drive(config=inner, profile=profile, setup=setup, watchdog=watchdog)
             self._drives[d.id] = drive
             self._by_address[d.address] = drive
-            watchdog = self.options.watchdog
-            if drive_opts is not None and drive_opts.watchdog is not None:
-                watchdog = drive_opts.watchdog
             slaves.append(_slave_params(d.address, setup, watchdog))
         self.master = Master(self.options.bus_params(), slaves)
         self._hub: HubPort | None = None
@@ -414,7 +437,7 @@ class ProfibusAdapter:
         drive.configured = False
         drive.absent_reported = False
         self._hub.update(drive.id, comm=CommState.CONNECTING)
-        self._set_outputs(drive, self._safe(drive), self._loop.time())
+        self._set_unconfigured(drive, self._loop.time())  # fresh: never a pre-loss output
         drive.connect_task = self._loop.create_task(
             self._connect(drive), name=f"profibus-connect-{drive.id}"
         )
@@ -471,14 +494,14 @@ class ProfibusAdapter:
         if drive.configured:
             changes = drive.profile.inputs(action.data, now)
             self._hub.update(drive.id, comm=CommState.ONLINE, **changes)
-            desired = self._hub.desired(drive.id)
             if drive.profile.wants_codes:
                 self._read_codes(drive, now)
-        else:
-            desired = self._safe(drive)
         if self.master.outputs_pending(drive.address):
             return  # the last outputs computed have not gone out: they go first
-        self._set_outputs(drive, desired, now)
+        if drive.configured:
+            self._set_outputs(drive, self._hub.desired(drive.id), now)
+        else:
+            self._set_unconfigured(drive, now)
 
     def _read_codes(self, drive: _Drive, now: float) -> None:
         """The profile wants fault/alarm codes its telegram does not carry: read them."""
@@ -541,6 +564,12 @@ class ProfibusAdapter:
     def _set_outputs(self, drive: _Drive, desired: DesiredCommand, now: float) -> None:
         self.master.set_outputs(drive.address, drive.profile.outputs(desired, now))
 
+    def _set_unconfigured(self, drive: _Drive, now: float) -> None:
+        """Outputs while the drive is not configured: a stop (:func:`unconfigured_outputs`)."""
+        self.master.set_outputs(
+            drive.address, unconfigured_outputs(drive.profile, self._safe(drive), now)
+        )
+
     async def _connect(self, drive: _Drive) -> None:
         """on_connect until it succeeds (back-off between attempts, an event on each new error)."""
         hub = self._hub
@@ -557,6 +586,8 @@ class ProfibusAdapter:
             except Exception as exc:  # the profile's failure: the drive stays not configured
                 if not isinstance(exc, GatewayError):
                     log.exception("%s: on_connect failed", drive.id)
+                if self._reparameterise(drive, exc):
+                    return
                 text = f"not configured: {exc}"
                 if text != drive.connect_error:
                     drive.connect_error = text
@@ -566,12 +597,34 @@ class ProfibusAdapter:
                 pause = min(2 * pause, CONNECT_BACKOFF[1])
                 continue
             drive.connect_error = None
+            drive.reparameterised = 0
             hub.set_capabilities(drive.id, drive.profile.capabilities())
             drive.configured = True
+            if not drive.watchdog and getattr(drive.profile, "failsafe_needs_watchdog", False):
+                own = changes.get("failsafe_text")
+                changes["failsafe"] = False
+                changes["failsafe_text"] = WATCHDOG_OFF + (f" ({own} never acts)" if own else "")
             if changes:
                 hub.update(drive.id, **changes)
             self._event(drive, EventKind.COMM, "configured: data exchange with the drive's profile")
             return
+
+    def _reparameterise(self, drive: _Drive, exc: Exception) -> bool:
+        """``on_connect`` asked for a restart of the slave (its exception's
+        ``reparameterise``): out of data exchange, then Set_Prm again. True when done; the
+        slave's SlaveUp starts a new connect. Asked again right after: a failure."""
+        loop = self._loop
+        if not getattr(exc, "reparameterise", False) or loop is None:
+            return False
+        if drive.reparameterised >= MAX_REPARAMETERISE:
+            return False
+        drive.reparameterised += 1
+        self._event(drive, EventKind.PARAMETER, str(exc), reparameterise=True)
+        drive.connect_task = None  # this task ends here: not cancelled by the SlaveDown
+        self._dispatch(self.master.restart(drive.address, loop.time(), str(exc)))
+        if self._driver is not None:
+            self._driver.poke()
+        return True
 
     def _sink(self, drive: _Drive) -> EventSink:
         def sink(text: str, kind: DiagKind = DiagKind.INFO, **data: Any) -> None:
@@ -689,6 +742,25 @@ class ProfibusAdapter:
 
 def _ignore(data: bytes, now: float) -> None:
     return
+
+
+def unconfigured_outputs(profile: DpProfile, safe: DesiredCommand, now: float) -> bytes:
+    """The telegram for a slave in data exchange whose profile is not configured (first
+    output after any (re)connection, and while ``on_connect`` fails): the profile's
+    ``unconfigured_outputs`` hook where it has one (a stop whatever data profile the drive
+    speaks, the WEG drives), else its outputs for ``safe`` (run and JOG off)."""
+    hook = getattr(profile, "unconfigured_outputs", None)
+    if callable(hook):
+        data: bytes = hook(safe, now)
+        return data
+    return profile.outputs(safe, now)
+
+
+def _watchdog_of(bus: opts.BusOptions, drive: opts.DriveOptions | None) -> float:
+    """The slave's DP watchdog: its own, else the bus's (0: off)."""
+    if drive is not None and drive.watchdog is not None:
+        return drive.watchdog
+    return bus.watchdog
 
 
 def _overridden(setup: SlaveSetup, override: opts.SetupOverride | None) -> SlaveSetup:

@@ -187,6 +187,13 @@ class Master:
         self._scheduler.reset(now)
         return self._take()
 
+    def restart(self, address: int, now: float, reason: str) -> list[Action]:
+        """Take one slave out of data exchange and start it up again (Slave_Diag, Set_Prm,
+        Chk_Cfg): a slave that takes a parameter only without cyclic data (WEG P0741)
+        is parameterised again. Its SlaveDown and state changes are returned."""
+        self._slave(address).enter(SlaveState.WAIT_DIAG, now, reason)
+        return self._take()
+
     def leave(self, now: float) -> list[Transmit]:
         """Leave the line: Global_Control Clear to everyone, twice (SDN is unacknowledged)."""
         self._stopped = True

@@ -35,7 +35,15 @@ from adapters.profibus.weg import words as w
 from adapters.profibus.weg.options import WegOptions, parse_options
 from adapters.profibus.weg.paramtable import PARAM_TABLES
 from adapters.profibus.weg.records import RecordParams
-from adapters.profibus.weg.spec import SIGNED, DataProfile, ModelSpec, scaled
+from adapters.profibus.weg.spec import (
+    NEUTRAL_STOP_WORD,
+    SIGNED,
+    DataProfile,
+    ModelSpec,
+    failsafe_of,
+    failsafe_warning,
+    scaled,
+)
 from gateway.adapter import Capabilities, ParamValue
 from gateway.errors import GatewayError, ParameterError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus, Readings, SpeedScale
@@ -57,6 +65,17 @@ STATUS_VALUES: Final = (("fire_mode", "fire_mode"), ("pid_automatic", "automatic
 
 class DriveProgrammingMismatch(GatewayError):
     """The drive's programming (P0741, P0922/P751, P0742..) differs from the drive's config."""
+
+
+class DataProfilePending(GatewayError):
+    """A ``startup_params`` write the drive takes only without cyclic data (P0741, P0922 /
+    P751: CFW-11 l.959-961, CFW700 l.922-924 and l.1172, CFW320 l.547 and l.581) was made.
+
+    The drive still speaks its old words until it leaves data exchange: the adapter takes
+    the slave out of data exchange and parameterises it again (``reparameterise``), and the
+    next connect finds the value in force (issue 32 item 2)."""
+
+    reparameterise = True
 
 
 class StartupParamRefused(ParameterError):
@@ -117,6 +136,7 @@ class _Sent:
     forward: bool = True
     reference: int = 0  # signed raw word as sent
     remote: bool = True
+    jog: bool = False
 
 
 _OutMemory = tuple[bool, int | None, bool, _Sent]
@@ -139,6 +159,9 @@ class WegProfile(DpProfileBase):
     device: ClassVar[Device]
     spec: ClassVar[ModelSpec]
     addresses: ClassVar[AddressRange]  # from the spec, set for each subclass
+    # the drive's reaction to a lost master (P0313) needs the DP watchdog: with it off the
+    # drive never detects the loss (the adapter publishes failsafe false then)
+    failsafe_needs_watchdog: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -166,6 +189,15 @@ class WegProfile(DpProfileBase):
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> WegOptions:
         return parse_options(table, cls.spec)
+
+    @classmethod
+    def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
+        """``check-config``: the drive's reaction to a lost master from the config alone
+        (the DP watchdog, P0313 as ``startup_params`` writes it; :func:`.spec.failsafe_warning`)."""
+        opts = drive.options if isinstance(drive.options, WegOptions) else WegOptions()
+        p0313 = dict(opts.startup_params).get(313)
+        text = failsafe_warning(cls.spec, p0313, watchdog)
+        return [] if text is None else [text]
 
     def __init__(self, drive: DriveConfig) -> None:
         opts = drive.options if isinstance(drive.options, WegOptions) else WegOptions()
@@ -199,6 +231,7 @@ class WegProfile(DpProfileBase):
         self._reported_type: int | None = None  # the last P0202 taken
         self._event: EventSink | None = None
         self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
+        self._p0741_seen: int | None = None  # P0741 read in this data exchange (not yet: None)
         self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
         # inputs' fast path: (key, the memory the call left, its readings)
         self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
@@ -231,39 +264,72 @@ class WegProfile(DpProfileBase):
         )
 
     def capabilities(self) -> Capabilities:
-        unsupported: dict[str, str] = {}
+        """The CFW320 has no quick stop (P684 bit 6 "Reserved", Table 4.3): a quick stop is
+        its ramp stop (bit 0 = 0), the nearest controlled stop it has (docs/devices.md; a
+        coast stop would leave an overhauling load without torque). The hub substitutes it
+        and says so once (issue 32 item 4); it is never refused."""
+        substitutes: dict[str, str] = {}
         if not self.spec.quick_stop:
-            unsupported["quick_stop"] = (
-                f"the {self.spec.device.value} has no quick stop "
-                f"({self.spec.pname(684)} bit 6 is reserved, Table 4.3)"
-            )
+            substitutes["quick_stop"] = "run"
         scale = None if self.base is None else self.base.scale()
         # alarm texts of the model's manual (CFW-11 section 5, CFW700 6, CFW320 7)
         return Capabilities(
             speed_scale=scale,
-            unsupported=unsupported,
             alarm_texts=self.spec.alarms,
             params=PARAM_TABLES[self.spec.device],  # the manual's parameter table
+            stop_substitutes=substitutes,
         )
 
     # ------------------------------------------------------------------ connect
 
     async def on_connect(self, channel: RecordChannel, event: EventSink) -> Readings:
-        """Write ``startup_params``, check the drive's programming, read the scales."""
+        """Write ``startup_params``, check the drive's programming, read the scales and the
+        drive's reaction to a lost master (P0313).
+
+        A written P0741 or telegram size is in force only after the drive left cyclic data
+        (:class:`DataProfilePending`: the adapter re-parameterises the slave). P0741 is
+        checked at every connect, ``verify_mapping`` or not (issue 32 item 2); until then
+        the adapter sends :meth:`unconfigured_outputs`, a stop in both data profiles.
+        """
+        # P0741 first: the value in force is the one read right after Set_Prm
+        p0741 = await self._read_data_profile(channel) if self.spec.reads_data_profile else None
+        offline_taken = {741, self.spec.telegram_param}
+        written: list[int] = []
         for number, value in self.options.startup_params:
-            await self._startup_param(channel, event, number, value)
-        if self.spec.reads_data_profile:
-            await self._check_data_profile(channel)
+            if await self._startup_param(channel, event, number, value):
+                written += [number] if number in offline_taken else []
+        if written:
+            names = ", ".join(self.spec.pname(n) for n in written)
+            raise DataProfilePending(
+                f"{names} written: the drive takes it only without cyclic data, "
+                "the slave is parameterised again"
+            )
+        if p0741 is not None:
+            self._check_data_profile(p0741)
         if self.options.verify_mapping:
             await self._verify_programming(channel)
         await self._read_ratings(channel)
         self._event = event
         if self.spec.reads_control_type:
             self._set_control_type(await self.params.read(channel, 202))
-        changes: Readings = {"speed_base": None if self.base is None else self.base.label}
+        p0313, p0206 = await self.params.read_many(channel, [(313, 0), (206, 0)])
+        failsafe, failsafe_text = failsafe_of(self.spec, p0313, p0206)
+        changes: Readings = {
+            "speed_base": None if self.base is None else self.base.label,
+            "failsafe": failsafe,
+            "failsafe_text": failsafe_text,
+        }
         if self.control_type is not None:
             changes["values"] = self._own_values()
         return changes
+
+    def unconfigured_outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The telegram while the drive is not configured (its P0741 not verified): the
+        control word :data:`~.spec.NEUTRAL_STOP_WORD`, a stop without JOG in both data
+        profiles, and a zero reference (issue 32 item 2). The cyclic parameter words are
+        the configured ones (no motion); nothing of the output memory is touched."""
+        words = [NEUTRAL_STOP_WORD, 0, *self.out_values]
+        return struct.pack(f">{len(words)}H", *words)
 
     # ------------------------------------------------------------------ P0202
 
@@ -304,11 +370,14 @@ class WegProfile(DpProfileBase):
 
     async def _startup_param(
         self, channel: RecordChannel, event: EventSink, number: int, value: int
-    ) -> None:
+    ) -> bool:
+        """Write one ``startup_params`` entry where the drive differs; True when written."""
         name = self.spec.pname(number)
         raw = w.to_word(value)
+        written = False
         try:
             if await self.params.read(channel, number) != raw:
+                written = True
                 await self.params.write(channel, number, raw)
                 event(
                     f"startup {name} = {value} written",
@@ -321,13 +390,29 @@ class WegProfile(DpProfileBase):
             raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
         if back != raw:
             raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
+        return written
 
-    async def _check_data_profile(self, channel: RecordChannel) -> None:
+    async def _read_data_profile(self, channel: RecordChannel) -> int:
+        """P0741 as read at this connect. The first value read after the slave entered data
+        exchange is the one in force; a later read of another value (changed at the HMI
+        while this master exchanges cyclic data) is not in force before the drive leaves
+        data exchange ([11] l.959-961, [700] l.922-924): :class:`DataProfilePending`."""
+        got = await self.params.read(channel, 741)
+        seen = self._p0741_seen
+        if seen is None:
+            self._p0741_seen = got  # the value in force: read first after Set_Prm
+        elif got != seen:
+            raise DataProfilePending(
+                f"{self.spec.pname(741)} changed from {seen} to {got} during cyclic data: "
+                "the slave is parameterised again"
+            )
+        return got
+
+    def _check_data_profile(self, got: int) -> None:
         """P741 against the configured data profile (CFW320 Table 4.6 note: the control,
         status, speed reference and motor speed words depend on it): a mismatch would be
         misread, so the drive is not brought online."""
         want = self.options.data_profile
-        got = await self.params.read(channel, 741)
         if got == want.p0741:
             return
         names = {p.p0741: p.value for p in DataProfile}
@@ -341,7 +426,7 @@ class WegProfile(DpProfileBase):
         """(parameter, expected raw value) that the config implies about the drive."""
         spec, opts = self.spec, self.options
         out = [(spec.telegram_param, spec.telegram_code(opts.words))]
-        if len(spec.profiles) > 1:
+        if len(spec.profiles) > 1 and not spec.reads_data_profile:
             out.append((741, opts.data_profile.p0741))
         for i, param in enumerate(self.in_map):
             out.append((spec.read_map_param(i + 3), param))
@@ -518,7 +603,7 @@ class WegProfile(DpProfileBase):
             quick_stop=d.quick_stop and self.spec.quick_stop and not self.quick_stop_as_ramp,
             fault_reset=reset,
         )
-        self._sent = _Sent(run or jog, forward, reference, d.remote)
+        self._sent = _Sent(run or jog, forward, reference, d.remote, jog)
         return control.encode(self.spec.control_bits), reference
 
     def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
@@ -570,7 +655,7 @@ class WegProfile(DpProfileBase):
             jog=jog and on,
             control_by_plc=d.remote,
         )
-        self._sent = _Sent(on, True, reference, d.remote)
+        self._sent = _Sent(on, True, reference, d.remote, jog and on)
         return control.encode(w.STW1_BITS), reference
 
     # ------------------------------------------------------------------ inputs
@@ -594,9 +679,9 @@ class WegProfile(DpProfileBase):
         self._inputs_memo = (key, self._inputs_memory(), _copy_readings(changes))
         return changes
 
-    def _sent_key(self) -> tuple[bool, bool, int, bool]:
+    def _sent_key(self) -> tuple[bool, bool, int, bool, bool]:
         s = self._sent
-        return (s.run, s.forward, s.reference, s.remote)
+        return (s.run, s.forward, s.reference, s.remote, s.jog)
 
     def _inputs_memory(self) -> tuple[object, ...]:
         """What :meth:`_decode_inputs` reads or writes of the profile's own state."""
@@ -654,17 +739,24 @@ class WegProfile(DpProfileBase):
         return abs(self.base.pct_of(speed) - self.base.pct_of(effective)) <= band
 
     def _manufacturer_in(self, word: int, speed: int, changes: Readings) -> None:
-        """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403)."""
+        """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403).
+
+        A drive jogging (bit 11 "JOG active", CFW-11 Table 3.2, CFW700 Table 4.2, CFW320
+        Table 4.2) runs at its own JOG speed: commanded and at that reference (issue 32
+        item 8). Local control is bit 12 LOC/REM = 0: the drive follows its local sources,
+        not the network (issue 32 item 6; docs/devices.md).
+        """
         st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
         self._status_values = {
             key: int(getattr(st, bit)) for key, bit in STATUS_VALUES if self._has_status_bit(bit)
         }
         self._speed_fields(speed, changes)
         if self.spec.device is Device.CFW320:
-            commanded = st.run_command  # CFW320 bit 1 "Run command"
+            commanded = st.run_command or st.jog  # CFW320 bit 1 "Run command" (JOG: no)
         else:
             commanded = self._sent.run if st.remote else True
-        at_ref = st.running and commanded and st.remote and self._near_reference(speed)
+        jogging = st.running and st.jog
+        at_ref = jogging or (st.running and commanded and st.remote and self._near_reference(speed))
         if st.fault:
             status = DriveStatus.FAULTED
         elif st.config_mode or st.undervoltage:
@@ -685,6 +777,7 @@ class WegProfile(DpProfileBase):
                 "direction": Direction.FORWARD if st.forward else Direction.REVERSE,
                 "at_reference": at_ref,
                 "remote": st.remote,
+                "local_control": not st.remote,
                 "alarm": st.alarm,
             }
         )
@@ -700,7 +793,9 @@ class WegProfile(DpProfileBase):
         self._speed_fields(speed, changes)
         operation = state is w.ProfidriveState.OPERATION
         running = operation and (self._sent.run or speed != 0)
-        if any(name == "frequency_reached" for name, _ in self.spec.zsw1_bits):
+        if self._sent.jog:  # JOG 1 (STW1 bit 8): the drive's own JOG speed is its reference
+            at_ref = operation and speed != 0
+        elif any(name == "frequency_reached" for name, _ in self.spec.zsw1_bits):
             at_ref = operation and self._sent.run and zsw.frequency_reached  # CFW-11 bit 10
         else:
             at_ref = operation and self._sent.run and self._near_reference(speed)
@@ -726,6 +821,7 @@ class WegProfile(DpProfileBase):
                 "direction": direction,
                 "at_reference": at_ref,
                 "remote": zsw.control_requested,
+                "local_control": not zsw.control_requested,  # ZSW1 bit 9 (Table 3.9 / 4.8)
                 "alarm": zsw.warning,
             }
         )
@@ -860,6 +956,7 @@ class WegProfile(DpProfileBase):
         ]
 
     def on_comm_lost(self) -> None:
+        self._p0741_seen = None
         self._reset_seen = None
         self._pulse_until = None
         self._pulse_sent = False

@@ -321,13 +321,19 @@ class WegSim(SimDeviceBase):
         if self.comm in (specs.COMM_ONLINE, specs.COMM_CLEAR):
             log.info("%s: Set_Prm while exchanging: leaving data exchange", self.spec.device)
         self.comm = specs.COMM_OFFLINE
+        self._take_offline_params()
+        return True
+
+    def _take_offline_params(self) -> None:
+        """P0741, P0922 (P751) and, on the CFW700/CFW320, the address: taken "only when there
+        is no cyclic communication with the master" (CFW-11 l.959-961, CFW700 l.922-924,
+        l.1029, l.1172; CFW320 l.547, l.581): at Set_Prm and when cyclic data stops."""
         self.n_words = self.spec.words_of(self.values[self.spec.telegram_param])
         if len(self.spec.profiles) > 1:
             pidrive = self.values[741] == 0
             self.data_profile = DataProfile.PROFIDRIVE if pidrive else DataProfile.MANUFACTURER
         if not self.spec.address_needs_power_cycle:
             self.address = self.values[self.spec.address_param]
-        return True
 
     def exchange(self, outputs: bytes, now: float) -> bytes:
         self.tick(now)
@@ -350,6 +356,7 @@ class WegSim(SimDeviceBase):
         self.clear = False
         self._online_since = None
         self._comm_error(139)
+        self._take_offline_params()
 
     def clear_mode(self, now: float, active: bool = True) -> None:
         """Global_Control Clear (A138/F238 per P0313) or Operate (the A138 alarm goes)."""
@@ -455,6 +462,10 @@ class WegSim(SimDeviceBase):
         self.fault = 0
         self.faults.clear()
         self.pd_state = PdState.S1
+        if self.data_profile is DataProfile.PROFIDRIVE:
+            # switching on inhibited: no operation until ON = 0 then ON = 1 (fact sheet
+            # 1.11); the manufacturer profile's P0684 bit 0 is a level and applies again
+            self.net = replace(self.net, run=False, jog=False, general_enable=False)
 
     def _comm_error(self, alarm: int) -> None:
         """P0313 reaction to a communication error (Table 3.3.1 / 4.1 / 4.1).

@@ -56,6 +56,26 @@ COMM_ACTION_TEXTS: Final[Mapping[int, str]] = MappingProxyType(
     }
 )
 
+# The drive's own reaction to a lost master by P0313 (issue 32 item 5): True when the
+# motor stops (1 ramp stop, 2 general disable: coasts, 5 a fault: needs a reset), False when
+# it may keep turning (0 "remains in the existing status"; 3 local: the local sources take
+# over, no stop; 4 local keeping the network's enable and reference). CFW-11 Table 3.3.1,
+# CFW700 Table 4.1, CFW320 Table 4.1.
+COMM_ACTION_FAILSAFE: Final[Mapping[int, bool]] = MappingProxyType(
+    {0: False, 1: True, 2: True, 3: False, 4: False, 5: True}
+)
+
+# The control word sent until the drive's data profile (P0741) is verified at connect
+# (issue 32 item 2): a stop in both profiles, with no JOG in either. Manufacturer P0684
+# (CFW-11 Table 3.3, CFW700 Table 4.3, CFW320 Table 4.3): bit 0 = 0 ramp stop, bit 1 general
+# enable, bit 2 forward, bit 3 = 0 no JOG, bit 4 remote, bit 6 = 0 no quick stop, bits 8-15
+# reserved. PROFIdrive STW1 (CFW-11 Table 3.8, CFW700 Table 4.7): bit 0 = 0 OFF1, bit 1 no
+# coast stop, bit 2 no quick stop, bit 3 = 0 operation disabled, bit 4 ramp generator,
+# bit 6 = 0 setpoint zeroed, bit 8 = 0 no JOG, bit 10 control by PLC (remote). The reference
+# word is 0 (no speed in either scale).
+NEUTRAL_STOP_WORD: Final = 0x0416
+
+
 # P0740 Profibus DP communication status: CFW-11 Table 3.5 / CFW700 Table 4.5.
 CFW11_COMM_STATUS: Final[Mapping[int, str]] = MappingProxyType(
     {
@@ -180,8 +200,9 @@ class ModelSpec:
     default_ident: int  # placeholder: the GSD file's Ident_Number is not in the seeds
     control_types: Mapping[int, str] = field(default_factory=dict)  # P0202 (none: not read)
     quick_stop_ignored_ramp_only: bool = False  # the drive ignores bit 6 in V/f or VVW
-    # read P741 at connect whatever verify_mapping says: the CFW320's words "depend on the
-    # parameter P741" (Table 4.6 note) and the gateway speaks only its manufacturer's words
+    # read P0741/P741 at connect whatever verify_mapping says: the words depend on it
+    # (CFW-11 Table 3.6, CFW700 Table 4.6, CFW320 Table 4.6 note) and a word of the other
+    # profile can be a motion command (issue 32 item 2); all three models set it
     reads_data_profile: bool = False
 
     @property
@@ -261,6 +282,7 @@ CFW11: Final = ModelSpec(
     interface_fault=240,
     default_ident=0x0C11,
     control_types=CFW11_CONTROL_TYPES,
+    reads_data_profile=True,  # issue 32 item 2: P0741 checked at every connect
 )
 
 CFW700: Final = ModelSpec(
@@ -289,6 +311,7 @@ CFW700: Final = ModelSpec(
     default_ident=0x0C70,
     control_types=CFW700_CONTROL_TYPES,
     quick_stop_ignored_ramp_only=True,  # P0684 bit 6: "not allowed" (CFW-11: "not recommended")
+    reads_data_profile=True,  # issue 32 item 2: P0741 checked at every connect
 )
 
 CFW320: Final = ModelSpec(
@@ -359,3 +382,49 @@ def scaled(number: int, raw: int) -> float | int:
     value = words.signed(raw) if number in SIGNED else raw & 0xFFFF
     places = DECIMALS.get(number, 0)
     return value / 10**places if places else value
+
+
+def failsafe_of(spec: ModelSpec, p0313: int, p0206: int = 0) -> tuple[bool | None, str]:
+    """(``failsafe``, ``failsafe_text``) for the drive's P0313 value (read at connect).
+
+    P0313 = 5 faults the drive (F238/F239), but an auto-reset (P0206 > 0, the programming
+    manuals' auto-reset time, docs/devices.md) clears that fault by itself while the
+    master is still away, and the control word it holds (bit 0 run is a level) applies
+    again: not fail-safe."""
+    name = spec.pname(313)
+    text = COMM_ACTION_TEXTS.get(p0313)
+    if text is None:
+        return None, f"{name} = {p0313}: unknown communication error action"
+    failsafe = COMM_ACTION_FAILSAFE[p0313]
+    if failsafe and p0313 == CommAction.FAULT.value and p0206 > 0:
+        return False, (
+            f"{name} = {p0313}: {text}, but {spec.pname(206)} = {p0206} s auto-resets it and "
+            "the drive runs again on the last command it holds while the master is away"
+        )
+    if failsafe:
+        return True, f"{name} = {p0313}: {text} when the master is lost"
+    return False, f"{name} = {p0313}: {text}, the drive keeps running when the master is lost"
+
+
+WATCHDOG_OFF_TEXT: Final = (
+    "watchdog = 0: the DP watchdog is off, the drive never sees the master go "
+    "(A139/F239 and P0313 never act)"
+)
+
+
+def failsafe_warning(spec: ModelSpec, p0313: int | None, watchdog: float | None) -> str | None:
+    """What ``check-config`` says of a WEG drive's reaction to a lost master, from the
+    config alone: the DP watchdog (``None`` or 0: off) and P0313 as ``startup_params``
+    writes it (``None``: not written, the factory setting is assumed). None: fail-safe."""
+    if not watchdog:
+        return WATCHDOG_OFF_TEXT
+    value = spec.comm_action_default if p0313 is None else p0313
+    failsafe, text = failsafe_of(spec, value)
+    if failsafe:
+        return None
+    if p0313 is None:
+        return (
+            f"{text} (factory setting; startup_params does not write {spec.pname(313)}): "
+            f"set {spec.pname(313)} = 1 (ramp stop), 2 or 5"
+        )
+    return f"{text}: set {spec.pname(313)} = 1 (ramp stop), 2 or 5"

@@ -145,9 +145,18 @@ async def test_drive_programmed_differently_is_not_configured() -> None:
     loop.sim.values[741] = 0
     with pytest.raises(DriveProgrammingMismatch) as err:
         await loop.connect()
+    # P0741 first, at every connect (issue 32 item 2), then the mapping
     assert str(err.value) == (
-        "the drive is programmed differently from its config: "
-        "P0741 = 0 (config: 1), P0743 = 48 (config: 49)"
+        "P0741 = 0 (profidrive), the config's data_profile is manufacturer (P0741 = 1): "
+        "its words would be misread"
+    )
+    loop.sim.values[741] = 1
+    loop.profile.on_comm_lost()  # the drive takes P0741 only out of data exchange
+    loop.sim.set_prm(b"")
+    with pytest.raises(DriveProgrammingMismatch) as err:
+        await loop.connect()
+    assert str(err.value) == (
+        "the drive is programmed differently from its config: P0743 = 48 (config: 49)"
     )
     ok = Loop(Device.CFW11, WegOptions(words=4, words_in=(3, 49), verify_mapping=False))
     ok.sim.values[743] = 48
@@ -183,8 +192,11 @@ async def test_configured_scales_are_not_read() -> None:
     options = WegOptions(sync_rpm=1800.0, max_rpm=1800.0, verify_mapping=False)
     loop = Loop(Device.CFW11, options)
     assert (await loop.connect())["speed_base"] == "8192 = 1800 rpm synchronous (configured)"
-    # the one record: P0202 (type of control, for the quick stop), never a scale parameter
-    assert loop.channel.writes == [(0, 47, bytes.fromhex("01 01 00 01 10 01 00 ca 00 00"))]
+    # P0741 (data profile, every connect), P0202 (type of control, for the quick stop) and
+    # P0313 and P0206 (reaction to a lost master): never a scale parameter
+    assert loop.channel.writes[1] == (0, 47, bytes.fromhex("02 01 00 01 10 01 00 ca 00 00"))
+    asked = [n for _, _, data in loop.channel.writes for n in _numbers(data)]
+    assert asked == [741, 202, 313, 206]
 
 
 async def test_profidrive_scale_follows_a_write_of_p0134() -> None:

@@ -142,7 +142,9 @@ def test_capabilities() -> None:
     assert caps.speed_scale.max_pct == pytest.approx(400.0, abs=0.02)
     assert caps.speed_scale.label == "8192 = 1800 rpm synchronous (configured)"
     cfw320_caps = profile(Device.CFW320).capabilities()
-    assert "no quick stop" in cfw320_caps.unsupported["quick_stop"]
+    # issue 32 item 4: never refused, a ramp stop instead (P684 bit 6 reserved, Table 4.3)
+    assert cfw320_caps.unsupported == {}
+    assert cfw320_caps.stop_substitutes == {"quick_stop": "run"}
     pdrive = profile(Device.CFW700, WegOptions(data_profile=DataProfile.PROFIDRIVE, max_rpm=1500))
     scale = pdrive.capabilities().speed_scale
     assert scale is not None
