@@ -206,9 +206,7 @@ class ProfibusAdapter:
         """``check-config``: what the drive's profile says of its safety settings from the
         config alone (its ``safety_warnings(drive, watchdog)`` hook, given the profile's
         options and the slave's DP watchdog; the WEG drives: watchdog 0 and P0313)."""
-        hook = getattr(cls.profile_class(drive.device), "safety_warnings", None)
-        if not callable(hook):
-            return []
+        hook = cls.profile_class(drive.device).safety_warnings
         bus_options = bus.options if isinstance(bus.options, opts.BusOptions) else None
         drive_options = drive.options if isinstance(drive.options, opts.DriveOptions) else None
         watchdog = _watchdog_of(bus_options or opts.BusOptions(), drive_options)
@@ -600,7 +598,7 @@ class ProfibusAdapter:
             drive.reparameterised = 0
             hub.set_capabilities(drive.id, drive.profile.capabilities())
             drive.configured = True
-            if not drive.watchdog and getattr(drive.profile, "failsafe_needs_watchdog", False):
+            if not drive.watchdog and drive.profile.failsafe_needs_watchdog:
                 own = changes.get("failsafe_text")
                 changes["failsafe"] = False
                 changes["failsafe_text"] = WATCHDOG_OFF + (f" ({own} never acts)" if own else "")
@@ -749,11 +747,7 @@ def unconfigured_outputs(profile: DpProfile, safe: DesiredCommand, now: float) -
     output after any (re)connection, and while ``on_connect`` fails): the profile's
     ``unconfigured_outputs`` hook where it has one (a stop whatever data profile the drive
     speaks, the WEG drives), else its outputs for ``safe`` (run and JOG off)."""
-    hook = getattr(profile, "unconfigured_outputs", None)
-    if callable(hook):
-        data: bytes = hook(safe, now)
-        return data
-    return profile.outputs(safe, now)
+    return profile.unconfigured_outputs(safe, now)
 
 
 def _watchdog_of(bus: opts.BusOptions, drive: opts.DriveOptions | None) -> float:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol, cast
 
 from gateway.adapter import Capabilities, ParamValue
 from gateway.devices import devices_of
@@ -162,6 +162,20 @@ class DpProfile(Protocol):
     (the profile keeps its own memory: the MCD 600); False: only a changed, non-empty one."""
     record_error_texts: ClassVar[Mapping[int, str] | None]
     """The device's own texts of DP-V1 Error_Code_1 values, or None (the standard's)."""
+    failsafe_needs_watchdog: ClassVar[bool]
+    """True: the device sees a lost master only through the DP watchdog, so with the
+    watchdog off the adapter publishes ``failsafe`` false (docs/safety.md)."""
+
+    @classmethod
+    def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
+        """``check-config``: what the drive's config alone says of its reaction to a lost
+        master, given the slave's DP watchdog (0: off)."""
+        ...
+
+    def unconfigured_outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        """The telegram before the profile is configured (the first output after any
+        (re)connection, and while ``on_connect`` fails): built fresh, a stop."""
+        ...
 
     @property
     def wants_codes(self) -> bool:
@@ -224,6 +238,15 @@ class DpProfileBase:
     addresses: ClassVar[AddressRange] = DEFAULT_ADDRESSES
     sees_every_diag: ClassVar[bool] = False
     record_error_texts: ClassVar[Mapping[int, str] | None] = None
+    failsafe_needs_watchdog: ClassVar[bool] = False
+
+    @classmethod
+    def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
+        return []
+
+    def unconfigured_outputs(self, desired: DesiredCommand, now: float) -> bytes:
+        profile = cast("DpProfile", self)
+        return profile.outputs(desired, now)
 
     @property
     def wants_codes(self) -> bool:
@@ -260,6 +283,9 @@ class ProfileFactory(Protocol):
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> Any: ...
+
+    @classmethod
+    def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]: ...
 
     def __call__(self, drive: DriveConfig) -> DpProfile: ...
 
