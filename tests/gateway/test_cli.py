@@ -139,3 +139,32 @@ def test_cmd_accepted_exits_0_and_carries_the_session_source_info(
     first, second = gw.sources
     assert first is not None and second is not None
     assert first[0] != second[0] != str(gw.session.zid())  # one id per client session
+
+
+def test_check_config_lists_the_safety_warnings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 32 item 5: a reaction to a lost master switched off is said by check-config."""
+    site = tmp_path / "site.toml"
+    site.write_text(
+        """
+[buses.pb]
+adapter = "profibus"
+simulate = true
+watchdog = 0
+[[buses.pb.drives]]
+id = "pump"
+device = "CFW-11"
+address = 3
+[[buses.pb.drives]]
+id = "starter"
+device = "MCD 600"
+address = 6
+comm_timeout = 0
+"""
+    )
+    assert main(["check-config", str(site)]) == 0  # warnings do not fail the check
+    out = capsys.readouterr().out
+    assert "safety warnings (" in out
+    assert "drive pump: watchdog = 0" in out
+    assert "drive starter:" in out
