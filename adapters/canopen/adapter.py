@@ -11,6 +11,16 @@ then NMT start; ``online`` with its first TPDO. Until then the drive gets no PDO
 heartbeat, a boot-up or a node leaving operational makes it ``offline``; it is brought
 up again, and the hub clears any run command when it comes back online (safety rule 1):
 it comes back stopped. A fault reset is one edge of controlword bit 7 (rule 2).
+
+One master per line (issue 32 item 12): the engine listens for :func:`listen_time`
+before its first frame; another master heard then (a SYNC, an NMT command, a heartbeat
+with the gateway's node id, an RPDO to one of its drives) refuses the line
+(:class:`~gateway.errors.LineHeld`, the daemon does not start). Heard later, it is an
+event on every drive of the line and their readings are doubtful. Frames that
+contradict each other for one drive (a second TPDO1 in a SYNC cycle, an SDO answer no
+request asked for) make that drive doubtful (``doubtful`` in the state, the hub refuses
+run commands) until :data:`DOUBT_HOLD` s pass without another; the events naming the
+node come at most every :data:`CONFLICT_EVENT_EVERY` s per drive, with the count.
 """
 
 from __future__ import annotations
@@ -32,14 +42,17 @@ from adapters.canopen.master import (
     BadFrame,
     BusErrorIn,
     Configured,
+    Conflict,
     EmcyIn,
     Event,
     FaultInfo,
     FrameIn,
     Inputs,
+    LineClaimed,
     LinkDown,
     Master,
     MasterConfig,
+    MasterHeard,
     NodeDown,
     NodeProblem,
     NodeSeen,
@@ -75,7 +88,7 @@ from gateway.adapter import (
 )
 from gateway.config import BusConfig, DriveConfig
 from gateway.devices import devices_of
-from gateway.errors import AdapterError, DriveOffline, GatewayTimeout, ParameterError
+from gateway.errors import AdapterError, DriveOffline, GatewayTimeout, LineHeld, ParameterError
 from gateway.model import CommState, DesiredCommand, Device, DriveStatus, SpeedScale
 from gateway.schema import Table
 
@@ -83,6 +96,18 @@ log = logging.getLogger(__name__)
 
 LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
 LEAVE_MARGIN = 0.1  # s: beyond the SDO timeout, the bound on the release writes on leaving
+LISTEN_MIN = 0.3  # s: the shortest listening before the first frame (one master per line)
+DOUBT_HOLD = 10.0  # s without a conflicting frame before a drive's readings are trusted again
+CONFLICT_EVENT_EVERY = 5.0  # s: at most one conflict event per drive this often
+# 0x6007 values that stop the drive when the master is lost (CiA 402-2 §6.4.5: 1 fault,
+# 2 disable voltage, 3 quick stop; 0 no action; negative: the manufacturer's, unknown)
+FAILSAFE_OPTIONS = frozenset({1, 2, 3})
+
+
+def listen_time(options: BusOptions) -> float:
+    """How long the engine listens before its first frame: long enough to hear two of the
+    gateway's own SYNCs and heartbeats, as another instance of it would send them."""
+    return max(LISTEN_MIN, 3 * options.cycle, 2 * options.heartbeat / 1000.0)
 
 
 @dataclass(slots=True)
@@ -100,6 +125,10 @@ class _Drive:
     input_key: object = None
     want_from: object = None  # the desired command the engine's wish was made of
     want_made: object = None  # that wish
+    doubtful: bool = False  # conflicting frames heard (reported to the hub)
+    doubt_until: float = 0.0  # trusted again from then on, unless another conflict comes
+    conflicts: int = 0  # conflicts since the last conflict event
+    conflict_event_at: float = -math.inf  # when the last conflict event went out
 
     @property
     def id(self) -> str:
@@ -183,7 +212,13 @@ class CanOpenAdapter:
         self._hub: HubPort | None = None
         self._pending: dict[int, asyncio.Future[SdoDone]] = {}
         self._next_refresh = 0.0
+        self.claimed = asyncio.Event()
+        """Set once the engine listened without hearing another master (the daemon's
+        READY); never set when another master holds the line."""
         self._handlers: dict[type, Callable[[float, Any], None]] = {
+            LineClaimed: self._on_claimed,
+            MasterHeard: self._on_master_heard,
+            Conflict: self._on_conflict,
             NodeSeen: self._on_seen,
             Configured: self._on_configured,
             NodeUp: self._on_up,
@@ -208,6 +243,7 @@ class CanOpenAdapter:
             retry=o.retry,
             own_node_id=o.node_id,
             own_heartbeat=o.heartbeat / 1000.0,
+            listen=listen_time(o),
         )
 
     # ------------------------------------------------------------ run
@@ -296,7 +332,10 @@ class CanOpenAdapter:
             if cycle_at is not None and cycle_at < self._next_refresh:
                 self._next_refresh = cycle_at
 
-    def _wake_at(self) -> float:
+    def _wake_at(self) -> float | None:
+        engine = self.engine
+        if engine is None or engine.next_cycle is None:
+            return None  # listening (or left): no cycle, no wish to refresh for it
         return self._next_refresh
 
     def _refresh(self, now: float) -> None:
@@ -307,6 +346,8 @@ class CanOpenAdapter:
         if engine is None or hub is None:
             return
         for d in self.drives.values():
+            if d.doubtful and now >= d.doubt_until:
+                self._trust(d)
             if not d.online:
                 engine.set_want(d.node, want(_STOPPED_DESIRED, d.opts))
                 d.want_from = None
@@ -328,6 +369,63 @@ class CanOpenAdapter:
     def _handle(self, now: float, action: Action) -> None:
         self._handlers[type(action)](now, action)
 
+    def _on_claimed(self, now: float, action: LineClaimed) -> None:
+        log.info("CANopen %s: no other master heard: the line is the gateway's", self.name)
+        self.claimed.set()
+
+    def _on_master_heard(self, now: float, action: MasterHeard) -> None:
+        """Another master on the line (CiA 301: one NMT master, one SYNC producer). Before
+        the first frame: the line is refused, nothing was sent. Later: reported on every
+        drive of the line (rate-limited), whose readings become doubtful."""
+        o = self.options
+        line = f"CANopen {o.interface} channel {o.channel}"
+        hub = self._hub_port()
+        if not action.claimed:
+            text = f"{line}: {action.text}: another master is on this line"
+            for d in self.drives.values():
+                hub.event(d.id, EventKind.BUS, f"{text}; the gateway does not start on it")
+            raise LineHeld(f"{text}: stop it (one master per line)")
+        for d in self.drives.values():
+            self._doubt(d, now, f"another master on the line: {action.text}")
+
+    def _on_conflict(self, now: float, action: Conflict) -> None:
+        d = self.drives[action.node]
+        self._doubt(d, now, f"node {d.node}: {action.what}")
+
+    def _doubt(self, d: _Drive, now: float, text: str) -> None:
+        """Frames that contradict each other: the readings may be forged (CAN carries no
+        authentication): doubtful until DOUBT_HOLD s pass without another."""
+        d.doubt_until = now + DOUBT_HOLD
+        d.conflicts += 1
+        hub = self._hub_port()
+        if not d.doubtful:
+            d.doubtful = True
+            hub.update(d.id, doubtful=True)
+        if now - d.conflict_event_at >= CONFLICT_EVENT_EVERY:
+            count, d.conflicts = d.conflicts, 0
+            d.conflict_event_at = now
+            log.warning("CANopen %s: drive %s: %s (%d)", self.name, d.id, text, count)
+            hub.event(
+                d.id,
+                EventKind.BUS,
+                f"{text}; readings doubtful ({count} conflicting frame(s) since the last "
+                "such event)",
+                node=d.node,
+                conflicts=count,
+            )
+
+    def _trust(self, d: _Drive) -> None:
+        d.doubtful = False
+        d.conflicts = 0
+        hub = self._hub_port()
+        hub.update(d.id, doubtful=False)
+        hub.event(
+            d.id,
+            EventKind.BUS,
+            f"node {d.node}: no conflicting frame for {DOUBT_HOLD:g} s: readings trusted again",
+            node=d.node,
+        )
+
     def _on_seen(self, now: float, action: NodeSeen) -> None:
         d = self.drives[action.node]
         self._hub_port().update(d.id, comm=CommState.CONNECTING)
@@ -344,13 +442,27 @@ class CanOpenAdapter:
             text += (
                 f"; quick stop option 0x605A = {option} ({cia402.quick_stop_option_text(option)})"
             )
-        if d.opts.comm_loss_option is not None:
-            option = d.opts.comm_loss_option
+        raw = action.reports.get((cia402.ABORT_CONNECTION_OPTION, 0))
+        comm_loss = d.opts.comm_loss_option
+        if raw:
+            comm_loss = int.from_bytes(raw, "little", signed=True)
+        if comm_loss is not None:
             text += (
-                f"; abort connection option 0x6007 = {option} "
-                f"({cia402.abort_connection_option_text(option)})"
+                f"; abort connection option 0x6007 = {comm_loss} "
+                f"({cia402.abort_connection_option_text(comm_loss)})"
             )
-        self._hub_port().event(d.id, EventKind.CONFIG, text, quick_stop_option=d.quick_stop_option)
+        hub = self._hub_port()
+        hub.event(d.id, EventKind.CONFIG, text, quick_stop_option=d.quick_stop_option)
+        failsafe, failsafe_text = failsafe_of(comm_loss, self._consumer_text(d))
+        hub.update(d.id, failsafe=failsafe, failsafe_text=failsafe_text)
+
+    def _consumer_text(self, d: _Drive) -> str | None:
+        """What the bring-up set the drive to watch (0x1016:1), None when nothing."""
+        o = self.options
+        if o.heartbeat <= 0 or not d.opts.has_consumer_heartbeat:
+            return None
+        ms = min(0xFFFF, math.ceil(o.heartbeat * o.heartbeat_factor))
+        return f"0x1016:1 watches node {o.node_id}'s heartbeat ({ms} ms)"
 
     def _on_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.node]
@@ -573,6 +685,26 @@ class CanOpenAdapter:
 
 
 _STOPPED_DESIRED = DesiredCommand()
+
+
+def failsafe_of(option: int | None, consumer: str | None) -> tuple[bool | None, str]:
+    """The drive's own reaction to a lost master (issue 32 item 5): its heartbeat consumer
+    (CiA 301 §7.2.8.3.2, 0x1016:1) and what 0x6007 does then (CiA 402-2 §6.4.5).
+
+    True: it stops or faults; False: it keeps running; None: not known."""
+    if consumer is None:
+        return False, (
+            "no heartbeat consumer set (bus heartbeat = 0, or the EDS has no 0x1016:1): the "
+            "drive does not notice a lost master and keeps running"
+        )
+    if option is None:
+        return None, f"{consumer}; 0x6007 not known (not in the EDS, not configured)"
+    text = f"{consumer}, then 0x6007 = {option} ({cia402.abort_connection_option_text(option)})"
+    if option in FAILSAFE_OPTIONS:
+        return True, text
+    if option == 0:
+        return False, text + ": the drive keeps running"
+    return None, text + ": its effect is not known"
 
 
 LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(

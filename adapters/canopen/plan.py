@@ -200,7 +200,12 @@ def node_config(node_id: int, opts: DriveOptions, bus: BusOptions) -> NodeConfig
                 f"startup_sdo {obj_name(v.index, v.subindex)} = {w.value}",
             )
         )
-    reports = ((cia402.QUICK_STOP_OPTION, 0),) if opts.has_quick_stop_option else ()
+    reports: tuple[tuple[int, int], ...] = (
+        ((cia402.QUICK_STOP_OPTION, 0),) if opts.has_quick_stop_option else ()
+    )
+    if eds.has(cia402.ABORT_CONNECTION_OPTION):
+        # the drive's reaction to a lost master as it has it (the failsafe report)
+        reports += ((cia402.ABORT_CONNECTION_OPTION, 0),)
     fault_reads = ((0x1001, 0),) + (((cia402.ERROR_CODE, 0),) if opts.has_error_code else ())
     return NodeConfig(
         node_id=node_id,

@@ -99,6 +99,8 @@ class FakeNode:
         self.nmt_seen: list[f.NmtCommand] = []
         self.sdo_requests: list[f.SdoRequest] = []
         self.sdo_log: list[str] = []
+        self.tpdo_on_sync = True
+        self.sdo_silent = False  # SDO requests unanswered, the rest goes on
 
     def statusword(self) -> int:
         return cia402.statusword_bits(self.state) | cia402.SW_REMOTE
@@ -107,7 +109,7 @@ class FakeNode:
         if frame.cob_id == f.sdo_rx_id(self.id):
             request = f.decode_sdo_request(frame.data)
             self.sdo_log.append("abort" if isinstance(request, f.Abort) else "request")
-            if self.silent or isinstance(request, f.Abort):
+            if self.silent or self.sdo_silent or isinstance(request, f.Abort):
                 return []
             self.sdo_log.append("response")
         if self.silent:
@@ -127,6 +129,8 @@ class FakeNode:
             return []
         if frame.cob_id == f.sdo_rx_id(self.id):
             return [f.CanFrame(f.sdo_tx_id(self.id), self._sdo(frame.data))]
+        if frame.cob_id == f.COB_SYNC and self.nmt is f.NmtState.OPERATIONAL:
+            return [self.tpdo()] if self.tpdo_on_sync else []  # transmission type 1
         if frame.cob_id == f.rpdo_id(1, self.id) and self.nmt is f.NmtState.OPERATIONAL:
             cw = int.from_bytes(frame.data[:2], "little")
             previous = self.controlwords[-1] if self.controlwords else 0
@@ -198,13 +202,13 @@ class Line:
             step_at = min(end, deadline if deadline is not None else end, next_hb)
             self.now = max(self.now, step_at)
             self._deliver(list(self.master.step(self.now)))
+            for node in self.nodes.values():
+                node.tpdo_on_sync = tpdo
             if self.now >= next_hb:
                 next_hb = self.now + HB_MS / 1000
                 for node in self.nodes.values():
                     if heartbeats and not node.silent:
                         self.inject(node.heartbeat())
-                    if tpdo and node.nmt is f.NmtState.OPERATIONAL and not node.silent:
-                        self.inject(node.tpdo())
             if self.now >= end:
                 break
             self.now += 1e-4
@@ -394,17 +398,15 @@ def test_an_operational_node_is_reset_when_the_config_says_so() -> None:
 
 
 def test_a_missed_heartbeat_takes_the_node_offline_then_it_comes_back() -> None:
-    line, node = up()
+    line, _node = up()
     line.master.set_want(5, Want(run=True, target=100))
     line.run(0.2)
-    node.silent = True
-    line.run(HB_MS / 1000 * 3 + 0.05)
+    line.run(HB_MS / 1000 * 3 + 0.05, heartbeats=False)  # its TPDO1 still comes
     down = line.of(NodeDown)
     assert len(down) == 1 and isinstance(down[0], NodeDown)
     assert down[0].reason.startswith("no heartbeat for ")
     assert not line.master.online(5)
     assert line.master.nodes[5].want == STOPPED  # nothing of the old wish survives
-    node.silent = False
     line.run(1.0)
     assert line.master.online(5)
     assert line.master.nodes[5].want == STOPPED
@@ -479,9 +481,9 @@ def test_sdo_jobs_one_at_a_time_with_abort_texts() -> None:
 
 def test_sdo_timeout_aborts_and_reports() -> None:
     line, node = up()
-    node.silent = True
+    node.sdo_silent = True
     token = line.master.submit(5, 0x605A, 0, None)
-    line.run(0.15, heartbeats=False, tpdo=False)
+    line.run(0.15)
     done = next(a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token)
     assert done.result == f.SdoResult(abort_code=codes.ABORT_TIMEOUT)
     abort = f.CanFrame(0x605, f.encode_sdo_request(f.Abort(0x605A, 0, codes.ABORT_TIMEOUT)))
@@ -562,10 +564,10 @@ def test_a_release_unanswered_ends_at_the_sdo_timeout_and_is_reported() -> None:
     node = FakeNode()
     line = Line(Master(config(), [node_config(release=RELEASE)]), node)
     line.run(0.5)
-    node.silent = True
+    node.sdo_silent = True
     line._deliver(list(line.master.release(line.now)))
     assert not line.master.released
-    line.run(0.15, heartbeats=False, tpdo=False)
+    line.run(0.15)
     assert line.master.released
     reports = [a.text for a in line.of(Report) if isinstance(a, Report)]
     assert any(t.startswith("leaving: write of 0x1016:1 failed: 0x05040000") for t in reports)
@@ -633,15 +635,16 @@ class _NoAnswer(Exception):
     pass
 
 
-def test_a_reset_pulse_keeps_the_other_bits() -> None:
+def test_no_reset_pulse_for_a_drive_that_is_not_faulted() -> None:
+    """Transition 15 leaves FAULT only (CiA 402-2 §6.2): a reset asked of a running drive
+    sends nothing (bit 7 never rides on Enable operation)."""
     line, node = up()
     line.master.set_want(5, Want(run=True, target=100))
     line.run(0.3)
     assert node.state is State.OPERATION_ENABLED
-    assert line.master.fault_reset(5, line.now)
+    assert not line.master.fault_reset(5, line.now)
     line.run(0.1)
-    words = [w for w in node.controlwords if w & 0x80]
-    assert words and all(w & 0x0F == 0x0F for w in words)  # still enable operation
+    assert not [w for w in node.controlwords if w & 0x80]
     assert node_state(node) is State.OPERATION_ENABLED
 
 
@@ -685,7 +688,7 @@ def test_a_transfer_under_way_when_the_node_is_lost_is_aborted() -> None:
     token = line.master.submit(5, 0x605A, 0, None)
     line.run(0.5, heartbeats=False, tpdo=False)
     done = next(a for a in line.of(SdoDone) if isinstance(a, SdoDone) and a.token == token)
-    assert done.error is not None and done.error.startswith("node lost: no heartbeat")
+    assert done.error is not None and done.error.startswith("node lost: no TPDO1")
     abort = f.encode_sdo_request(f.Abort(0x605A, 0, codes.ABORT_GENERAL))
     assert f.CanFrame(0x605, abort) in line.sent
 

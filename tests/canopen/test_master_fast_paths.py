@@ -142,6 +142,7 @@ def test_the_struct_unpacks_as_the_general_path(fields_: list[PdoField], data: b
 def test_a_repeated_tpdo_is_the_same_inputs_and_is_counted() -> None:
     line, node = _brought_up(general=False)
     frame = node.tpdo(7)
+    line.master.nodes[NODE].tpdo_credit = 2  # two SYNCs' worth: no conflict here
     first = line.master.step(line.now, FrameIn(frame))
     again = line.master.step(line.now, FrameIn(f.CanFrame(frame.cob_id, bytes(frame.data))))
     assert again == first and again[0] is first[0]  # not decoded again

@@ -45,13 +45,16 @@ from adapters.canopen.master.events import (
     BadFrame,
     BusErrorIn,
     Configured,
+    Conflict,
     EmcyIn,
     Event,
     FaultInfo,
     FrameIn,
     Inputs,
+    LineClaimed,
     LinkDown,
     MasterConfig,
+    MasterHeard,
     NodeConfig,
     NodeDown,
     NodeProblem,
@@ -69,6 +72,19 @@ from adapters.canopen.master.node import Job, Node, Phase, Purpose
 RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
 COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
+# then the bit is back at 0 this many cycles (>= 1 RPDO and SYNC) before the next
+# command: the reset is an edge 0 -> 1 -> 0, never 1 carried into Shutdown (0x0086)
+RESET_CLEAR_CYCLES = 1.5
+# a node online gets its TPDO1 every cycle (every SYNC, or its event timer without
+# SYNC): this many cycles without one and it is lost (issue 32 item 11)
+TPDO_LOSS_CYCLES = 3
+# TPDO1s allowed ahead: one per SYNC, one of a late cycle carried over; one more is a
+# second producer of the node's TPDO1 (issue 32 item 12)
+TPDO_CREDIT_MAX = 2
+# a late SYNC or heartbeat moves the next one: never sooner than this share of the period
+# after it (missed slots are skipped, never sent in a burst)
+SLOT_MIN_GAP = 0.9
+SDO_LATE_MAX = 4  # late answers expected at most (transfers ended without an answer)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
 HOLD_MARGIN = 0.002  # s: a receive hold ends this long before the next SYNC (at most cycle/4)
 # s: no shorter hold (the loop's wait is rounded up to whole milliseconds, epoll: a short
@@ -90,13 +106,22 @@ class Master:
         self._tokens = itertools.count(1)
         self._next_cycle: float | None = 0.0
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
-        self.figures = {"syncs_tx": 0, "bad_frames": 0, "bus_errors": 0, "tx_failures": 0}
+        self.figures = {
+            "syncs_tx": 0,
+            "bad_frames": 0,
+            "bus_errors": 0,
+            "tx_failures": 0,
+            "foreign_master_frames": 0,
+        }
         self._left = False
         self._releasing = False
         self._kick = False  # a job was queued for an idle SDO channel
         self._due: float | None = 0.0  # a lower bound of the next deadline
         self._cobs: dict[int, frames.CobId | None] = {}
         self._quiet = False  # the event stepped moved no deadline (a PDO)
+        self._claimed = config.listen <= 0  # listened without hearing another master
+        self._refused = False  # another master heard while listening: silent for good
+        self._listen_until: float | None = None
 
     # ------------------------------------------------------------ the adapter's side
 
@@ -109,11 +134,21 @@ class Master:
 
     def fault_reset(self, node_id: int, now: float) -> bool:
         """Start one fault reset pulse (bit 7 of the controlword); False when the node is
-        not online (nothing is sent, nothing is kept for later) or a pulse is under way."""
+        not online or its statusword shows no fault (CiA 402-2 §6.2: transition 15 leaves
+        FAULT only; nothing is sent, nothing is kept for later) or a pulse is under way.
+
+        The pulse: Disable voltage with bit 7 for :data:`RESET_PULSE_CYCLES`, then
+        Disable voltage with bit 7 at 0 for :data:`RESET_CLEAR_CYCLES`, then the word for
+        the state and the wish: bit 7 is never set together with a command that moves
+        the drive toward operation (0x0086 was sent before)."""
         node = self.nodes[node_id]
-        if node.phase is not Phase.ONLINE or now < node.reset_until:
+        if node.phase is not Phase.ONLINE or now < node.reset_clear_until:
             return False
-        node.reset_until = now + RESET_PULSE_CYCLES * self.config.cycle
+        if node.state not in FAULT_STATES:
+            return False
+        cycle = self.config.cycle
+        node.reset_until = now + RESET_PULSE_CYCLES * cycle
+        node.reset_clear_until = node.reset_until + RESET_CLEAR_CYCLES * cycle
         return True
 
     def submit(self, node_id: int, index: int, subindex: int, write: bytes | None) -> int:
@@ -144,12 +179,13 @@ class Master:
         or timed out), then :meth:`leave`."""
         out: list[Action] = []
         self._releasing = True
+        if not self._claimed:
+            return out  # never on the line: nothing to release
         for node in self.nodes.values():
-            self._drop_jobs(node, "the gateway is leaving the line", out)
+            self._drop_jobs(node, now, "the gateway is leaving the line", out)
             node.probe_at = None
-            if node.phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
-                for s in node.config.release:
-                    node.jobs.append(Job(Purpose.RELEASE, s.index, s.subindex, s.data))
+            if node.consumer_set or node.phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
+                self._queue_release(node)
             if node.jobs:
                 self._start_job(node, now, out)
         self._due = self._compute_due()
@@ -170,6 +206,9 @@ class Master:
         RPDOs to act, and, from an NMT master, NMT enter pre-operational (no PDO is
         obeyed after it; the drive's 0x6007 reaction follows when the gateway's
         heartbeat stops)."""
+        if not self._claimed:
+            self._left = True
+            return []  # never on the line (another master holds it): nothing is sent
         online = [n for n in self.nodes.values() if n.phase is Phase.ONLINE]
         out: list[Action] = [Send(self._rpdo(node, now)) for node in online]
         if online and self.config.sync_period > 0:
@@ -185,7 +224,9 @@ class Master:
     @property
     def next_cycle(self) -> float | None:
         """When the next cycle (SYNC, RPDOs) is due; None once the engine left the line."""
-        return None if self._left else self._next_cycle
+        if self._left or not self._claimed:
+            return None
+        return self._next_cycle
 
     def hold_until(self, now: float) -> float | None:
         """Until when received frames may wait (the driver's receive hold), or None.
@@ -203,6 +244,8 @@ class Master:
         cfg = self.config
         at = self._next_cycle
         if at is None or cfg.sync_period <= 0 or self._left or self._releasing or self._kick:
+            return None
+        if not self._claimed:
             return None
         due = self._due
         if due is not None and due < at:
@@ -252,6 +295,10 @@ class Master:
         self._kick = self._quiet = False
         if self._left:
             return out
+        if not self._claimed:
+            self._listen(now, event, out)
+            if not self._claimed:
+                return out
         touched: Node | None = None
         if event is not None:
             touched = self._on_event(now, event, out)
@@ -272,6 +319,54 @@ class Master:
             self._due = mine
         return out
 
+    # ------------------------------------------------------------ one master per line
+
+    def _listen(self, now: float, event: Event | None, out: list[Action]) -> None:
+        """Before the first frame: listen for ``config.listen`` s (issue 32 item 12: the
+        gateway never becomes a second master; the Profibus and DeviceNet lines refuse a
+        line another master holds the same way). Then the cycle, the heartbeat and the
+        probes start at once, as they would have at the first step."""
+        if self._listen_until is None:
+            self._listen_until = now + self.config.listen
+            self._due = self._listen_until
+        if self._refused:
+            return
+        if isinstance(event, FrameIn):
+            cob = self._classify(event.frame.cob_id)
+            what = None if cob is None else self._master_frame(cob, event.frame)
+            if what is not None:
+                self.figures["foreign_master_frames"] += 1
+                self._refused = True
+                self._due = None
+                out.append(MasterHeard(what, claimed=False))
+                return
+        if now < self._listen_until:
+            return
+        self._claimed = True
+        self._next_cycle = now
+        if self._next_heartbeat is not None:
+            self._next_heartbeat = now
+        for node in self.nodes.values():
+            if node.probe_at is not None:
+                node.probe_at = now
+        self._due = now
+        out.append(LineClaimed())
+
+    def _master_frame(self, cob: frames.CobId, frame: CanFrame) -> str | None:
+        """What a frame from another producer says of another master on the line, or None
+        (CiA 301 §7.2.5, §7.2.8: one SYNC producer, one NMT master per network; the node
+        id of the gateway's heartbeat is its own)."""
+        kind, cfg = cob.kind, self.config
+        if kind is Kind.SYNC and cfg.sync_period > 0:
+            return "a SYNC from another producer"
+        if kind is Kind.NMT and cfg.nmt_master:
+            return f"an NMT command ({frame.data.hex()}) from another master"
+        if kind is Kind.HEARTBEAT and cfg.own_heartbeat > 0 and cob.node_id == cfg.own_node_id:
+            return f"a heartbeat with the gateway's own node id {cfg.own_node_id}"
+        if kind is Kind.RPDO and cob.node_id in self.nodes:
+            return f"RPDO{cob.pdo} to node {cob.node_id} from another producer"
+        return None
+
     # ------------------------------------------------------------ time
 
     def _hb_timeout(self, node: Node) -> float:
@@ -281,7 +376,7 @@ class Master:
         cfg = self.config
         if self._next_heartbeat is not None and now >= self._next_heartbeat:
             out.append(Send(frames.encode_heartbeat(cfg.own_node_id, NmtState.OPERATIONAL)))
-            self._next_heartbeat = max(self._next_heartbeat + cfg.own_heartbeat, now)
+            self._next_heartbeat = _next_slot(self._next_heartbeat, cfg.own_heartbeat, now)
         for node in self.nodes.values():
             if node.sdo_deadline is not None and now >= node.sdo_deadline:
                 self._sdo_timeout(node, now, out)
@@ -300,18 +395,28 @@ class Master:
                 node.jobs.appendleft(Job(Purpose.PROBE, 0x1000, 0))
         if self._next_cycle is not None and now >= self._next_cycle:
             self._cycle(now, out)
-            cycle = cfg.cycle
-            self._next_cycle += cycle
-            if self._next_cycle <= now:  # late (a loaded machine): no burst to catch up
-                self._next_cycle = now + cycle
+            # late (a loaded machine): the missed slots skipped, no burst to catch up
+            self._next_cycle = _next_slot(self._next_cycle, cfg.cycle, now)
 
     def _cycle(self, now: float, out: list[Action]) -> None:
         if self.config.sync_period > 0:
             out.append(Send(SYNC_FRAME))
             self.figures["syncs_tx"] += 1
         refresh = max(RPDO_REFRESH, self.config.cycle)
+        sync = self.config.sync_period > 0
         for node in self.nodes.values():
             if node.phase is not Phase.ONLINE:
+                continue
+            if sync:
+                # one TPDO1 per SYNC; one more only when the last cycle had none (late)
+                silent = node.tpdo_silent
+                node.tpdo_credit = 1 if silent == 0 else min(node.tpdo_credit + 1, TPDO_CREDIT_MAX)
+            node.tpdo_silent += 1
+            if node.tpdo_silent > TPDO_LOSS_CYCLES:
+                # CiA 301 §7.2.2.2: a TPDO of transmission type 1 goes on every SYNC (the
+                # event timer without SYNC): a heartbeat alone (another node may send it
+                # with this id) does not keep a drive online
+                self._lose(node, now, f"no TPDO1 for {TPDO_LOSS_CYCLES} cycles", out)
                 continue
             frame = self._rpdo(node, now)
             if frame.data == node.rpdo_sent and now - node.rpdo_at < refresh:
@@ -322,16 +427,19 @@ class Master:
 
     def _rpdo(self, node: Node, now: float) -> CanFrame:
         want = node.want
-        resetting = now < node.reset_until
+        resetting = 0 if now >= node.reset_clear_until else 1 if now < node.reset_until else 2
         key = (node.state, want, resetting)
         if key == node.rpdo_key and node.rpdo_frame is not None:
             return node.rpdo_frame  # a pure function of these: built once per change
-        cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
         if resetting:
-            # transition 15 on the drive's 0 -> 1 edge; the other bits stay as they are,
-            # so a reset asked of a drive that is not faulted changes nothing else
-            cw |= Cw.FAULT_RESET_BIT
-        values = (cw, target(node.state, want))
+            # transition 15 on the drive's 0 -> 1 edge of bit 7 (CiA 402-2 §6.2), with
+            # Disable voltage, which moves nothing; then bit 7 back at 0 for a cycle, and
+            # only then the word for the state (Shutdown, ...): never 0x0086
+            cw = int(Cw.DISABLE_VOLTAGE) | (Cw.FAULT_RESET_BIT if resetting == 1 else 0)
+            values = (cw, 0)
+        else:
+            cw = controlword(node.state, want, mode_bits=node.config.mode_bits)
+            values = (cw, target(node.state, want))
         data = bytearray()
         for field_, value in zip(node.config.rpdo, values, strict=False):
             data += _pack(field_, value)
@@ -350,21 +458,21 @@ class Master:
     # ------------------------------------------------------------ phases
 
     def _to_probe(self, node: Node, now: float, at: float, out: list[Action]) -> None:
-        self._drop_jobs(node, "node lost", out)
+        self._drop_jobs(node, now, "node lost", out)
         node.phase = Phase.PROBE
         node.phase_deadline = None
         node.probe_at = at
         node.watch_heartbeat = False
         node.state = node.statusword = None
         node.want = STOPPED
-        node.reset_until = 0.0
+        node.reset_until = node.reset_clear_until = 0.0
         node.rpdo_sent, node.rpdo_at = None, 0.0
         node.rpdo_key = node.rpdo_frame = None
         node.tpdo_data = node.tpdo_inputs = None
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
-        self._drop_jobs(node, f"node lost: {reason}", out)
+        self._drop_jobs(node, now, f"node lost: {reason}", out)
         self._to_probe(node, now, now + self.config.retry, out)
         node.seen = False
         node.figures["lost"] += 1
@@ -372,15 +480,23 @@ class Master:
             out.append(NodeDown(node.id, reason))
 
     def _fail(self, node: Node, now: float, text: str, code: int | None, out: list[Action]) -> None:
-        self._drop_jobs(node, f"bring-up failed: {text}", out)
+        self._drop_jobs(node, now, f"bring-up failed: {text}", out)
         node.phase = Phase.FAILED
         node.probe_at = None
         node.watch_heartbeat = False  # not started: its silence is no news
         node.phase_deadline = now + self.config.failed_retry
         node.last_problem = text
         out.append(NodeProblem(node.id, text, code))
+        if node.consumer_set:
+            # a drive the gateway does not start must not watch its heartbeat: it would
+            # react per 0x6007 when the gateway stops (EMCY 0x8130 on a clean stop)
+            self._queue_release(node)
 
-    def _drop_jobs(self, node: Node, why: str, out: list[Action]) -> None:
+    def _queue_release(self, node: Node) -> None:
+        for s in node.config.release:
+            node.jobs.append(Job(Purpose.RELEASE, s.index, s.subindex, s.data))
+
+    def _drop_jobs(self, node: Node, now: float, why: str, out: list[Action]) -> None:
         """End every SDO job of the node; a transfer under way is aborted on the line
         (CiA 301 §7.2.4.3.17, general error) so that the server starts afresh."""
         jobs = list(node.jobs)
@@ -392,6 +508,7 @@ class Master:
                 out.append(
                     Send(CanFrame(frames.sdo_rx_id(node.id), frames.encode_sdo_request(abort)))
                 )
+                node.sdo_late = min(node.sdo_late + 1, SDO_LATE_MAX)
         node.jobs.clear()
         node.current = node.transfer = None
         node.sdo_deadline = None
@@ -430,6 +547,8 @@ class Master:
 
     def _online(self, node: Node, out: list[Action]) -> None:
         node.phase = Phase.ONLINE
+        node.tpdo_silent = 0
+        node.tpdo_credit = 1
         node.phase_deadline = None
         node.last_problem = None
         out.append(NodeUp(node.id))
@@ -450,25 +569,46 @@ class Master:
             return
         out.append(Send(CanFrame(frames.sdo_rx_id(node.id), transfer.timeout())))
         node.figures["sdo_timeouts"] += 1
+        node.sdo_late = min(node.sdo_late + 1, SDO_LATE_MAX)
         self._sdo_end(node, now, out)
 
     def _on_sdo(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
         transfer = node.transfer
         if transfer is None:
-            return  # late answer to a transfer that timed out
+            self._unexpected_sdo(node, now, "an SDO answer with no request under way", out)
+            return
         ignored = transfer.ignored
         reply = transfer.on_response(data)
         if reply is not None:
             out.append(Send(CanFrame(frames.sdo_rx_id(node.id), reply)))
         if transfer.result is None:
             if transfer.ignored != ignored:
-                # a late answer of a transfer ended on its timeout: not this one's, and
-                # its deadline stays as it is (CiA 301 §7.2.4.3)
-                node.figures["sdo_stale"] += 1
+                # not this transfer's answer, and its deadline stays as it is (CiA 301
+                # §7.2.4.3)
+                what = (
+                    "an SDO answer that does not answer the request for "
+                    f"0x{transfer.index:04X}:{transfer.subindex}"
+                )
+                self._unexpected_sdo(node, now, what, out)
                 return
             node.sdo_deadline = now + self.config.sdo_timeout
             return
         self._sdo_end(node, now, out)
+
+    def _unexpected_sdo(self, node: Node, now: float, what: str, out: list[Action]) -> None:
+        """An SDO answer no request under way asked for: the one late answer a transfer
+        that ended without one (timed out, aborted) may still get, else a conflict (CiA
+        301 §7.2.4: one server answers one client's request once; a second answer, or one
+        nobody asked for, is another node's, or forged)."""
+        if node.sdo_late > 0:
+            node.sdo_late -= 1
+            node.figures["sdo_stale"] += 1
+            return
+        self._conflict(node, f"{what} (unsolicited, or a second answer to one request)", out)
+
+    def _conflict(self, node: Node, what: str, out: list[Action]) -> None:
+        node.figures["conflicts"] += 1
+        out.append(Conflict(node.id, what))
 
     def _sdo_end(self, node: Node, now: float, out: list[Action]) -> None:
         job, transfer = node.current, node.transfer
@@ -552,6 +692,8 @@ class Master:
         if s.index == 0x1017 and s.subindex == 0:
             node.watch_heartbeat = True  # the producer runs from now on
             node.heard_at = now
+        if (s.index, s.subindex) == (0x1016, 1) and int.from_bytes(s.data, "little"):
+            node.consumer_set = True  # it watches the gateway's heartbeat from now on
         if s.read_back:
             node.jobs.appendleft(Job(Purpose.VERIFY, s.index, s.subindex, step=job.step))
             return
@@ -602,9 +744,11 @@ class Master:
     ) -> None:
         if result.ok:
             node.figures["released"] += 1
+            node.consumer_set = False
             return
+        what = "leaving" if self._releasing else "not started"
         text = (
-            f"leaving: write of 0x{job.index:04X}:{job.subindex} failed: {result.message} "
+            f"{what}: write of 0x{job.index:04X}:{job.subindex} failed: {result.message} "
             "(the drive reacts per 0x6007 when the gateway's heartbeat stops)"
         )
         out.append(Report(node.id, text))
@@ -658,13 +802,24 @@ class Master:
             self.figures["bad_frames"] += 1
             return None
         node = self.nodes.get(cob.node_id)
-        if node is None:
-            return None  # another node, or a broadcast (SYNC, NMT of another master)
         kind = cob.kind
+        if node is None:
+            # another node, or a broadcast: a SYNC or NMT of another master, a heartbeat
+            # with the gateway's own node id
+            if kind is not Kind.TPDO:
+                what = self._master_frame(cob, frame)
+                if what is not None:
+                    self.figures["foreign_master_frames"] += 1
+                    out.append(MasterHeard(what, claimed=True))
+            return None
         if kind is Kind.TPDO:
             self._quiet = True  # a PDO moves no deadline of its node
             if cob.pdo == 1 and node.phase is Phase.ONLINE:
                 self._on_tpdo(node, now, frame.data, out)
+        elif kind is Kind.RPDO:
+            self.figures["foreign_master_frames"] += 1
+            what = f"RPDO{cob.pdo} to node {node.id} from another producer"
+            out.append(MasterHeard(what, claimed=True))
         elif kind is Kind.SDO_TX:
             self._on_sdo(node, now, frame.data, out)
         elif kind is Kind.HEARTBEAT:
@@ -690,6 +845,7 @@ class Master:
         node.heard, node.heard_at = state, now
         phase = node.phase
         if state is NmtState.BOOTUP:
+            node.consumer_set = False  # its OD back at the defaults
             if phase is Phase.RESET:
                 self._to_probe(node, now, now, out)
             elif phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
@@ -705,6 +861,12 @@ class Master:
         """TPDO1 in. A drive at rest repeats its TPDO1 every SYNC: the same data gives the
         same :class:`Inputs` (the statusword in it is the node's already, so no state
         changes and no fault read starts), the same object again without decoding."""
+        node.tpdo_silent = 0
+        if self.config.sync_period > 0:
+            node.tpdo_credit -= 1
+            if node.tpdo_credit < 0:
+                node.tpdo_credit = 0
+                self._conflict(node, "a second TPDO1 in one SYNC cycle", out)
         last = node.tpdo_inputs
         if data == node.tpdo_data and last is not None and last.statusword == node.statusword:
             node.figures["tpdo_rx"] += 1
@@ -755,6 +917,16 @@ class Master:
             "sdo_queue": len(node.jobs) + (node.current is not None),
             **node.figures,
         }
+
+
+def _next_slot(slot: float, period: float, now: float) -> float:
+    """The slot after ``slot`` (sent at ``now``): on the grid, unless the send was late;
+    then a period after ``now`` whenever the grid's next slot is nearer than
+    :data:`SLOT_MIN_GAP` periods: the missed slots are skipped, never sent in a burst."""
+    nxt = slot + period
+    if nxt < now + SLOT_MIN_GAP * period:
+        return now + period
+    return nxt
 
 
 def _pack(field_: PdoField, value: int) -> bytes:

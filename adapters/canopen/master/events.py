@@ -79,6 +79,10 @@ class MasterConfig:
     ``pdo_period``). ``heartbeat_factor``: a node is lost when no heartbeat came for
     this many of its producer periods. ``own_node_id``/``own_heartbeat``: the gateway's
     heartbeat (0: none), which the drives consume (0x1016) to react per 0x6007.
+    ``listen``: s the engine only listens before it sends its first frame (one master
+    per line: a SYNC, an NMT command, a heartbeat with ``own_node_id`` or an RPDO to one
+    of its nodes heard meanwhile is another master, :class:`MasterHeard` with
+    ``claimed`` False, and the engine never starts); 0: no listening.
     """
 
     nmt_master: bool = True
@@ -91,6 +95,7 @@ class MasterConfig:
     failed_retry: float = 10.0
     own_node_id: int = 0
     own_heartbeat: float = 0.0
+    listen: float = 0.0
 
     @property
     def cycle(self) -> float:
@@ -222,8 +227,38 @@ class Report:
     text: str
 
 
+@dataclass(frozen=True, slots=True)
+class LineClaimed:
+    """The listening before the first frame ended with no other master heard: the engine
+    produces its SYNC, heartbeat and NMT from now on."""
+
+
+@dataclass(frozen=True, slots=True)
+class MasterHeard:
+    """A frame only a master sends, from another producer (a SYNC, an NMT command, a
+    heartbeat with the gateway's node id, an RPDO to one of its nodes). ``claimed``
+    False: heard while listening, before the first frame: the engine stays silent for
+    good (the adapter refuses the line)."""
+
+    text: str
+    claimed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Conflict:
+    """Frames for one node that contradict each other (a second TPDO1 in one SYNC
+    cycle, an SDO answer with no request under way, two answers to one request): they
+    may be forged; ``what`` says which."""
+
+    node: int
+    what: str
+
+
 Action = (
     Send
+    | LineClaimed
+    | MasterHeard
+    | Conflict
     | NodeSeen
     | Configured
     | NodeUp

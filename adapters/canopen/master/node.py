@@ -70,17 +70,28 @@ class Node:
     statusword: int | None = None
     state: State | None = None
     want: Want = STOPPED
-    reset_until: float = 0.0
+    reset_until: float = 0.0  # the fault reset bit set until then
+    reset_clear_until: float = 0.0  # then at 0 until then, before the next command
     rpdo_sent: bytes | None = None  # the last RPDO1 data sent, and when
     rpdo_at: float = 0.0
     # RPDO1 as last built, and what it was built from (state, want, reset pulse on)
-    rpdo_key: tuple[State | None, Want, bool] | None = None
+    rpdo_key: tuple[State | None, Want, int] | None = None
     rpdo_frame: CanFrame | None = None
     # TPDO1 as last received and what it gave (a repeated TPDO1 gives the same again)
     tpdo_data: bytes | None = None
     tpdo_inputs: Inputs | None = None
     # TPDO1's mapping as one struct (every field 1, 2, 4 or 8 bytes), else None
     tpdo_struct: struct.Struct | None = None
+    # cycles (SYNCs) since the last TPDO1 while online: lost beyond TPDO_LOSS_CYCLES
+    tpdo_silent: int = 0
+    # TPDO1s the SYNCs allow (one each, one carried over at most): below 0 is a conflict
+    tpdo_credit: int = 1
+    # transfers that ended without an answer (timed out, aborted): each may still get
+    # its one late answer (ignored); any other answer no request asked for is a conflict
+    sdo_late: int = 0
+    # the bring-up wrote the consumer of the gateway's heartbeat (0x1016:1) and no
+    # release write has switched it off since: the drive watches the gateway
+    consumer_set: bool = False
     figures: dict[str, int] = field(
         default_factory=lambda: {
             "tpdo_rx": 0,
@@ -94,6 +105,7 @@ class Node:
             "bad_pdos": 0,
             "lost": 0,
             "released": 0,
+            "conflicts": 0,  # frames that contradict each other (may be forged)
         }
     )
     last_problem: str | None = None
