@@ -25,6 +25,7 @@ import pytest_asyncio
 
 from adapters.profibus.sim.slave import DpSlave
 from adapters.profibus.weg.sim import WegSim
+from gateway.adapter import EventKind
 from gateway.config import DEFAULT_CONFIG
 from gateway.model import CommState, Direction, DriveState, DriveStatus
 from tests.e2e.harness import (
@@ -235,8 +236,12 @@ async def test_run_reverse_stop_by_zenoh(gw: Gateway, model: Model) -> None:
         assert (s.direction, s.speed_pct, s.speed_ref_rpm) == (Direction.REVERSE, -50.0, -900.0)
         await stop(gw, states, lambda: gw.command(model.id, {"run": False}), -900.0)
     if model.device == "CFW320":  # P684 bit 6 is reserved: no quick stop (Table 4.3)
-        reason = await gw.refused(model.id, {"quick_stop": True})
-        assert "no quick stop" in reason and "P684 bit 6" in reason, reason
+        # a stop is never refused (issue 32): the quick stop becomes a ramp stop, said once
+        with gw.daemon.hub.subscribe_events() as events:
+            await gw.command(model.id, {"quick_stop": True})
+            said = [e.text for e in events.drain() if e.kind is EventKind.SAFETY]
+        assert "quick_stop is not in the CFW320: a ramp stop applied instead" in said, said
+        assert not gw.daemon.hub.desired(model.id).run
 
 
 @every_model
