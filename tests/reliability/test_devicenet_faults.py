@@ -73,7 +73,7 @@ async def test_scanner_bus_off_and_restart(tmp_path, monkeypatch: pytest.MonkeyP
                 await token.auntil(lambda g: g.put, TIMEOUT)
                 # the drive kept turning on its own (P313 = no action); back under the
                 # gateway it is stopped, and only a new run command starts it again
-                await events.text("cfw08", "run command cleared: drive came online")
+                await events.text("cfw08", "run command cleared: drive left online")
                 await gw.wait_for("cfw08", stopped)
                 assert can_sim(gw).node(MAC).drive.motor.speed == 0.0
                 assert not hub.desired("cfw08").run
@@ -99,7 +99,7 @@ async def test_drive_bus_off_e34_and_automatic_recovery(tmp_path) -> None:
             event = await events.text("cfw08", "drive offline: no data")
             assert "P313 = no action (2)" in event.text  # what the drive did meanwhile
             await gw.wait_for("cfw08", lambda s: s.online)
-            await events.text("cfw08", "run command cleared: drive came online")
+            await events.text("cfw08", "run command cleared: drive left online")
             await gw.wait_for("cfw08", stopped)
             assert not gw.daemon.hub.desired("cfw08").run
             diag = devicenet_adapter(gw).diagnostics()["drives"]["cfw08"]

@@ -122,7 +122,7 @@ async def test_a_slave_power_cycle_brings_the_drive_back_stopped(tmp_path: Path)
             assert not back.running and back.status.label == "ready"
             await events.text("cfw11", "left data exchange")
             await events.text("cfw11", "configured")
-            await events.text("cfw11", "run command cleared: drive came online")
+            await events.text("cfw11", "run command cleared: drive left online")
             assert not hub.desired("cfw11").run
             assert not weg(slave(gw, "cfw11").device).running
             diag = profibus_adapter(gw).diagnostics()["drives"]["cfw11"]
@@ -191,7 +191,7 @@ async def test_the_serial_port_vanishing_is_reopened_with_back_off(
                     assert profibus_adapter(gw).diagnostics()["reopens"] == 1
                     # the drive had kept turning on its own (P0313 = 0, no action); the
                     # gateway stops it, and nothing starts again without a new command
-                    await events.text("cfw11", "run command cleared: drive came online")
+                    await events.text("cfw11", "run command cleared: drive left online")
                     await gw.wait_for("cfw11", stopped)
                     assert not hub.desired("cfw11").run
                     assert weg(line[3].device).motor.speed == 0.0
