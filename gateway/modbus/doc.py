@@ -211,7 +211,7 @@ _COMMAND_RULES = [
     "",
     "- `run` and `jog` are sent to the hub only when the bit differs from the last word",
     "  **the same client** wrote for that unit; `fault_reset` only on its 0 -> 1 edge.",
-    "  After the hub cleared run (fault, drive came online, control passed to another",
+    "  After the hub cleared run (fault, drive left or came online, control passed to another",
     "  source, command watchdog, shutdown), a run bit held at 1 does **not** restart the",
     "  drive: write 0, then 1.",
     "- A client is its peer IP address, not its TCP connection: a PLC that reconnects is the",
