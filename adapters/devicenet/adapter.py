@@ -31,6 +31,7 @@ from adapters.devicenet.link import (
     LinkEvent,
     RxFrame,
 )
+from adapters.devicenet.objects import INACTIVITY_EPR_FACTOR
 from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus
 from adapters.devicenet.profile import (
     RESET_OFFLINE_WINDOW,
@@ -47,6 +48,7 @@ from adapters.devicenet.scanner import (
     FrameIn,
     IdentityCheck,
     InputData,
+    IoConflict,
     LineFault,
     LineOnline,
     LinkDown,
@@ -91,7 +93,7 @@ from gateway.errors import (
     LineHeld,
     ParameterError,
 )
-from gateway.model import CommState, Device
+from gateway.model import CommState, DesiredCommand, Device
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
@@ -101,6 +103,11 @@ LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
 ADR_INTERVAL = 1.0  # s between two looks at MAC 63 while an adr drive is missing
 IDLE = "idle"
+# Doubtful readings (issue 32 item 12): a drive whose poll responses conflicted is doubtful
+# until this many of its inputs in a row came without a conflict (at least this many poll
+# cycles: a forger answering each poll keeps it doubtful); a reconnect does not clear it.
+DOUBT_CLEAN_INPUTS = 50
+CONFLICT_EVENT_INTERVAL = 10.0  # s: at most one conflict event per drive this often
 
 REPORT_EVENTS: dict[ReportKind, EventKind] = {
     ReportKind.ALLOCATION: EventKind.COMM,
@@ -128,6 +135,16 @@ class _Drive:
     bad_inputs: int = 0
     output_key: object = None  # what the current output was computed from
     input_key: object = None  # the last input data and desired command mapped
+    # Rule 1 (issue 32 item 1): after every (re)connection the outputs carry no run and no
+    # jog until the hub's desired command is one without them, or one given since (not
+    # the object held when the drive was lost or configured): a run from before the loss
+    # is never sent, whatever the hub still holds.
+    armed: bool = False
+    held: object = None  # the desired command when the drive was (re)connected
+    doubtful: bool = False
+    clean_inputs: int = 0  # inputs in a row without a conflict, while doubtful
+    conflicts_unsaid: int = 0  # conflicts since the last conflict event
+    conflict_said_at: float | None = None
 
     @property
     def id(self) -> str:
@@ -152,6 +169,10 @@ class _Port:
     @property
     def bitrate(self) -> int:
         return self.adapter.options.bitrate
+
+    @property
+    def io_timeout(self) -> float:
+        return INACTIVITY_EPR_FACTOR * self.adapter.options.expected_packet_rate
 
     async def request(self, body: Request) -> Response:
         return await self.adapter._request(self.drive, body)
@@ -250,6 +271,7 @@ class DeviceNetAdapter:
             NodeUp: self._on_node_up,
             NodeDown: self._on_node_down,
             InputData: self._on_input,
+            IoConflict: self._on_conflict,
             ExplicitResult: self._on_result,
             Report: self._on_report,
         }
@@ -418,6 +440,7 @@ class DeviceNetAdapter:
 
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]
+        self._disarm(d)
         self._hub_port().update(d.id, comm=CommState.CONNECTING)
         if d.setup is not None:
             d.setup.cancel()
@@ -432,6 +455,7 @@ class DeviceNetAdapter:
                 task.cancel()
         d.setup = d.status = None
         d.configured = False
+        self._disarm(d)
         d.input_key = d.output_key = None
         text = f"drive offline: {action.reason}"
         note = d.profile.reset_note
@@ -448,11 +472,13 @@ class DeviceNetAdapter:
 
     def _on_input(self, now: float, action: InputData) -> None:
         d = self.drives[action.mac]
+        if d.doubtful:
+            self._count_clean(d)
         if not d.configured or not d.profile.ready:
             return
         hub = self._hub_port()
         desired = hub.desired(d.id)
-        key = (action.data, desired)
+        key = (action.data, desired, d.doubtful)
         if key == d.input_key:
             return  # the same reading for the same command: nothing new to publish
         d.input_key = key
@@ -462,7 +488,39 @@ class DeviceNetAdapter:
             d.bad_inputs += 1
             return
         changes["values"] = d.values  # the I/O words with the parameters read
+        changes["doubtful"] = d.doubtful
         hub.update(d.id, comm=CommState.ONLINE, **changes)
+
+    def _count_clean(self, d: _Drive) -> None:
+        d.clean_inputs += 1
+        if d.clean_inputs >= DOUBT_CLEAN_INPUTS:
+            d.doubtful = False
+            self._hub_port().update(d.id, doubtful=False)
+
+    def _on_conflict(self, now: float, action: IoConflict) -> None:
+        """Two answers to one poll (issue 32 item 12): the drive's readings are doubtful
+        until :data:`DOUBT_CLEAN_INPUTS` clean inputs in a row; one event when it starts,
+        then at most one per :data:`CONFLICT_EVENT_INTERVAL` with the count since."""
+        d = self.drives[action.mac]
+        d.clean_inputs = 0
+        d.conflicts_unsaid += 1
+        hub = self._hub_port()
+        if not d.doubtful:
+            d.doubtful = True
+            hub.update(d.id, doubtful=True)
+        said = d.conflict_said_at
+        if said is not None and now - said < CONFLICT_EVENT_INTERVAL:
+            return
+        hub.event(
+            d.id,
+            EventKind.BUS,
+            f"node {d.mac}: {d.conflicts_unsaid} poll response(s) beyond one per poll "
+            f"({action.count} in all; the last {action.data.hex(' ')}): another station "
+            f"sends with MAC {d.mac}'s identifier; the drive's readings are doubtful",
+            mac=d.mac,
+            conflicts=action.count,
+        )
+        d.conflict_said_at, d.conflicts_unsaid = now, 0
 
     def _on_result(self, now: float, action: ExplicitResult) -> None:
         fut = self._pending.pop(action.token, None)
@@ -579,10 +637,18 @@ class DeviceNetAdapter:
                     EventKind.FAULT,
                     "fault reset sent" if note is None else f"fault reset sent ({note})",
                 )
-            key = (desired, now < d.reset_until)
+            if d.output_key is not None:  # the first output after (re)configuration: a stop
+                d.armed = d.armed or desired is not d.held or not (desired.run or desired.jog)
+            command = desired if d.armed else motion_free(desired)
+            key = (command, now < d.reset_until)
             if key != d.output_key:
                 d.output_key = key
-                engine.set_output(d.mac, d.profile.outputs(desired, key[1]))
+                engine.set_output(d.mac, d.profile.outputs(command, key[1]))
+
+    def _disarm(self, d: _Drive) -> None:
+        """No run or jog reaches the drive until a command given from now on (rule 1)."""
+        d.armed = False
+        d.held = self._hub_port().desired(d.id)
 
     def _reset_pulse(self) -> float:
         """Long enough for at least one production with the bit set (edge, seed 3.1.2)."""
@@ -617,6 +683,7 @@ class DeviceNetAdapter:
         hub = self._hub_port()
         d.reset_seen = hub.desired(d.id).fault_reset_seq
         d.configured, d.problem = True, None
+        self._disarm(d)  # the first output after (re)configuration is a stop, built fresh
         d.input_key = d.output_key = None
         hub.event(d.id, EventKind.CONFIG, d.profile.configured_text())
         d.status = asyncio.get_running_loop().create_task(
@@ -755,6 +822,11 @@ class DeviceNetAdapter:
 
 
 # ---------------------------------------------------------------- helpers
+
+
+def motion_free(desired: DesiredCommand) -> DesiredCommand:
+    """``desired`` without run, jog or speed: a ramp stop (a quick or coast stop kept)."""
+    return replace(desired, run=False, jog=False, speed_rpm=None, speed_pct=None)
 
 
 def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:

@@ -61,6 +61,12 @@ class DrivePort(Protocol):
         """The line's configured bit rate (bus key ``bitrate``)."""
         ...
 
+    @property
+    def io_timeout(self) -> float:
+        """How long the drive's I/O connection lasts without the master's data before the
+        drive sees it lost (4 x the expected packet rate, fact sheet 2.9)."""
+        ...
+
     async def request(self, body: Request) -> Response:
         """An explicit request to the drive; the reply as it came (an error reply too).
 

@@ -286,10 +286,13 @@ def test_commands_per_pair() -> None:
 def test_capabilities_per_pair() -> None:
     c20, c21, c100 = capabilities(S20), capabilities(S21), capabilities(S100)
     assert c21.speed_scale is not None and c21.speed_scale.max_rpm == 1800.0
-    assert set(c20.unsupported) == {"quick_stop", "coast_stop", "jog", "direction", "remote"}
-    assert set(c21.unsupported) == {"quick_stop", "coast_stop", "jog"}
-    assert set(c100.unsupported) == {"quick_stop"}
-    assert "no quick stop" in c100.unsupported["quick_stop"]
+    assert set(c20.unsupported) == {"jog", "direction", "remote"}
+    assert set(c21.unsupported) == {"jog"}
+    assert set(c100.unsupported) == set()
+    # a stop kind the pair lacks becomes the nearest it has (issue 32 item 4)
+    ramp = {"quick_stop": "run", "coast_stop": "run"}
+    assert c20.stop_substitutes == ramp and c21.stop_substitutes == ramp
+    assert c100.stop_substitutes == {"quick_stop": "coast_stop"}
 
 
 def test_only_20_70_refuses_a_reverse() -> None:

@@ -456,6 +456,37 @@ P313_TEXT: Mapping[int, str] = {
 }
 
 
+P313_FAILSAFE: Mapping[int, bool] = {
+    # seed 4.1.3: what the drive does by itself on E37 (I/O timeout) or E36 (master idle),
+    # "only if the command is enabled for DeviceNet": 0 and 1 stop the motor (ramp, or
+    # general disable: it coasts); 2 does nothing and 3 hands the drive to its local
+    # commands (P229), which may keep it running: not a fail-safe reaction.
+    0: True,
+    1: True,
+    2: False,
+    3: False,
+}
+P313_EFFECT: Mapping[int, str] = {
+    0: "the drive ramps the motor to a stop",
+    1: "the drive disables the motor (it coasts)",
+    2: "the drive keeps the motor turning (factory value)",
+    3: "the drive goes to local mode and follows its local commands (P229)",
+}
+
+
+def failsafe_of(
+    p313: int | None, io_timeout: float | None = None
+) -> tuple[bool | None, str | None]:
+    """The drive's reaction to a lost master from P313 (seed 4.1.3): (``failsafe``,
+    ``failsafe_text``); (None, None) while P313 is unknown or out of its range.
+    ``io_timeout``: how long without I/O before the drive sees the loss (4 x EPR, E37)."""
+    if p313 is None or p313 not in P313_FAILSAFE:
+        return None, None if p313 is None else f"P313 = {p313}: unknown action"
+    after = f" {io_timeout:g} s after the last I/O (E37)" if io_timeout is not None else ""
+    text = f"P313 = {p313} ({P313_TEXT[p313]}): on a lost master{after} {P313_EFFECT[p313]}"
+    return P313_FAILSAFE[p313], text
+
+
 def fault_text(code: int | None) -> str | None:
     """The text of a CFW-08 error code: the seed's meaning for E33-E37, else "E<code>".
 
@@ -574,6 +605,15 @@ def capabilities(settings: ProfileSettings) -> Capabilities:
             f"assembly {pair.label} has no general disable (use 100/150 for a coast stop)"
         )
         unsupported["jog"] = f"assembly {pair.label} has no JOG bit (use 100/150)"
+    # A stop kind the pair lacks becomes the nearest it has (issue 32 item 4): on 100/150
+    # a quick stop is a general disable (Habilita Geral = 0, table 7: the motor coasts,
+    # the quickest way the drive has to take the torque off); on 20/70 and 21/71, which
+    # have no general disable, both become a ramp stop (Run = 0, seed 3.1.2).
+    substitutes = {"quick_stop": "coast_stop"} if pair is AssemblyPair.WEG else {}
+    if pair is not AssemblyPair.WEG:
+        substitutes = {"quick_stop": "run", "coast_stop": "run"}
+        del unsupported["coast_stop"]
+    del unsupported["quick_stop"]
     reverse_refused = None
     if pair is AssemblyPair.BASIC:
         unsupported["direction"] = "assembly 20/70 runs forward only (Run Fwd); use 21/71"
@@ -585,6 +625,7 @@ def capabilities(settings: ProfileSettings) -> Capabilities:
         speed_scale=settings.speed_scale,
         unsupported=unsupported,
         reverse_refused=reverse_refused,
+        stop_substitutes=substitutes,
     )
 
 
@@ -612,14 +653,21 @@ def _near(settings: ProfileSettings, actual: float, ref: float) -> bool:
 def _state70(s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref: float) -> Readings:
     if not isinstance(a, In70):
         raise TypeError(a)
-    rpm = float(a.speed_rpm)
-    at_ref = a.running1 and _near(s, rpm, ref)
+    # Seed 3.1.1: Running1 is set while the motor turns clockwise; 70 has no Running2
+    # (table 5), and Speed Actual is a magnitude (0-9999, table 17). A motor turning
+    # with Running1 clear turns counter-clockwise (P231 = 1, or commands from the keypad
+    # or terminals): running, in reverse (issue 32 item 8).
+    turning = a.speed_rpm != 0
+    reverse = turning and not a.running1
+    running = a.running1 or turning
+    rpm = -float(a.speed_rpm) if reverse else float(a.speed_rpm)
+    at_ref = running and _near(s, rpm, ref)
     return {
-        "status": _status(a.faulted, a.running1, at_ref, not desired.run),
-        "running": a.running1,
-        "direction": Direction.FORWARD,
+        "status": _status(a.faulted, running, at_ref, not desired.run),
+        "running": running,
+        "direction": Direction.REVERSE if reverse else Direction.FORWARD,
         "at_reference": at_ref,
-        "remote": True,  # 20/70 has no local/remote information (seed table 5)
+        "remote": True,  # 20/70 has no local/remote bit (table 5): the profile reads 29h/15
         "alarm": False,
         "fault_code": None,
         "fault_text": None,
@@ -652,10 +700,15 @@ def _state71(s: ProfileSettings, a: InputAssembly, desired: DesiredCommand, ref:
     rpm = -float(a.speed_rpm) if reverse else float(a.speed_rpm)
     return {
         "status": status,
-        "running": a.running1 or a.running2,
+        # table 16: Running1/2 also while Stopping or Fault Stop; a motor that turns
+        # (Speed Actual, a magnitude) is running whatever the bits say
+        "running": a.running1 or a.running2 or a.speed_rpm != 0,
         "direction": Direction.REVERSE if reverse else Direction.FORWARD,
         "at_reference": a.at_reference,
         "remote": a.ctrl_from_net,
+        # seed 3.1.1: Ctrl from Net clear = the drive does not take its commands from
+        # DeviceNet (P220/P229/P230, seed 4.2): it ignores run commands (issue 32 item 6)
+        "local_control": not a.ctrl_from_net,
         "alarm": a.warning,
         "fault_code": None,
         "fault_text": None,
@@ -671,7 +724,8 @@ def _state150(
         raise TypeError(a)
     magnitude = counts_to_rpm(a.speed_counts, s.max_rpm, s.weg_speed_scale)
     rpm = magnitude if a.forward else -magnitude
-    running = a.general_enabled and (a.ramp_enabled or a.jog or a.speed_counts != 0)
+    # a motor that turns is running, enabled or not (a fault or general disable coasts it)
+    running = a.speed_counts != 0 or (a.general_enabled and (a.ramp_enabled or a.jog))
     at_ref = running and a.ramp_enabled and _near(s, magnitude, ref)
     stopping = running and not a.ramp_enabled and not a.jog
     code = a.error_code if a.error else None

@@ -8,6 +8,12 @@ communication error, seed 4.1.3), the maximum speed is read if the config asks, 
 ``startup_params`` are written and read back; P702 is checked against the line's rate
 (seed 4.1.6) and P070 read (seed 4.1.1). Until that succeeds the adapter sends idle
 (zero-length) I/O and the drive stays ``connecting``: it never runs half-set.
+
+What the drive does without the gateway and whether it obeys it are published with the
+readings (issue 32 items 5, 6): ``failsafe`` from P313 (seed 4.1.3), ``local_control``
+from Ctrl from Net (21/71, seed 3.1.1), from the situation bit of 150 with the command
+source of that situation (P229/P230, seed 4.2.4-4.2.5), or on 20/70 (no such bit) from
+Control Supervisor attribute 15 (table 16), read at connect and every status poll.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from adapters.devicenet.cfw08.assemblies import (
     command_assembly,
     decode_parameter,
     encode_parameter,
+    failsafe_of,
     fault_text,
     parameter_path,
     state_changes,
@@ -80,6 +87,8 @@ class Cfw08Profile(DnProfile):
     opts: DriveOptions
     settings: ProfileSettings | None = None
     p313: int | None = None
+    io_timeout: float | None = None  # s without I/O before the drive sees a lost master
+    ctrl_from_net: bool | None = None  # Control Supervisor attribute 15 (20/70 only)
     in_force: str | None = None  # the assembly pair the I/O connection's paths name
     io_values: dict[str, float | int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
@@ -111,7 +120,23 @@ class Cfw08Profile(DnProfile):
     def inputs(self, data: bytes, desired: DesiredCommand) -> Readings:
         changes = state_changes(self._scale(), data, desired)
         self.io_values = dict(changes.pop("values"))
+        changes.update(self._control(changes))
+        failsafe, text = failsafe_of(self.p313, self.io_timeout)
+        changes["failsafe"], changes["failsafe_text"] = failsafe, text
         return changes
+
+    def _control(self, changes: Readings) -> Readings:
+        """Whether the drive obeys the network's run commands (issue 32 item 6)."""
+        pair = self._scale().pair
+        if pair is AssemblyPair.EXTENDED:
+            return {}  # Ctrl from Net is in assembly 71 (state_changes)
+        if pair is AssemblyPair.BASIC:
+            net = True if self.ctrl_from_net is None else self.ctrl_from_net
+            return {"remote": net, "local_control": not net}
+        # 150: b4 says which situation the drive is in; P229/P230 where its commands
+        # come from in that situation (seed 4.2.4, 4.2.5: 2 = DeviceNet)
+        source = self.params.get("P230" if changes.get("remote") else "P229")
+        return {"local_control": source is not None and source != COMMANDS_DEVICENET}
 
     @property
     def values(self) -> dict[str, float | int]:
@@ -128,6 +153,8 @@ class Cfw08Profile(DnProfile):
         await self._check_assembly(port)
         self.p313 = await self._checked_read(port, P313)
         self.params["P313"] = self.p313
+        self.io_timeout = port.io_timeout
+        await self._read_sources(port)
         if self.opts.max_rpm_param is not None:
             await self._read_max_rpm(port, self.opts.max_rpm_param)
         for number, value in self.opts.startup_params:
@@ -154,6 +181,29 @@ class Cfw08Profile(DnProfile):
 
     async def poll_status(self, port: DrivePort) -> None:
         await self._read_status(port)
+        # the keypad can change these while the drive runs (seed 4.1.3, 4.2)
+        self.p313 = int(await self.read_param(port, P313, 0))
+        self.params["P313"] = self.p313
+        await self._read_sources(port)
+
+    async def _read_sources(self, port: DrivePort) -> None:
+        """P220-P231 (seed 4.2: where commands, reference and direction come from), and on
+        20/70 Control Supervisor attribute 15 Ctrl from Net (table 16; 70 has no such
+        bit). A direction or reference that is not the network's is said in an event."""
+        for number in SOURCE_PARAMS:
+            name = f"P{number:03d}"
+            value = int(await self.read_param(port, number, 0))
+            old = self.params.get(name)
+            self.params[name] = value
+            note = SOURCE_NOTES.get((number, value))
+            if note is not None and old != value:
+                port.event(EventKind.CONFIG, f"{name} = {value}: {note}", **{name: value})
+        if self.opts.assembly is AssemblyPair.BASIC:
+            body = GetAttributeSingle(CipClass.CONTROL_SUPERVISOR, 1, CTRL_FROM_NET)
+            try:
+                self.ctrl_from_net = bool(reply_data(await port.request(body))[0])
+            except (ParameterError, IndexError):
+                self.ctrl_from_net = None
 
     def offline_note(self) -> str | None:
         if self.p313 is None:
@@ -343,6 +393,24 @@ class Cfw08Profile(DnProfile):
 
 
 # ---------------------------------------------------------------- helpers
+
+COMMANDS_DEVICENET = 2  # seed 4.2.4, 4.2.5: P229/P230 = 2 DeviceNet
+CTRL_FROM_NET = 15  # Control Supervisor attribute 15, Get (seed table 16)
+SOURCE_PARAMS = (220, 221, 222, 229, 230, 231)  # seed 4.2.1-4.2.6
+SOURCE_NOTES: dict[tuple[int, int], str] = {
+    # seed 4.2.6: the direction is fixed whatever the network asks
+    (231, 0): "the drive always turns clockwise (forward), whatever the direction asked",
+    (231, 1): (
+        "the drive always turns counter-clockwise (reverse), whatever the direction asked: "
+        "a forward run turns the motor in reverse"
+    ),
+    # seed 4.2.1: the situation is fixed or chosen off the network
+    (220, 0): "always local: run commands come from P229's source",
+    (220, 1): "always remote: run commands come from P230's source",
+    (220, 2): "the keypad chooses local or remote",
+    (220, 3): "the keypad chooses local or remote",
+    (220, 4): "DI2-DI4 choose local or remote",
+}
 
 
 def _settings(opts: DriveOptions, max_rpm: float) -> ProfileSettings:

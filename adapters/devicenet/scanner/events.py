@@ -210,6 +210,18 @@ class InputData:
 
 
 @dataclass(frozen=True, slots=True)
+class IoConflict:
+    """A poll response nobody asked for: a second answer to one poll, or one before any
+    poll. Another station sends with the node's identifier (a forger, or a second node
+    at that MAC); the data is not delivered, and the node's readings are doubtful.
+    ``count`` is the node's total (its ``io_conflicts`` figure)."""
+
+    mac: int
+    data: bytes
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
 class ExplicitResult:
     """The end of a submitted explicit request: a response, or why there is none."""
 
@@ -252,7 +264,17 @@ class LineFault:
     text: str
 
 
-Action = Send | NodeUp | NodeDown | InputData | ExplicitResult | Report | LineOnline | LineFault
+Action = (
+    Send
+    | NodeUp
+    | NodeDown
+    | InputData
+    | IoConflict
+    | ExplicitResult
+    | Report
+    | LineOnline
+    | LineFault
+)
 
 
 class NodeUnavailable(GatewayError):

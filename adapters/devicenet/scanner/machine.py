@@ -53,6 +53,7 @@ from adapters.devicenet.objects import (
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import (
     InputData,
+    IoConflict,
     IoKind,
     NodeDown,
     NodeIdentity,
@@ -503,6 +504,7 @@ class NodeMachine:
         node.last_rx = now
         node.sent_output = None
         node.last_output_sent = 0.0
+        node.poll_open = False
         node.ack_deadline = None
         node.figures.last_problem = None
         identity = NodeIdentity(node.vendor_id, node.product_code, node.product_name)
@@ -538,6 +540,15 @@ class NodeMachine:
         sent = self.schedule.answered(node.mac)
         if sent is not None:
             node.figures.rtt(now - sent)
+        if not node.poll_open and node.phase is Phase.ONLINE:
+            # One poll, one response (fact sheet 2.10 step 7): a second answer, or one
+            # before any poll, comes from another station with the node's identifier.
+            # Which one is the node's cannot be told: this one is not delivered, and the
+            # node's readings are doubtful (the adapter's decision, issue 32 item 12).
+            node.figures.io_conflicts += 1
+            self.ctx.out.append(IoConflict(node.mac, message, node.figures.io_conflicts))
+            return
+        node.poll_open = False  # (a late answer to a timed out poll is still its answer)
         self._deliver(node, message)
 
     def on_production(self, node: Node, now: float, data: bytes) -> None:

@@ -84,6 +84,7 @@ class NodeFigures:
     frames_rx: int = 0
     bad_frames: int = 0
     stale_responses: int = 0
+    io_conflicts: int = 0  # poll responses beyond one per poll (issue 32 item 12)
     rtt_last: float | None = None
     rtt_max: float = 0.0
     rtt_sum: float = 0.0
@@ -114,6 +115,7 @@ class NodeFigures:
             "frames_rx": self.frames_rx,
             "errors": self.bad_frames,
             "stale_responses": self.stale_responses,
+            "io_conflicts": self.io_conflicts,
             "response_time_ms": _ms(self.rtt_last),
             "response_time_avg_ms": _ms(avg),
             "response_time_max_ms": _ms(self.rtt_max if self.rtt_count else None),
@@ -154,6 +156,7 @@ class Node:
     last_output_sent: float = 0.0
     ack_deadline: float | None = None
     ack_retried: bool = False
+    poll_open: bool = False  # a poll went out and its response has not come yet
     last_rx: float = 0.0
     figures: NodeFigures = field(default_factory=NodeFigures)
 

@@ -103,6 +103,7 @@ class Scheduler:
             node = ctx.nodes[self.poll_queue.popleft()]
             if node.phase is Phase.ONLINE:
                 ctx.send_io(node, node.output)
+                node.poll_open = True
                 self.in_flight.pop(node.mac, None)  # (never there: kept in send order)
                 self.in_flight[node.mac] = now
         if self.cycle_started is not None and not self.poll_queue and not self.in_flight:

@@ -1,11 +1,19 @@
 """The simulated CFW-08 drive behind the network: commands in, status out, motor physics.
 
 Sans-IO: :meth:`SimDrive.advance` moves the shared motor model (gateway.sim) by ``dt``.
-Command sources follow the seed: assembly 21 NetCtrl/NetRef (seed 3.1.2) and Control
-Supervisor NetCtrl / AC Drive NetRef (tables 16, 17) choose network control and
-reference; assembly 100 Local/Remoto (table 7) chooses remote; assembly 20 has neither
-and is taken as network-controlled (the drive's P229/P230 set to DeviceNet). Without
-network control the simulated local side asks for nothing: the motor ramps to a stop.
+Command sources follow the seed: P220 chooses who selects the local or remote situation
+(seed 4.2.1: always local or remote, the keypad, DI, or DeviceNet), P229 and P230 where
+the commands come from in each situation (seed 4.2.4, 4.2.5: 2 = DeviceNet) and P231
+the direction (seed 4.2.6: 0 clockwise, 1 counter-clockwise, 2 the commands). With P220
+= 5/6 (DeviceNet) the master selects the situation: assembly 21 NetCtrl (seed 3.1.2) or
+Control Supervisor NetCtrl (table 16), assembly 100 Local/Remoto (table 7); assembly 20
+has no such bit and leaves the default of P220 (6: remote). The simulated drive is
+commissioned for DeviceNet (P220 = 6, P229 = 0 keypad, P230 = 2 DeviceNet, P222 = 5):
+the seed's factory values (P220 = 2, P230 = 1) would ignore the network. Without
+network control the simulated local side (keypad, terminals) asks for nothing: the
+motor ramps to a stop. P313 = 3 "go to local mode" (seed 4.1.3) holds the drive local
+until the master selects remote again (NetCtrl or Local/Remoto set; on 20/70, which
+has no such bit, until a reset or power cycle): a decision, the seed is silent.
 """
 
 from __future__ import annotations
@@ -36,6 +44,13 @@ AT_REFERENCE_RPM = 30.0  # seed 3.1.1: within 1 Hz (30 rpm for a 4-pole motor at
 P313_RAMP, P313_GENERAL_DISABLE, P313_NONE, P313_LOCAL = 0, 1, 2, 3  # seed 4.1.3
 E36_IDLE, E37_TIMEOUT = 36, 37  # seed 2.2
 SPEED_WORD_MAX = 0x7FFF
+P220, P221, P222, P229, P230, P231 = 220, 221, 222, 229, 230, 231  # seed 4.2
+P220_LOCAL, P220_REMOTE, P220_HMI_LOCAL, P220_HMI_REMOTE, P220_DI = 0, 1, 2, 3, 4
+P220_NET_REMOTE = 6  # seed 4.2.1: 5 = DeviceNet (default local), 6 = (default remote)
+COMMANDS_DEVICENET = 2  # seed 4.2.4, 4.2.5
+DIRECTION_CW, DIRECTION_CCW = 0, 1  # seed 4.2.6 (2 = from the commands)
+# the simulated drive's commissioning for DeviceNet (see the module doc)
+COMMISSIONED: dict[int, int] = {P220: 6, P221: 0, P222: 5, P229: 0, P230: 2, P231: 2}
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +80,10 @@ class SimDrive:
         ramp = max(1, min(9990, round(config.ramp_time * 10)))
         self.params.update({700: 2, 701: config.mac, 710: config.p710, 313: config.p313})
         self.params.update({100: ramp, 101: ramp, 402: round(config.max_rpm), 70: 2})
+        self.params.update(COMMISSIONED)
+        self.hmi_remote = False  # the keypad's local/remote key (P220 = 2/3)
+        self.di_remote = False  # the DI chosen by P220 = 4 (not wired in the simulator)
+        self.forced_local = False  # P313 = 3 acted (seed 4.1.3)
         self.motor = Motor(
             MotorParams(
                 rated_rpm=config.max_rpm,
@@ -83,6 +102,7 @@ class SimDrive:
         self._input_cache: tuple[object, bytes] | None = None
         self.reset_requested = False
         self._clear_commands()
+        self._situation_defaults()
 
     def _clear_commands(self) -> None:
         self._last_output = None
@@ -113,6 +133,7 @@ class SimDrive:
         self.fault_code = None
         self.comm_error = None
         self.idle = True
+        self._situation_defaults()
         self.motor.coast()
 
     def trip(self, code: int) -> None:
@@ -130,13 +151,39 @@ class SimDrive:
 
     # ------------------------------------------------------------ network inputs
 
+    def _situation_defaults(self) -> None:
+        """At power-up the situation is P220's default (seed 4.2.1: "default: local" or
+        "default: remoto"), until the keypad or the master selects another."""
+        self.forced_local = False
+        self.hmi_remote = self.params[P220] == P220_HMI_REMOTE
+        self.net_ctrl = self.remote = self.params[P220] == P220_NET_REMOTE
+
     @property
-    def network_control(self) -> bool:
-        if self.pair is AssemblyPair.BASIC:
-            return True
+    def situation_remote(self) -> bool:
+        """The drive is in its remote situation (seed 4.2.1, P220)."""
+        if self.forced_local:
+            return False
+        p220 = self.params[P220]
+        fixed = {P220_LOCAL: False, P220_REMOTE: True, P220_DI: self.di_remote}
+        if p220 in fixed:
+            return fixed[p220]
+        if p220 in (P220_HMI_LOCAL, P220_HMI_REMOTE):
+            return self.hmi_remote
         if self.pair is AssemblyPair.EXTENDED:
             return self.net_ctrl
-        return self.remote
+        if self.pair is AssemblyPair.WEG:
+            return self.remote
+        return p220 == P220_NET_REMOTE  # 20/70 has no bit: P220's default
+
+    @property
+    def network_control(self) -> bool:
+        """The drive takes its run/stop commands from DeviceNet (seed 4.2.4, 4.2.5)."""
+        source = self.params[P230] if self.situation_remote else self.params[P229]
+        return source == COMMANDS_DEVICENET
+
+    def local_remote_key(self) -> None:
+        """The keypad's local/remote key (acts with P220 = 2 or 3, seed 4.2.1)."""
+        self.hmi_remote = not self.hmi_remote
 
     def apply_output(self, data: bytes) -> None:
         """Consume the master's I/O data: empty = idle (P081 = 1, seed 4.1.2)."""
@@ -166,11 +213,13 @@ class SimDrive:
         elif isinstance(a, Out21):
             self.run_fwd, self.run_rev = a.run_fwd, a.run_rev
             self.net_ctrl, self.net_ref = a.net_ctrl, a.net_ref
+            self.forced_local = self.forced_local and not a.net_ctrl
             self.speed_ref_rpm = float(a.speed_rpm)
             self._reset_edge(a.fault_reset)
         else:
             self.ramp_enable, self.general_enable = a.ramp_enable, a.general_enable
             self.reverse, self.jog, self.remote = a.reverse, a.jog, a.remote
+            self.forced_local = self.forced_local and not a.remote
             c = self.config
             self.speed_ref_rpm = counts_to_rpm(a.speed_counts, c.max_rpm, c.weg_speed_scale)
             self._reset_edge(a.fault_reset)
@@ -205,6 +254,7 @@ class SimDrive:
             self.coasting = True
         elif action == P313_LOCAL:
             self.net_ctrl = self.remote = False
+            self.forced_local = True
 
     # ------------------------------------------------------------ physics
 
@@ -213,14 +263,20 @@ class SimDrive:
         if not self.network_control:
             return False, False, 0.0
         if self.pair is AssemblyPair.WEG:
+            reverse = self._direction(self.reverse)
             if self.jog and self.general_enable:
-                return True, self.reverse, self.config.jog_rpm
-            return self.general_enable and self.ramp_enable, self.reverse, self.speed_ref_rpm
+                return True, reverse, self.config.jog_rpm
+            return self.general_enable and self.ramp_enable, reverse, self.speed_ref_rpm
         run = self.run_fwd != self.run_rev and (self.run_fwd or self.run_rev)
         ref = self.speed_ref_rpm
         if self.pair is AssemblyPair.EXTENDED and not self.net_ref:
             ref = 0.0  # local reference: the simulated keypad gives none
-        return run, self.run_rev, ref
+        return run, self._direction(self.run_rev), ref
+
+    def _direction(self, commanded_reverse: bool) -> bool:
+        """P231 (seed 4.2.6): always clockwise, always counter-clockwise, or commanded."""
+        forced = {DIRECTION_CW: False, DIRECTION_CCW: True}
+        return forced.get(self.params[P231], commanded_reverse)
 
     @property
     def coast_requested(self) -> bool:
@@ -294,7 +350,7 @@ class SimDrive:
                 running2=self.running_reverse,
                 ready=state
                 in (DriveStateCode.READY, DriveStateCode.ENABLED, DriveStateCode.STOPPING),
-                ctrl_from_net=self.pair is AssemblyPair.BASIC or self.net_ctrl,
+                ctrl_from_net=self.network_control,
                 ref_from_net=self.pair is AssemblyPair.BASIC or self.net_ref,
                 at_reference=self.at_reference,
                 drive_state=state,
@@ -307,7 +363,7 @@ class SimDrive:
             general_enabled=self.general_enable and not self.coasting,
             forward=m.speed > 0 or (m.speed == 0 and not self.reverse),
             jog=self.jog,
-            remote=self.remote,
+            remote=self.situation_remote,
             undervoltage=c.undervoltage,
             error=faulted,
             speed_counts=rpm_to_counts(min(abs(m.speed), c.max_rpm), c.max_rpm, c.weg_speed_scale),
@@ -331,6 +387,9 @@ class SimDrive:
             self.coasting,
             self.run_fwd,
             self.run_rev,
+            self.forced_local,
+            self.hmi_remote,
+            tuple(self.params[n] for n in COMMISSIONED),
         )
 
     def input_data(self, instance: int | None = None) -> bytes:
