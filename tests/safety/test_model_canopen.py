@@ -24,7 +24,7 @@ Invariants:
   bound (two SYNC periods and a margin: the RPDO goes with the next cycle, a synchronous
   RPDO acts on the SYNC after it) the reachable, online drive no longer runs.
 - I3: the published state does not show the drive online more than ``OFFLINE_BOUND``
-  after it became unreachable (its TPDO1 stops: TPDO_LOSS_CYCLES + 1 cycles), nor
+  after it became unreachable (its TPDO1 stops: tpdo_loss_cycles(CYCLE) + 1 cycles), nor
   stopped while its motor turns, running while it stands, or healthy while it is faulted
   for more than ``READ_BOUND`` (3 cycles), unless it is marked doubtful.
 """
@@ -43,7 +43,7 @@ from adapters.canopen import frames as f
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.cia402 import State
 from adapters.canopen.master import FrameIn, Master, Send
-from adapters.canopen.master.engine import TPDO_LOSS_CYCLES
+from adapters.canopen.master.engine import tpdo_loss_cycles
 from adapters.canopen.sim.node import SimNode, SimNodeConfig
 from gateway.config import parse
 from gateway.errors import CommandRejected, StopAppliedRestRefused
@@ -65,7 +65,7 @@ CYCLE = 0.02  # s: the SYNC period
 MAX_STEP = 0.002  # s: the clock never jumps further (the simulator's timers run)
 WATCHDOG = 1.5  # s: the hub's command watchdog for the drive
 CYCLE_BOUND = 2 * CYCLE + 0.01  # I2
-OFFLINE_BOUND = (TPDO_LOSS_CYCLES + 1) * CYCLE + 0.01 + 1e-6  # I3
+OFFLINE_BOUND = (tpdo_loss_cycles(CYCLE) + 1) * CYCLE + 0.01 + 1e-6  # I3
 READ_BOUND = 3 * CYCLE + 0.01 + 1e-6  # I3
 TURNING_RPM = 50.0
 CLIENTS = ((Source.ZENOH, "scada"), (Source.MODBUS, "10.0.0.5"), (Source.WEB, "10.0.0.9 op"))

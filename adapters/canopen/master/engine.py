@@ -78,6 +78,17 @@ RESET_CLEAR_CYCLES = 1.5
 # a node online gets its TPDO1 every cycle (every SYNC, or its event timer without
 # SYNC): this many cycles without one and it is lost (issue 32 item 11)
 TPDO_LOSS_CYCLES = 3
+# ... and at least this long (s): at a line's minimum SYNC period (285 us for one node at
+# 1 Mbit/s) three cycles are shorter than a busy host's scheduling and a slave's reply
+# jitter; a silent drive is still found within 0.1 s
+TPDO_LOSS_MIN = 0.1
+
+
+def tpdo_loss_cycles(cycle: float) -> int:
+    """Cycles without a TPDO1 after which a node online is lost, for a SYNC period."""
+    return max(TPDO_LOSS_CYCLES, math.ceil(TPDO_LOSS_MIN / cycle - 1e-9))
+
+
 # TPDO1s allowed ahead: one per SYNC, one of a late cycle carried over; one more is a
 # second producer of the node's TPDO1 (issue 32 item 12)
 TPDO_CREDIT_MAX = 2
@@ -98,6 +109,7 @@ class Master:
 
     def __init__(self, config: MasterConfig, nodes: Sequence[NodeConfig]) -> None:
         self.config = config
+        self._tpdo_loss_cycles = tpdo_loss_cycles(config.cycle)
         self.nodes: dict[int, Node] = {}
         for n in nodes:
             if n.node_id in self.nodes:
@@ -412,11 +424,11 @@ class Master:
                 silent = node.tpdo_silent
                 node.tpdo_credit = 1 if silent == 0 else min(node.tpdo_credit + 1, TPDO_CREDIT_MAX)
             node.tpdo_silent += 1
-            if node.tpdo_silent > TPDO_LOSS_CYCLES:
+            if node.tpdo_silent > self._tpdo_loss_cycles:
                 # CiA 301 §7.2.2.2: a TPDO of transmission type 1 goes on every SYNC (the
                 # event timer without SYNC): a heartbeat alone (another node may send it
                 # with this id) does not keep a drive online
-                self._lose(node, now, f"no TPDO1 for {TPDO_LOSS_CYCLES} cycles", out)
+                self._lose(node, now, f"no TPDO1 for {self._tpdo_loss_cycles} cycles", out)
                 continue
             frame = self._rpdo(node, now)
             if frame.data == node.rpdo_sent and now - node.rpdo_at < refresh:
