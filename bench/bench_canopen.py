@@ -70,8 +70,8 @@ from adapters.canopen.sim.node import DEFAULT_EDS
 from bench.common import Figure, id_range, node_counts_main
 from bench.plant import canbus
 from gateway.config import Config, parse
-from gateway.daemon import build_hub
 from gateway.model import CommState
+from gateway.runtime.daemon import build_hub
 
 HERE = Path(__file__).resolve().parent.parent
 PY = sys.executable

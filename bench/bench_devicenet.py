@@ -23,14 +23,14 @@ import time
 import uuid
 
 from adapters.devicenet.adapter import DeviceNetAdapter
-from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim import SimRunner
 from adapters.devicenet.sim.simulated import sim_configs
 from bench.common import Figure, id_range, node_counts_main
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.model import CommState
+from gateway.runtime.daemon import build_hub
 from tests.devicenet.harness import Line
 from tests.devicenet.test_scanner import FAST, node, sim
 

@@ -34,11 +34,11 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from bench.common import Figure, add_number, arg_parser, positive_int, print_figures
 from gateway.config import load
-from gateway.daemon import Daemon
 from gateway.modbus.frontend import ModbusFrontEnd
 from gateway.modbus.map import DRIVE_HOLDINGS, DRIVE_INPUTS, MIRROR_OFFSET
 from gateway.modbus.regs import block_size
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support import plugins
 from tests.support.net import free_port
 

@@ -60,9 +60,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
-from adapters.profibus.dp import DataExchange, build_request
-from adapters.profibus.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
-from adapters.profibus.timing import BITS_PER_CHAR, BusParams
+from adapters.profibus.codec.dp import DataExchange, build_request
+from adapters.profibus.codec.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
+from adapters.profibus.master.timing import BITS_PER_CHAR, BusParams
 from bench.common import Figure, add_number, arg_parser, positive_float, print_figures
 from bench.plant import PIN_ENV, canbus
 from tests.support.net import free_port
@@ -103,7 +103,8 @@ class Plant:
     # the gateway on one CPU, everything else on another (placement); off by default: on a
     # machine shared with other work it made every figure worse (the gateway could not move
     # away from a CPU another job held: 0.21 core but 15.6 x the Profibus minimum, 2.3 x on
-    # DeviceNet, Modbus late, in a run beside the unpinned ones of docs/decisions.md)
+    # DeviceNet, Modbus late, in a run beside the unpinned ones of
+    # docs/decisions/0054-full-plant-benchmark.md)
     pin: bool = False
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     logs: list[Any] = field(default_factory=list)
@@ -125,7 +126,7 @@ def exchange_bits(words: int = PROFIBUS_WORDS) -> tuple[int, int]:
 
 
 def _srd() -> Any:
-    from adapters.profibus.fdl import FcbState
+    from adapters.profibus.codec.fdl import FcbState
 
     return FcbState(fcb=True, fcv=True).fc(RequestFunction.SRD_HIGH)
 
@@ -136,7 +137,7 @@ def felser_cycle(slaves: int, bus: BusParams | None = None) -> float:
     request, reply = exchange_bits()
     per_slave = request + reply + bus.min_tsdr + 33  # TSYN: 33 bit times before a request
     slaves_time = slaves * per_slave * bus.t_bit
-    from adapters.profibus.dp import GlobalControl, global_control_request
+    from adapters.profibus.codec.dp import GlobalControl, global_control_request
 
     gc = global_control_request(GlobalControl.operate(), sa=MASTER_ADDRESS).encode()
     gc_time = (BITS_PER_CHAR * len(gc) + 33) * bus.t_bit
@@ -220,7 +221,7 @@ def canopen_cycle(nodes: int) -> float:
     CiA 402 drive of the shipped EDS in velocity mode: :data:`CANOPEN_RPDO1_BYTES`
     (controlword, vl target) and :data:`CANOPEN_TPDO1_BYTES` (statusword, vl actual,
     current, torque)."""
-    from adapters.canopen import frames
+    from adapters.canopen.codec import frames
 
     bits = canbus.frame_bits(frames.COB_SYNC, b"")
     for node in range(1, nodes + 1):
@@ -234,8 +235,8 @@ def canopen_sync_period(nodes: int) -> float:
     (``adapters.canopen.options.min_sync_period``: the same frames at worst-case bit
     stuffing, a little longer than :func:`canopen_cycle`'s exact count at standstill),
     rounded up to the microsecond."""
+    from adapters.can.bits import frame_bits
     from adapters.canopen.options import SYNC_FLOOR
-    from adapters.link.canbits import frame_bits
 
     bits = frame_bits(0) + nodes * (
         frame_bits(CANOPEN_RPDO1_BYTES) + frame_bits(CANOPEN_TPDO1_BYTES)
@@ -758,7 +759,7 @@ def _figures(
 def _come_up_figure(come_up: tuple[float, float], profibus: list[list[float]]) -> Figure:
     """How long every drive took to come online (from the gateway's start), and the
     Profibus cycles meanwhile against the slaves' watchdog (a longer cycle drops slaves
-    already in data exchange: docs/decisions.md, issue 25, fourth round)."""
+    already in data exchange: docs/decisions/0064-profibus-low-priority-budget.md)."""
     started, online = come_up
     during = [c for at, c in profibus if started <= at <= online]
     note = "from the gateway's start to every drive online"

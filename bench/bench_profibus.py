@@ -28,8 +28,7 @@ on one CPU and every responder child on another, the same two for reference and 
 Left to the scheduler, a round trip's cost depends on where the two ends happen to run:
 the same bare requester measured 1,700 to 9,300 round trips/s between runs on the 2-CPU
 test machine, and the ratio swung from 0.52 to 0.92 with the code unchanged. Pinned, both
-sides see the same placement in every round (docs/decisions.md, "Benchmarks: CPU
-placement").
+sides see the same placement in every round (docs/decisions/0020-bench-cpu-placement.md).
 
 The master's own time per message cycle (engine, decoder, driver) is also timed without
 the pty and the event loop, replaying the simulated slaves' replies: the steadiest figure
@@ -73,10 +72,8 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from adapters.link.stream import Transmission
-from adapters.profibus.dp import DataExchange, build_request
-from adapters.profibus.driver import LineDriver
-from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.dp import DataExchange, build_request
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     FcbState,
     RequestFunction,
@@ -84,12 +81,14 @@ from adapters.profibus.fdl import (
     ResponseStatus,
     decode_telegram,
 )
+from adapters.profibus.driver import LineDriver
+from adapters.profibus.errors import ProfibusDecodeError
 from adapters.profibus.link import SerialLink, open_link
 from adapters.profibus.master import InputsReceived, Master, SlaveParams, SlaveState
+from adapters.profibus.master.timing import BusParams
 from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.slave import DpSlave
-from adapters.profibus.timing import BusParams
 from bench.common import (
     Figure,
     add_counts,
@@ -284,7 +283,7 @@ class Windows:
     a stretch of a round down, by a factor that changes from one stretch to the next. The
     rate of the best window, and the least CPU time per completion of any window, are
     what the code can do on this transport; master and reference are counted the same way,
-    each at its own completions (docs/decisions.md, "Benchmarks: windows and medians").
+    each at its own completions (docs/decisions/0021-bench-windows-and-medians.md).
     """
 
     def __init__(
@@ -739,7 +738,7 @@ def _floor_figures(slaves: int, case: TimingCase) -> list[Figure]:
     that is the reference of the ``..._against_floor`` figures, and the ``..._floor``
     figures are the timed/untimed ratio it gives. The sleep is timed at TSYN's length;
     the unpaced case's extra sleep lasts about 300 us and costs more on the test machine,
-    so its floor is on the low side (docs/decisions.md)."""
+    so its floor is on the low side (docs/decisions/0024-profibus-timing-cost.md)."""
     sleep = case.sleep
     figures: list[Figure] = []
     for kind, timed, untimed in (

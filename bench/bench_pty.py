@@ -39,7 +39,7 @@ from collections.abc import Iterator
 from typing import Final
 
 from adapters.link.timer import precise_sleeps
-from adapters.profibus.timing import BITS_PER_CHAR
+from adapters.profibus.master.timing import BITS_PER_CHAR
 from bench.common import SLEEP, Figure, arg_parser, positive_int, sleep_cpu
 
 TELEGRAM: Final = 14  # bytes each way: SD3 Data_Exchange of 4 I/O words (bench_plant)

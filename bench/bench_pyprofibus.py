@@ -12,7 +12,7 @@ The simulator is ours, in its own process: ``drive-gateway sim profibus --port p
 master of that count in turn. Each master is a process of its own too (ours:
 ``python -m bench.bench_pyprofibus master ...``, the engine, the stream driver and the
 serial link as the daemon runs them), pinned to one CPU, the simulator to another
-(docs/decisions.md, "Benchmarks: CPU placement"). Rounds alternate the three masters:
+(docs/decisions/0020-bench-cpu-placement.md). Rounds alternate the three masters:
 
 - ``ours_timed``: drive-gateway keeping 500 kbit/s timing (TSYN and each telegram's line
   time before the next request: it caps the rate near 2,670 exchanges/s on a pty);

@@ -9,7 +9,7 @@
   .DROP, the QoS the gateway puts a change with), counted as they arrive. Also
   reported: the same raw puts with CongestionControl.BLOCK, where the putter waits
   for the subscriber, loses nothing and leaves it the CPU meanwhile (the gateway may
-  not wait; docs/decisions.md). Two more references: a naive bridge (the same hub
+  not wait; docs/decisions/0011-zenoh-bench-references.md). Two more references: a naive bridge (the same hub
   updates, each state taken off a hub subscription, ``json.dumps(state.to_json())``
   and put at once on the loop: the least any front end must do), the hub
   alone (``hub.update`` with a conflating subscription drained, no Zenoh): the
@@ -49,9 +49,9 @@ import zenoh
 from bench.common import Figure, arg_parser, positive_float, positive_int, print_figures
 from gateway.adapter import Capabilities
 from gateway.config import Config, ZenohSection
-from gateway.daemon import Runtime
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState, SpeedScale
+from gateway.runtime.daemon import Runtime
 from gateway.zenoh import link
 from gateway.zenoh.frontend import ZenohFrontEnd
 from gateway.zenoh.requests import encode_state

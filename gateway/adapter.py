@@ -1,52 +1,26 @@
 """The contract between the gateway core and the fieldbus adapters.
 
-The core never imports an adapter: the daemon and the config loader find an
-adapter class through :data:`ADAPTERS` (name -> "module:Class") and import it
-lazily. A third-party adapter is an installed distribution that declares an
-entry point in the group :data:`ENTRY_POINT_GROUP` (``drive_gateway.adapters``);
-its name cannot shadow one of the project's. A config file names an adapter by
-its registered name only: a ``"module:Class"`` path in a config is refused and
-never imported (a config file must not choose code to run, docs/decisions.md).
+The core never imports an adapter: the config loader finds an adapter's class by its
+registered name (:func:`gateway.config.load_adapter`) and imports it lazily.
 
 An adapter owns the schema of its bus table and of its drives' extra keys
-(``parse_bus_options`` / ``parse_drive_options``), runs against the hub until
-cancelled (cancellation is the signal to leave the bus cleanly), serves
-parameter reads and writes, and reports its bus diagnostics.
+(``parse_bus_options`` / ``parse_drive_options``, the class side of the contract:
+:class:`gateway.config.AdapterClass`), runs against the hub until cancelled
+(cancellation is the signal to leave the bus cleanly), serves parameter reads and
+writes, and reports its bus diagnostics.
 """
 
 from __future__ import annotations
 
-import difflib
-import importlib
-import importlib.metadata
-import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, Unpack, runtime_checkable
+from typing import Any, Protocol, Unpack, runtime_checkable
 
-from gateway.errors import AdapterError
-from gateway.loader import NotLoadable, load
-from gateway.model import DesiredCommand, Device, DriveState, DriveUpdate, SpeedScale
-
-if TYPE_CHECKING:
-    from gateway.config import BusConfig, DriveConfig
-    from gateway.schema import Table
+from gateway.model import DesiredCommand, DriveState, DriveUpdate, SpeedScale
 
 ParamValue = int | float
-
-ADAPTERS: dict[str, str] = {
-    "profibus": "adapters.profibus.adapter:ProfibusAdapter",
-    "devicenet": "adapters.devicenet.adapter:DeviceNetAdapter",
-    "canopen": "adapters.canopen.adapter:CanOpenAdapter",
-}
-"""Adapter name (the ``adapter`` key of a bus table) -> "module:Class"."""
-
-ENTRY_POINT_GROUP = "drive_gateway.adapters"
-"""Where installed third-party adapters declare themselves (name = "module:Class")."""
-
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
 
 
 class EventKind(Enum):
@@ -195,102 +169,3 @@ class DriveAdapter(Protocol):
     def diagnostics(self) -> dict[str, Any]:
         """Bus figures: line-level keys, and per drive under ``"drives"``."""
         ...
-
-
-class AdapterClass(Protocol):
-    """The class-level side of an adapter: its schema and its constructor. An adapter may
-    also define ``check_bus(table, bus_options, drive_options)``, a classmethod raising a
-    ConfigError for a rule across the bus's drives (the config reader calls it once the
-    drives are read), and ``safety_warnings(bus, drive)``, a classmethod returning what
-    ``check-config`` warns of a drive's safety settings (a reaction to a lost master
-    switched off; docs/safety.md): see :func:`safety_warnings`."""
-
-    devices: ClassVar[frozenset[Device]]
-    address_range: ClassVar[tuple[int, int]]
-
-    @classmethod
-    def parse_bus_options(cls, table: Table) -> Any: ...
-
-    @classmethod
-    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> Any: ...
-
-    def __call__(self, bus: BusConfig, *, links: Any = None) -> DriveAdapter:
-        """``links``: the line the composition root chose for the adapter (a simulated line
-        for ``simulate = true``, given only then); None: the adapter's configured line."""
-        ...
-
-
-def _installed() -> dict[str, importlib.metadata.EntryPoint]:
-    """Adapters declared by installed distributions (the project's own names win)."""
-    try:
-        points = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
-    except Exception:  # broken metadata of some distribution: no third-party adapters
-        return {}
-    return {ep.name: ep for ep in points if ep.name not in ADAPTERS}
-
-
-def adapter_names() -> list[str]:
-    """Every name a bus table may give as its ``adapter``."""
-    return sorted({*ADAPTERS, *_installed()})
-
-
-def _unknown(name: str) -> AdapterError:
-    known = adapter_names()
-    close = difflib.get_close_matches(name, known, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    if ":" in name or "." in name:
-        return AdapterError(
-            f"{name!r} is not an adapter name: a config names a registered adapter "
-            f"({', '.join(known)}), never a module; a third-party adapter is installed "
-            f"as an entry point in the group {ENTRY_POINT_GROUP!r}{hint}"
-        )
-    return AdapterError(f"unknown adapter {name!r} (known: {', '.join(known)}){hint}")
-
-
-def _import(name: str, target: str) -> Any:
-    try:
-        return load(target)
-    except NotLoadable as exc:
-        raise AdapterError(f"adapter {name!r}: {exc}") from None
-    except Exception as exc:  # an adapter that cannot be imported, for whatever reason
-        raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
-
-
-def load_adapter(name: str) -> AdapterClass:
-    """The adapter class registered as ``name`` (the project's table, then installed
-    entry points); raises :class:`AdapterError` naming the reason. Nothing is imported
-    for a name that is not registered."""
-    if not _NAME.fullmatch(name):
-        raise _unknown(name)
-    if name in ADAPTERS:
-        cls = _import(name, ADAPTERS[name])
-    else:
-        point = _installed().get(name)
-        if point is None:
-            raise _unknown(name)
-        cls = _import(name, point.value)
-    _check_class_side(name, cls)
-    result: AdapterClass = cls
-    return result
-
-
-def safety_warnings(bus: BusConfig, drive: DriveConfig) -> list[str]:
-    """What the drive's adapter warns of its safety settings, read from the config alone
-    (``check-config``; nothing is opened): each a line naming the drive, the key or the
-    drive's parameter, and what follows from it."""
-    cls = load_adapter(bus.adapter)
-    hook = getattr(cls, "safety_warnings", None)
-    if not callable(hook):
-        return []
-    return [str(w) for w in hook(bus, drive)]
-
-
-def _check_class_side(name: str, cls: object) -> None:
-    missing = [a for a in _CLASS_SIDE if not hasattr(cls, a)]
-    if not isinstance(cls, type) or missing:
-        raise AdapterError(
-            f"adapter {name!r} is not a drive adapter class (missing: {', '.join(missing)})"
-        )
-
-
-_CLASS_SIDE = ("devices", "address_range", "parse_bus_options", "parse_drive_options")

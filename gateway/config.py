@@ -6,9 +6,9 @@ Layout (see config/site.example.toml for every key)::
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          idle_timeout
-    [web]                bind, allow, commands, token_sha256 (gateway/web/settings.py)
+    [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
-                         (never a module path, gateway/adapter.py), plus the adapter's keys
+                         (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
                          on_command_timeout, on_shutdown, require_failsafe, writable_params,
                          plus the adapter's keys
@@ -21,13 +21,23 @@ errors naming both drives. The file itself is bounded (:data:`MAX_FILE_BYTES`,
 :data:`MAX_DEPTH`), and so is ``zenoh.config_file``: it is read and checked here
 (:func:`read_zenoh_config_file`), once, by ``check-config`` and ``run`` alike, and
 the text checked is the text Zenoh gets.
+
+A bus table names its adapter, and the loader finds the adapter's class through
+:data:`ADAPTERS` (name -> "module:Class") and imports it lazily: the core never imports
+an adapter. A third-party adapter is an installed distribution that declares an entry
+point in the group :data:`ENTRY_POINT_GROUP` (``drive_gateway.adapters``); its name
+cannot shadow one of the project's. A config file names an adapter by its registered
+name only: a ``"module:Class"`` path in a config is refused and never imported (a config
+file must not choose code to run, docs/decisions/0009-adapters-by-name-only.md).
 """
 
 from __future__ import annotations
 
+import difflib
 import importlib.metadata
 import ipaddress
 import os
+import re
 import stat
 import sys
 import tomllib
@@ -35,15 +45,17 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
-from gateway.adapter import load_adapter
+from gateway.adapter import DriveAdapter
 from gateway.errors import AdapterError, ConfigError, ConfigErrors
 from gateway.json5check import Json5Error, check_json5
+from gateway.loader import NotLoadable
+from gateway.loader import load as load_target
 from gateway.model import ControlMode, Device, StopAction
 from gateway.schema import Table
-from gateway.web.settings import WebSection, read_web_section
-from gateway.web.settings import web_bind as _web_bind
+from gateway.webconfig import WebSection, read_web_section
+from gateway.webconfig import web_bind as _web_bind
 
 SHARE = "share/drive-gateway"
 """Where a wheel installs config/ (the demo, the site template, the unit): under the
@@ -302,6 +314,120 @@ def _frame_timeout(t: Table, default: float) -> float:
         t.errors.append(t.error("frame_timeout", f"must be above 0, not {value:g}"))
         return default
     return value
+
+
+# ---------------------------------------------------------------- adapters
+
+ADAPTERS: dict[str, str] = {
+    "profibus": "adapters.profibus.adapter:ProfibusAdapter",
+    "devicenet": "adapters.devicenet.adapter:DeviceNetAdapter",
+    "canopen": "adapters.canopen.adapter:CanOpenAdapter",
+}
+"""Adapter name (the ``adapter`` key of a bus table) -> "module:Class"."""
+
+ENTRY_POINT_GROUP = "drive_gateway.adapters"
+"""Where installed third-party adapters declare themselves (name = "module:Class")."""
+
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
+
+
+class AdapterClass(Protocol):
+    """The class-level side of an adapter: its schema and its constructor. An adapter may
+    also define ``check_bus(table, bus_options, drive_options)``, a classmethod raising a
+    ConfigError for a rule across the bus's drives (the config reader calls it once the
+    drives are read), and ``safety_warnings(bus, drive)``, a classmethod returning what
+    ``check-config`` warns of a drive's safety settings (a reaction to a lost master
+    switched off; docs/safety.md): see :func:`safety_warnings`."""
+
+    devices: ClassVar[frozenset[Device]]
+    address_range: ClassVar[tuple[int, int]]
+
+    @classmethod
+    def parse_bus_options(cls, table: Table) -> Any: ...
+
+    @classmethod
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> Any: ...
+
+    def __call__(self, bus: BusConfig, *, links: Any = None) -> DriveAdapter:
+        """``links``: the line the composition root chose for the adapter (a simulated line
+        for ``simulate = true``, given only then); None: the adapter's configured line."""
+        ...
+
+
+def _installed() -> dict[str, importlib.metadata.EntryPoint]:
+    """Adapters declared by installed distributions (the project's own names win)."""
+    try:
+        points = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    except Exception:  # broken metadata of some distribution: no third-party adapters
+        return {}
+    return {ep.name: ep for ep in points if ep.name not in ADAPTERS}
+
+
+def adapter_names() -> list[str]:
+    """Every name a bus table may give as its ``adapter``."""
+    return sorted({*ADAPTERS, *_installed()})
+
+
+def _unknown(name: str) -> AdapterError:
+    known = adapter_names()
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    if ":" in name or "." in name:
+        return AdapterError(
+            f"{name!r} is not an adapter name: a config names a registered adapter "
+            f"({', '.join(known)}), never a module; a third-party adapter is installed "
+            f"as an entry point in the group {ENTRY_POINT_GROUP!r}{hint}"
+        )
+    return AdapterError(f"unknown adapter {name!r} (known: {', '.join(known)}){hint}")
+
+
+def _import(name: str, target: str) -> Any:
+    try:
+        return load_target(target)
+    except NotLoadable as exc:
+        raise AdapterError(f"adapter {name!r}: {exc}") from None
+    except Exception as exc:  # an adapter that cannot be imported, for whatever reason
+        raise AdapterError(f"adapter {name!r} is not available: {exc}") from exc
+
+
+def load_adapter(name: str) -> AdapterClass:
+    """The adapter class registered as ``name`` (the project's table, then installed
+    entry points); raises :class:`AdapterError` naming the reason. Nothing is imported
+    for a name that is not registered."""
+    if not _NAME.fullmatch(name):
+        raise _unknown(name)
+    if name in ADAPTERS:
+        cls = _import(name, ADAPTERS[name])
+    else:
+        point = _installed().get(name)
+        if point is None:
+            raise _unknown(name)
+        cls = _import(name, point.value)
+    _check_class_side(name, cls)
+    result: AdapterClass = cls
+    return result
+
+
+def safety_warnings(bus: BusConfig, drive: DriveConfig) -> list[str]:
+    """What the drive's adapter warns of its safety settings, read from the config alone
+    (``check-config``; nothing is opened): each a line naming the drive, the key or the
+    drive's parameter, and what follows from it."""
+    cls = load_adapter(bus.adapter)
+    hook = getattr(cls, "safety_warnings", None)
+    if not callable(hook):
+        return []
+    return [str(w) for w in hook(bus, drive)]
+
+
+def _check_class_side(name: str, cls: object) -> None:
+    missing = [a for a in _CLASS_SIDE if not hasattr(cls, a)]
+    if not isinstance(cls, type) or missing:
+        raise AdapterError(
+            f"adapter {name!r} is not a drive adapter class (missing: {', '.join(missing)})"
+        )
+
+
+_CLASS_SIDE = ("devices", "address_range", "parse_bus_options", "parse_drive_options")
 
 
 # ---------------------------------------------------------------- buses

@@ -23,7 +23,7 @@ from pathlib import Path
 class DeviceSpec:
     """One device's registration (see the module docstring).
 
-    ``bus``: the name of the adapter whose line carries it (``gateway.adapter.ADAPTERS``).
+    ``bus``: the name of the adapter whose line carries it (``gateway.config.ADAPTERS``).
     ``package``: where its code lives (the layering test reads it). ``profile``: the class
     the bus adapter builds per drive ("" where the adapter still holds the device's logic:
     the CFW-08 until DeviceNet has a profile contract). ``simulator``: the class whose
@@ -31,8 +31,11 @@ class DeviceSpec:
     one for ``None`` (the Profibus ``SimFactory``; "" where the bus adapter chooses its
     simulator itself). ``cli``: its name on ``drive-gateway sim <bus>``. ``doc``: its line
     in docs/architecture.md. ``gsd_names``: what a GSD file's Model_Name says for it
-    (casefolded parts; ``drive-gateway profibus scan --gsd-dir`` matches them). ``test``: a
-    device of the tests, in no adapter's production set and in no published list.
+    (casefolded parts; ``drive-gateway profibus scan --gsd-dir`` matches them).
+    ``firmware_param``: the parameter holding its firmware version, as its manual says (a
+    parameter backup names the firmware with it; None: the gateway reads it elsewhere, or
+    cannot). ``test``: a device of the tests, in no adapter's production set and in no
+    published list.
     """
 
     model: str
@@ -44,6 +47,7 @@ class DeviceSpec:
     cli: str = ""
     doc: str = ""
     gsd_names: tuple[str, ...] = ()
+    firmware_param: int | None = None
     soft_starter: bool = False
     test: bool = False
 
@@ -60,10 +64,12 @@ class Device(Enum):
         bus="profibus",
         package="adapters.profibus.weg",
         profile="adapters.profibus.weg.cfw11:Cfw11Profile",
-        simulator="adapters.profibus.weg.sim:Cfw11Sim",
+        simulator="adapters.profibus.weg.sim.drive:Cfw11Sim",
         cli="cfw11",
         doc="WEG CFW-11 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
         gsd_names=("cfw-11", "cfw11"),
+        # CFW-11 manual P0964: "versão de firmware do equipamento (P0023)"
+        firmware_param=23,
     )
     CFW700 = DeviceSpec(
         "CFW700",
@@ -71,10 +77,13 @@ class Device(Enum):
         bus="profibus",
         package="adapters.profibus.weg",
         profile="adapters.profibus.weg.cfw700:Cfw700Profile",
-        simulator="adapters.profibus.weg.sim:Cfw700Sim",
+        simulator="adapters.profibus.weg.sim.drive:Cfw700Sim",
         cli="cfw700",
         doc="WEG CFW700 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
         gsd_names=("cfw700", "cfw-700"),
+        # CFW700 manual P0964: "Sub-index 2: Version (software) = equipment firmware
+        # version (P0023)"
+        firmware_param=23,
     )
     CFW320 = DeviceSpec(
         "CFW320",
@@ -82,7 +91,7 @@ class Device(Enum):
         bus="profibus",
         package="adapters.profibus.weg",
         profile="adapters.profibus.weg.cfw320:Cfw320Profile",
-        simulator="adapters.profibus.weg.sim:Cfw320Sim",
+        simulator="adapters.profibus.weg.sim.drive:Cfw320Sim",
         cli="cfw320",
         doc="WEG CFW320 frequency inverter (docs/devices.md, WEG CFW-11 / CFW700 / CFW320)",
         gsd_names=("cfw320", "cfw-320"),
@@ -101,7 +110,7 @@ class Device(Enum):
         bus="profibus",
         package="adapters.mcd600",
         profile="adapters.mcd600.profile:Mcd600Profile",
-        simulator="adapters.mcd600.sim:Mcd600Sim",
+        simulator="adapters.mcd600.sim.starter:Mcd600Sim",
         cli="mcd600",
         doc="Danfoss VLT MCD 600 soft starter (docs/devices.md, Danfoss VLT MCD 600)",
         soft_starter=True,

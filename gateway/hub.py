@@ -26,7 +26,9 @@ Safety rules (docs/architecture.md, "Safety rules"; docs/safety.md) enforced her
 
 Every accepted command that changes the desired command is written to the log
 and to the drive's events (the audit trail); repeated identical refusals are
-logged once per client, reason and period, with a count.
+logged once per client, reason and period, with a count (gateway/eventlog.py).
+What a change of a drive's readings makes the hub do (the events, the run cleared,
+the unknown readings of a drive not heard) is in gateway/transitions.py.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from typing import Any, Protocol, Unpack, cast
+from functools import partial
+from typing import Any, Protocol, Unpack
 
 from gateway.adapter import Capabilities, Event, EventKind, ParamValue
 from gateway.errors import (
@@ -48,6 +51,7 @@ from gateway.errors import (
     StopAppliedRestRefused,
     UnknownDrive,
 )
+from gateway.eventlog import EventLog
 from gateway.model import (
     COMMAND_FIELDS,
     STATE_FIELDS,
@@ -62,7 +66,7 @@ from gateway.model import (
     Source,
     StopAction,
 )
-from gateway.ratelimit import LogRateLimit
+from gateway.transitions import TRANSITION_FIELDS, UNKNOWN_COMM, mask_unknown, on_transitions
 
 log = logging.getLogger(__name__)
 
@@ -93,42 +97,6 @@ class DrivePolicy:
         return number in self.writable_params or (number, subindex) in self.writable_entries
 
 
-_TRANSITION_FIELDS = frozenset(
-    {
-        "comm",
-        "status",
-        "alarm",
-        "alarm_code",
-        "fault_code",
-        "local_control",
-        "failsafe",
-        "doubtful",
-    }
-)
-"""Fields whose change may raise an event or clear run (rule 1)."""
-_READY_STATUSES = frozenset(
-    {DriveStatus.READY, DriveStatus.STARTING, DriveStatus.RUNNING, DriveStatus.STOPPING}
-)
-_UNKNOWN_COMM = frozenset({CommState.OFFLINE, CommState.CONNECTING})
-"""Comm states in which nothing the drive said is current: its readings are unknown."""
-_UNKNOWN_READINGS: dict[str, Any] = {
-    "status": DriveStatus.NOT_READY,
-    "running": False,
-    "at_reference": False,
-    "alarm": False,
-    "speed_rpm": None,
-    "speed_pct": None,
-    "current_a": None,
-    "current_pct_flc": None,
-    "motor_temp_pct": None,
-    "power_kw": None,
-    "voltage_v": None,
-    "fault_code": None,
-    "fault_text": None,
-    "alarm_code": None,
-}
-"""What an offline or connecting drive publishes (docs/safety.md, "Offline drives"): never
-its last values, which would show a drive that may have stopped, or started, as it was."""
 _STOP_FIELDS: dict[str, bool] = {
     "run": False,
     "jog": False,
@@ -263,7 +231,7 @@ class Hub:
         self._event_subs: set[EventSubscription] = set()
         self._seq = 0
         self._listeners: list[Callable[[str], None]] = []
-        self._refusal_log = LogRateLimit()
+        self._event_log = EventLog(log, clock)
         self.started = clock()
         self.shutting_down = False
 
@@ -327,20 +295,20 @@ class Hub:
         if drv is None:
             raise UnknownDrive(f"no drive {drive_id!r}")
         old = drv.state
-        current = old.__dict__  # the fields, and nothing else (see DriveState._derive)
+        current = old.__dict__  # its fields by name, and nothing else (DriveState.changed)
         delta: dict[str, Any] = {}
         transition = False
         try:
             for name, value in changes.items():
                 if current[name] != value and name not in _HUB_FIELDS:
                     delta[name] = value
-                    if name in _TRANSITION_FIELDS:
+                    if name in TRANSITION_FIELDS:
                         transition = True
         except KeyError:
             unknown = sorted(changes.keys() - STATE_FIELDS)
             raise TypeError(f"DriveState has no field(s) {unknown}") from None
-        if delta.get("comm", old.comm) in _UNKNOWN_COMM:
-            transition = _mask_unknown(current, delta) or transition
+        if delta.get("comm", old.comm) in UNKNOWN_COMM:
+            transition = mask_unknown(current, delta) or transition
         if not delta:
             return old
         self._seq += 1
@@ -352,98 +320,27 @@ class Hub:
         client = desired.client or None
         if client != old.control_client:
             delta["control_client"] = client
-        new = drv.state = old._derive(delta)
+        new = drv.state = old.changed(**delta)
         if transition:
-            self._on_transitions(drive_id, drv, old, new)
+            clear_run = partial(self._clear_run, drive_id, drv)
+            alarm_texts = drv.caps.alarm_texts
+            on_transitions(drive_id, old, new, alarm_texts, event=self.event, clear_run=clear_run)
         for sub in self._state_subs:
             sub._offer(drv.state)
         return drv.state
 
     def _commit(self, drv: _Drive, new: DriveState) -> DriveState:
         self._seq += 1
-        new = new.evolve(
-            {
-                "seq": self._seq,
-                "ts": self._wallclock(),
-                "control_source": drv.desired.source,
-                "control_client": drv.desired.client or None,
-            }
+        new = new.changed(
+            seq=self._seq,
+            ts=self._wallclock(),
+            control_source=drv.desired.source,
+            control_client=drv.desired.client or None,
         )
         drv.state = new
         for sub in self._state_subs:
             sub._offer(new)
         return new
-
-    def _on_transitions(self, drive_id: str, drv: _Drive, old: DriveState, new: DriveState) -> None:
-        if old.comm is not new.comm:
-            self.event(drive_id, EventKind.COMM, f"comm {old.comm.value} -> {new.comm.value}")
-            if new.comm is CommState.ONLINE:
-                self._clear_run(drive_id, drv, "drive came online")
-            elif old.comm is CommState.ONLINE:
-                # Rule 1, made structural: whatever the cause, a drive that comes back gets
-                # no run from before the loss.
-                self._clear_run(drive_id, drv, f"drive left online ({new.comm.value})")
-        self._on_trust_transitions(drive_id, drv, old, new)
-        if new.comm in _UNKNOWN_COMM:
-            return  # no fault or alarm news from a drive that is not heard
-        if new.status is DriveStatus.NOT_READY and old.status in _READY_STATUSES and old.online:
-            # Rule 1: what made it not ready (a reset input opened, undervoltage, an enable
-            # taken away) must not start it again by itself when it ends.
-            self._clear_run(drive_id, drv, "drive became not ready")
-        if new.faulted and not old.faulted:
-            kind = self._fault_event(drive_id, new)
-            self._clear_run(drive_id, drv, f"drive {kind.value}")
-        elif new.faulted and new.fault_code is not None and new.fault_code != old.fault_code:
-            # the code came after the fault (read over the bus later): the event with its text
-            self._fault_event(drive_id, new)
-        if old.faulted and not new.faulted:
-            self.event(drive_id, EventKind.FAULT, "fault cleared")
-            # Rule 1: however the fault ended (keypad, auto-reset, power cycle, our reset)
-            self._clear_run(drive_id, drv, "fault ended")
-        if new.alarm and (not old.alarm or new.alarm_code != old.alarm_code):
-            known = drv.caps.alarm_texts.get(new.alarm_code) if new.alarm_code else None
-            text = f"alarm {new.alarm_code}" + (f": {known}" if known else "")
-            self.event(drive_id, EventKind.ALARM, text, code=new.alarm_code)
-
-    def _on_trust_transitions(
-        self, drive_id: str, drv: _Drive, old: DriveState, new: DriveState
-    ) -> None:
-        """Local control, the drive's fail-safe reaction, doubtful readings (docs/safety.md)."""
-        if new.local_control and not old.local_control:
-            self.event(
-                drive_id,
-                EventKind.SAFETY,
-                "drive in local control: it ignores the network's run commands; "
-                "run commands are refused, stops are still sent",
-            )
-            self._clear_run(drive_id, drv, "drive in local control")
-        elif old.local_control and not new.local_control:
-            self.event(drive_id, EventKind.CONTROL, "drive back in network control")
-            self._clear_run(drive_id, drv, "drive back in network control")
-        if new.failsafe is False and old.failsafe is not False:
-            self.event(
-                drive_id,
-                EventKind.SAFETY,
-                "the drive keeps running if the gateway is lost: "
-                + (new.failsafe_text or "no reaction to a lost master"),
-                failsafe=False,
-            )
-        if new.doubtful and not old.doubtful:
-            self.event(
-                drive_id,
-                EventKind.SAFETY,
-                "readings doubtful: frames that contradict each other were heard for this "
-                "drive; run commands are refused until its readings are consistent again",
-            )
-        elif old.doubtful and not new.doubtful:
-            self.event(drive_id, EventKind.SAFETY, "readings consistent again")
-
-    def _fault_event(self, drive_id: str, new: DriveState) -> EventKind:
-        kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
-        code = "" if new.fault_code is None else f" {new.fault_code}"
-        text = f": {new.fault_text}" if new.fault_text else ""
-        self.event(drive_id, kind, f"{kind.value}{code}{text}", code=new.fault_code)
-        return kind
 
     def _clear_run(self, drive_id: str, drv: _Drive, why: str) -> None:
         if drv.desired.run or drv.desired.jog:
@@ -474,41 +371,9 @@ class Hub:
 
     def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None:
         ev = Event(drive_id=drive_id, kind=kind, text=text, ts=self._wallclock(), data=data)
-        self._log_event(ev)
+        self._event_log.write(ev)
         for sub in tuple(self._event_subs):
             sub._offer(ev)
-
-    def _log_event(self, ev: Event) -> None:
-        """One log line per event; a refusal repeated by the same client for the same
-        reason is written once per period, with the count of those held back."""
-        if ev.kind is not EventKind.COMMAND_REFUSED:
-            log.info("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
-            return
-        held = self._refusal_log.admit((ev.drive_id, ev.text), self._clock())
-        if held is None:
-            log.debug("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
-        elif held:
-            log.info(
-                "%s: %s: %s (and %d more like it since the last line)",
-                ev.drive_id,
-                ev.kind.value,
-                ev.text,
-                held,
-            )
-        else:
-            log.info("%s: %s: %s", ev.drive_id, ev.kind.value, ev.text)
-
-    def _flush_refusal_log(self) -> None:
-        for key, held in self._refusal_log.flush(self._clock()):
-            drive_id, text = cast(tuple[str, str], key)
-            log.info(
-                "%s: %s: %s: %d more like it in the last %g s",
-                drive_id,
-                EventKind.COMMAND_REFUSED.value,
-                text,
-                held,
-                self._refusal_log.period,
-            )
 
     def subscribe_events(self) -> EventSubscription:
         sub = EventSubscription(self)
@@ -552,34 +417,7 @@ class Hub:
             raise CommandRejected("send run after the fault reset, not in the same command")
         if cmd.run or cmd.jog:
             _check_start(drive_id, drv, cmd)
-        self._check_capabilities(drv, cmd)
-
-    def _check_capabilities(self, drv: _Drive, cmd: DriveCommand) -> None:
-        for name, reason in drv.caps.unsupported.items():
-            value = getattr(cmd, name, None)
-            if value not in (None, False):
-                raise CommandRejected(reason)
-        no_reverse = drv.caps.reverse_refused
-        if no_reverse is not None:
-            if cmd.direction is Direction.REVERSE:
-                raise CommandRejected(f"direction reverse: {no_reverse}")
-            for name in ("speed_rpm", "speed_pct"):
-                value = getattr(cmd, name)
-                if value is not None and value < 0:
-                    raise CommandRejected(f"{name} {value:g} asks for reverse: {no_reverse}")
-        scale = drv.caps.speed_scale
-        if cmd.has_speed and scale is None:
-            raise CommandRejected(f"{drv.state.device.value} has no speed reference")
-        if scale is None:
-            return
-        if cmd.speed_rpm is not None and abs(cmd.speed_rpm) > scale.max_rpm + 1e-9:
-            raise CommandRejected(
-                f"speed_rpm {cmd.speed_rpm:g} is beyond the drive's scale (±{scale.max_rpm:g} rpm)"
-            )
-        if cmd.speed_pct is not None and abs(cmd.speed_pct) > scale.max_pct + 1e-9:
-            raise CommandRejected(
-                f"speed_pct {cmd.speed_pct:g} is beyond the drive's scale (±{scale.max_pct:g} %)"
-            )
+        _check_capabilities(drv, cmd)
 
     def in_control(self, drive_id: str, source: Source, client: str = "") -> bool:
         """Whether this client is the one in control of the drive (rule 3)."""
@@ -744,7 +582,7 @@ class Hub:
         now = self._clock()
         for drive_id, drv in self._drives.items():
             self._check_watchdog(drive_id, drv, now)
-        self._flush_refusal_log()
+        self._event_log.flush()
 
     def _check_watchdog(self, drive_id: str, drv: _Drive, now: float) -> None:
         timeout = drv.policy.command_timeout
@@ -854,6 +692,35 @@ def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
             )
 
 
+def _check_capabilities(drv: _Drive, cmd: DriveCommand) -> None:
+    """What the drive cannot do (its capabilities): unsupported fields, reverse, speed."""
+    for name, reason in drv.caps.unsupported.items():
+        value = getattr(cmd, name, None)
+        if value not in (None, False):
+            raise CommandRejected(reason)
+    no_reverse = drv.caps.reverse_refused
+    if no_reverse is not None:
+        if cmd.direction is Direction.REVERSE:
+            raise CommandRejected(f"direction reverse: {no_reverse}")
+        for name in ("speed_rpm", "speed_pct"):
+            value = getattr(cmd, name)
+            if value is not None and value < 0:
+                raise CommandRejected(f"{name} {value:g} asks for reverse: {no_reverse}")
+    scale = drv.caps.speed_scale
+    if cmd.has_speed and scale is None:
+        raise CommandRejected(f"{drv.state.device.value} has no speed reference")
+    if scale is None:
+        return
+    if cmd.speed_rpm is not None and abs(cmd.speed_rpm) > scale.max_rpm + 1e-9:
+        raise CommandRejected(
+            f"speed_rpm {cmd.speed_rpm:g} is beyond the drive's scale (±{scale.max_rpm:g} rpm)"
+        )
+    if cmd.speed_pct is not None and abs(cmd.speed_pct) > scale.max_pct + 1e-9:
+        raise CommandRejected(
+            f"speed_pct {cmd.speed_pct:g} is beyond the drive's scale (±{scale.max_pct:g} %)"
+        )
+
+
 def _check_trust(drive_id: str, drv: _Drive) -> None:
     """Local control, doubtful readings, a required fail-safe reaction (docs/safety.md)."""
     state = drv.state
@@ -888,19 +755,6 @@ def _stop_substitutes(caps: Capabilities) -> dict[str, str]:
         if name in caps.unsupported:
             subs.setdefault(name, "run")
     return subs
-
-
-def _mask_unknown(current: Mapping[str, Any], delta: dict[str, Any]) -> bool:
-    """Put the unknown readings of an offline drive into ``delta``; True when one of
-    them is a transition field that changes."""
-    transition = False
-    for name, value in _UNKNOWN_READINGS.items():
-        if current[name] != value:
-            delta[name] = value
-            transition = transition or name in _TRANSITION_FIELDS
-        else:
-            delta.pop(name, None)
-    return transition
 
 
 _AUDITED = (*(n for n in COMMAND_FIELDS if n != "fault_reset"), "fault_reset_seq")

@@ -1,6 +1,6 @@
 """The one "module:name" loader: the project's tables name code as strings, imported late.
 
-The core never imports an adapter (ARCHITECTURE.md, layers): its tables (adapters, front
+The core never imports an adapter (docs/architecture.md, layers): its tables (adapters, front
 ends, command-line commands, the device registry) name the code as ``"module:name"`` and
 :func:`load` imports it when it is first needed.
 """

@@ -141,6 +141,9 @@ faults, false when it keeps running, null when unknown; ``failsafe_text`` says
 which parameter and value), and whether frames that contradict each other were
 heard for this drive (``doubtful``: its readings may be forged or mixed)."""
 
+PUBLISHED_FIELDS: tuple[str, ...] = JSON_FIELDS + EXTRA_JSON_FIELDS
+"""Every field of the JSON form, in its order."""
+
 
 @dataclass(frozen=True)
 class DriveState:
@@ -191,7 +194,7 @@ class DriveState:
     def to_json(self) -> dict[str, Any]:
         """The JSON form: the fixed fields first, then the documented extras."""
         out: dict[str, Any] = {}
-        for name in JSON_FIELDS + EXTRA_JSON_FIELDS:
+        for name in PUBLISHED_FIELDS:
             out[name] = _json_value(getattr(self, name))
         return out
 
@@ -205,38 +208,21 @@ class DriveState:
         return cls(**kwargs)
 
     def changed(self, **changes: Any) -> DriveState:
-        return replace(self, **changes)
+        """This state with ``changes`` applied: the one way to make a state from another.
 
-    def differs(self, changes: Mapping[str, Any]) -> bool:
-        """True when applying ``changes`` would change a reading (fast path of the hub)."""
-        return any(getattr(self, name) != value for name, value in changes.items())
-
-    def evolve(self, changes: Mapping[str, Any]) -> DriveState:
-        """``dataclasses.replace`` without its per-call overhead (hot path of the hub).
-
-        Field names are checked; values are taken as given, like ``replace``.
+        Field names are checked (TypeError naming those that are no field); values are taken
+        as given, like ``dataclasses.replace``, without its per-call overhead (hot path of the
+        hub): the new state's fields are a copy of this one's with ``changes`` applied, one
+        dict copy instead of a call per field.
         """
         unknown = changes.keys() - _STATE_FIELDS
         if unknown:
             raise TypeError(f"DriveState has no field(s) {sorted(unknown)}")
-        return self._derive(dict(changes))
-
-    def _derive(self, changes: dict[str, Any]) -> DriveState:
-        """:meth:`evolve` for callers that checked the names and hand ``changes`` over.
-
-        A state's ``__dict__`` holds its fields and nothing else, in their order (the
-        hub and the Zenoh encoder rely on it): the new one is a copy of this one's with
-        ``changes`` applied, one dict copy instead of a call per field.
-        """
         new = object.__new__(DriveState)
-        fields_of_new = self.__dict__.copy()
-        fields_of_new.update(changes)
-        _set_attribute(new, "__dict__", fields_of_new)  # frozen: past its __setattr__
+        values = self.__dict__.copy()
+        values.update(changes)
+        _set_attribute(new, "__dict__", values)  # frozen: past its __setattr__
         return new
-
-    def same_reading(self, other: DriveState) -> bool:
-        """True when nothing but seq and ts differ."""
-        return replace(self, seq=0, ts=0.0) == replace(other, seq=0, ts=0.0)
 
 
 class Readings(TypedDict, total=False):
@@ -281,8 +267,11 @@ class DriveUpdate(Readings, total=False):
 
 _set_attribute = object.__setattr__
 
-_STATE_FIELD_ORDER: tuple[str, ...] = tuple(f.name for f in fields(DriveState))
-_STATE_FIELDS: frozenset[str] = frozenset(_STATE_FIELD_ORDER)
+_STATE_FIELDS: frozenset[str] = frozenset(f.name for f in fields(DriveState))
+if tuple(f.name for f in fields(DriveState)) != PUBLISHED_FIELDS:
+    # a state's ``__dict__`` holds its fields in this order (``__init__`` and ``changed``
+    # keep it): the encoder writes it as it is, so the JSON form's order is checked here
+    raise ImportError("DriveState's fields are not PUBLISHED_FIELDS in order")
 STATE_FIELDS = _STATE_FIELDS
 """Every field name of DriveState."""
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gateway.adapter import ParamInfo, ParamTable, ParamValue, param_table
+from gateway.devices import Device
 from gateway.errors import GatewayError, ParameterError
 
 SCHEMA = "drive-gateway/params-backup"
@@ -30,14 +31,6 @@ Reader = Callable[[int, int], Awaitable[ParamValue]]
 """``read(number, subindex)``: the raw value; raises with the device's error."""
 Progress = Callable[[int, int, "ParamEntry"], None]
 """``progress(done, total, entry)`` after each parameter."""
-
-FIRMWARE_PARAMS: Mapping[str, int] = {
-    # "Sub-index 2: Version (software) = equipment firmware version (P0023)": CFW700
-    # manual P0964, CFW-11 manual P0964 ("versão de firmware do equipamento (P0023)")
-    "CFW-11": 23,
-    "CFW700": 23,
-}
-"""Device model -> the parameter holding its firmware version (the manuals' own words)."""
 
 VERSION_VALUES = ("software_version_major", "software_version_minor")
 """State ``values`` with the firmware (MCD 600 data request 15, guide 4.2)."""
@@ -373,6 +366,15 @@ async def read_all(
     return tuple(entries)
 
 
+def _firmware_param(model: str) -> int | None:
+    """The parameter holding the firmware version of a device model (its registration in
+    gateway/devices.py), None for a model without one or not known."""
+    try:
+        return Device(model).spec.firmware_param
+    except ValueError:
+        return None
+
+
 async def firmware_of(
     device: str, values: Mapping[str, Any], diag: Mapping[str, Any], table: ParamTable, read: Reader
 ) -> tuple[str | None, str]:
@@ -383,7 +385,7 @@ async def firmware_of(
     revision = diag.get("revision")
     if revision is not None:
         return str(revision), "identity object revision"
-    number = FIRMWARE_PARAMS.get(device)
+    number = _firmware_param(device)
     if number is None:
         return None, f"the {device}'s firmware version is not readable through the gateway"
     entry = await read_entry(number, 0, table.get(number), read)

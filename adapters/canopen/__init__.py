@@ -1,7 +1,7 @@
-"""CANopen master for CiA 402 drives, on the shared CAN link and driver.
+"""CANopen master for CiA 402 drives, on the shared CAN link and driver, in layers:
 
-Codec layer (sans-IO): ``frames`` (COB-IDs, NMT, SDO, heartbeat, EMCY, SYNC, PDO
-mapping entries), ``cia402`` (the CiA 402 / IEC 61800-7-201 state machine and
-option codes), ``codes`` (SDO abort codes, EMCY error codes, error register bits),
-``errors`` (typed decode errors under the project's root).
+``codec/`` (sans-IO: frames, CiA 402 state machine, codes, the object dictionary read
+from an EDS), ``master/`` (the engine), ``drive`` (the CiA 402 device profile: the drive
+model to and from the drive's words), ``sim/`` (the simulated drive), then ``options``,
+``plan`` (the bring-up of each drive), ``link``, ``adapter`` and ``cli``.
 """

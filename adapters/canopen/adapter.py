@@ -2,9 +2,9 @@
 
 The engine (:mod:`adapters.canopen.master`) runs on the shared CAN driver loop
 (:mod:`adapters.link.candriver`) in the event loop's thread: no canopen library network,
-no notifier thread of its own, no blocking SDO call (docs/decisions.md, "CANopen: the
-project's own engine"). The canopen library reads each drive's EDS and encodes and
-decodes object values (:mod:`adapters.canopen.od`).
+no notifier thread of its own, no blocking SDO call
+(docs/decisions/0045-canopen-master-own-engine.md). The canopen library reads each drive's
+EDS and encodes and decodes object values (:mod:`adapters.canopen.codec.od`).
 
 Per drive: ``connecting`` once the node answers SDO; the bring-up writes (each read back)
 then NMT start; ``online`` with its first TPDO. Until then the drive gets no PDO. A lost
@@ -12,9 +12,10 @@ heartbeat, a boot-up or a node leaving operational makes it ``offline``; it is b
 up again, and the hub clears any run command when it comes back online (safety rule 1):
 it comes back stopped. A fault reset is one edge of controlword bit 7 (rule 2).
 
-One master per line (issue 32 item 12): the engine listens for :func:`listen_time`
-before its first frame; another master heard then (a SYNC, an NMT command, a heartbeat
-with the gateway's node id, an RPDO to one of its drives) refuses the line
+One master per line (issue 32 item 12): the engine listens for
+:func:`~adapters.canopen.plan.listen_time` before its first frame; another master heard
+then (a SYNC, an NMT command, a heartbeat with the gateway's node id, an RPDO to one of
+its drives) refuses the line
 (:class:`~gateway.errors.LineHeld`, the daemon does not start). Heard later, it is an
 event on every drive of the line and their readings are doubtful. Frames that
 contradict each other for one drive (a second TPDO1 in a SYNC cycle, an SDO answer no
@@ -28,42 +29,35 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
-from adapters.canopen import cia402
-from adapters.canopen.codes import abort_message, emcy_text, error_register_texts
-from adapters.canopen.frames import CanFrame
-from adapters.canopen.link import CanOpenBus, Link, LinkConfig
+from adapters.can.adapter import BusSpec, CanAdapter, Drive, handles
+from adapters.canopen.codec import cia402
+from adapters.canopen.codec.codes import abort_message, emcy_text, error_register_texts
+from adapters.canopen.codec.frames import CanFrame
+from adapters.canopen.codec.od import obj_name
+from adapters.canopen.drive import readings, want
+from adapters.canopen.link import CanOpenBus
 from adapters.canopen.master import (
     Action,
-    BadFrame,
-    BusErrorIn,
     Configured,
     Conflict,
     EmcyIn,
     Event,
     FaultInfo,
-    FrameIn,
     Inputs,
     LineClaimed,
-    LinkDown,
     Master,
     MasterConfig,
     MasterHeard,
     NodeDown,
     NodeProblem,
     NodeSeen,
-    NodeUnavailable,
     NodeUp,
     Report,
     SdoDone,
-    Send,
-    TxFailed,
 )
-from adapters.canopen.od import obj_name
 from adapters.canopen.options import (
     BusOptions,
     DriveOptions,
@@ -71,32 +65,27 @@ from adapters.canopen.options import (
     parse_bus,
     parse_drive,
 )
-from adapters.canopen.plan import node_config
-from adapters.canopen.profile import readings, want
-from adapters.link.can import CanLinks
+from adapters.canopen.plan import master_config, node_config
 from adapters.link.candriver import CanDriver
-from adapters.link.canline import CanLine, LinkEvents, act_quietly, leave_line
-from adapters.link.config import missing_options, unsimulated
+from adapters.link.canline import act_quietly, leave_line
 from gateway.adapter import (
     Capabilities,
     EventKind,
-    HubPort,
     ParamInfo,
     ParamTable,
     ParamValue,
     param_table,
 )
-from gateway.config import BusConfig, DriveConfig
+from gateway.config import DriveConfig
 from gateway.devices import devices_of
 from gateway.errors import AdapterError, DriveOffline, GatewayTimeout, LineHeld, ParameterError
-from gateway.model import CommState, DesiredCommand, Device, DriveStatus, SpeedScale
+from gateway.model import CommState, DesiredCommand, DriveStatus, SpeedScale
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
 LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
 LEAVE_MARGIN = 0.1  # s: beyond the SDO timeout, the bound on the release writes on leaving
-LISTEN_MIN = 0.3  # s: the shortest listening before the first frame (one master per line)
 DOUBT_HOLD = 10.0  # s without a conflicting frame before a drive's readings are trusted again
 CONFLICT_EVENT_EVERY = 5.0  # s: at most one conflict event per drive this often
 # 0x6007 values that stop the drive when the master is lost (CiA 402-2 §6.4.5: 1 fault,
@@ -104,15 +93,8 @@ CONFLICT_EVENT_EVERY = 5.0  # s: at most one conflict event per drive this often
 FAILSAFE_OPTIONS = frozenset({1, 2, 3})
 
 
-def listen_time(options: BusOptions) -> float:
-    """How long the engine listens before its first frame: long enough to hear two of the
-    gateway's own SYNCs and heartbeats, as another instance of it would send them."""
-    return max(LISTEN_MIN, 3 * options.cycle, 2 * options.heartbeat / 1000.0)
-
-
 @dataclass(slots=True)
-class _Drive:
-    cfg: DriveConfig
+class _Drive(Drive):
     opts: DriveOptions
     up: bool = False  # NMT operational (NodeUp) since it was last lost
     online: bool = False  # reported online to the hub (first TPDO)
@@ -129,10 +111,6 @@ class _Drive:
     doubt_until: float = 0.0  # trusted again from then on, unless another conflict comes
     conflicts: int = 0  # conflicts since the last conflict event
     conflict_event_at: float = -math.inf  # when the last conflict event went out
-
-    @property
-    def id(self) -> str:
-        return self.cfg.id
 
     @property
     def node(self) -> int:
@@ -159,15 +137,12 @@ def eds_param_table(opts: DriveOptions) -> ParamTable:
     return param_table(out)
 
 
-class CanOpenAdapter:
+class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOptions, SdoDone]):
     """One CANopen line mastered by the gateway, with its CiA 402 drives."""
 
-    devices: ClassVar[frozenset[Device]] = devices_of("canopen")
-    address_range: ClassVar[tuple[int, int]] = (1, 127)
-
-    @classmethod
-    def parse_bus_options(cls, table: Table) -> BusOptions:
-        return parse_bus(table)
+    spec = BusSpec(BusOptions, parse_bus, CanOpenBus, SdoDone)
+    devices = devices_of("canopen")
+    address_range = (1, 127)
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
@@ -178,112 +153,35 @@ class CanOpenAdapter:
         """The SYNC period against the bus time of one cycle of these drives."""
         check_sync_period(table, options, drives)
 
-    def __init__(
-        self,
-        bus: BusConfig,
-        *,
-        links: CanLinks[CanFrame] | None = None,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self.bus = bus
-        self.name = bus.name
-        if not isinstance(bus.options, BusOptions):
-            raise missing_options(bus.name)
-        self.options: BusOptions = bus.options
+    def new_drive(self, cfg: DriveConfig) -> _Drive:
         o = self.options
-        self.links: CanLinks[CanFrame] | None = links
-        if links is None and not o.simulate:
-            self.links = CanOpenBus(LinkConfig(o.interface, o.channel, o.bitrate))
-        self.clock = clock
-        self.drives: dict[int, _Drive] = {}
-        self._by_id: dict[str, _Drive] = {}
-        for d in bus.drives:
-            if o.heartbeat > 0 and d.address == o.node_id:
-                raise AdapterError(
-                    f"drive {d.id} has the gateway's own node id {d.address} (bus key 'node_id')"
-                )
-            drive = _Drive(d, d.options)
-            self.drives[d.address] = drive
-            self._by_id[d.id] = drive
+        if o.heartbeat > 0 and cfg.address == o.node_id:
+            raise AdapterError(
+                f"drive {cfg.id} has the gateway's own node id {cfg.address} (bus key 'node_id')"
+            )
+        return _Drive(cfg, cfg.options)
+
+    def setup(self) -> None:
+        o = self.options
         self.node_configs = [node_config(d.node, d.opts, o) for d in self.drives.values()]
-        self.engine: Master | None = None
-        self.link: Link | None = None
-        self._driver: CanDriver[CanFrame, Event, Action] | None = None
-        self._hub: HubPort | None = None
-        self._pending: dict[int, asyncio.Future[SdoDone]] = {}
         self._next_refresh = 0.0
-        self.claimed = asyncio.Event()
-        """Set once the engine listened without hearing another master (the daemon's
-        READY); never set when another master holds the line."""
-        self._handlers: dict[type, Callable[[float, Any], None]] = {
-            LineClaimed: self._on_claimed,
-            MasterHeard: self._on_master_heard,
-            Conflict: self._on_conflict,
-            NodeSeen: self._on_seen,
-            Configured: self._on_configured,
-            NodeUp: self._on_up,
-            NodeDown: self._on_down,
-            NodeProblem: self._on_problem,
-            Inputs: self._on_inputs,
-            EmcyIn: self._on_emcy,
-            FaultInfo: self._on_fault_info,
-            SdoDone: self._on_sdo_done,
-            Report: self._on_report,
-        }
 
     def master_config(self) -> MasterConfig:
-        o = self.options
-        return MasterConfig(
-            nmt_master=o.nmt_master,
-            sync_period=o.sync_period,
-            pdo_period=o.pdo_period,
-            sdo_timeout=o.sdo_timeout,
-            heartbeat_factor=o.heartbeat_factor,
-            boot_timeout=o.boot_timeout,
-            retry=o.retry,
-            own_node_id=o.node_id,
-            own_heartbeat=o.heartbeat / 1000.0,
-            listen=listen_time(o),
-        )
+        return master_config(self.options)
 
     # ------------------------------------------------------------ run
 
-    async def run(self, hub: HubPort) -> None:
-        links = self.links
-        if links is None:
-            raise unsimulated(self.name)
-        self._hub = hub
-        for d in self.drives.values():
-            hub.update(d.id, comm=CommState.OFFLINE)
-            hub.set_capabilities(d.id, self._capabilities(d))
-        link = links.link()
-        engine = Master(self.master_config(), self.node_configs)
-        async with link:
-            self.link, self.engine = link, engine
-            driver = self._driver = CanDriver(engine, link, _Line(self), self.clock)
-            try:
-                await links.start()
-                await driver.run()
-            finally:
-                try:
-                    await self._leave(link, engine, driver)
-                    self._stop_pending()
-                finally:
-                    await links.stop()
-                for d in self.drives.values():
-                    d.up = d.online = False
-                    hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
-                self.link = self.engine = self._driver = None
+    def make_engine(self) -> Master:
+        return Master(self.master_config(), self.node_configs)
 
-    async def _leave(
-        self, link: Link, engine: Master, driver: CanDriver[CanFrame, Event, Action]
-    ) -> None:
+    def drive_left(self, d: _Drive) -> None:
+        d.up = d.online = False
+
+    async def leave(self, engine: Master, driver: CanDriver[CanFrame, Event, Action]) -> None:
         """Leave the line cleanly (docs/devices.md, "Leaving the line"): each drive's
         consumer of the gateway's heartbeat switched off by SDO, bounded by the SDO
         timeout, while SYNC, RPDOs (the shutdown stop: the wishes refreshed each pass) and
         the heartbeat go on; then the last RPDOs, a SYNC and NMT enter pre-operational."""
-        if not link.is_open:
-            return
         await leave_line(
             driver,
             engine.release,
@@ -298,15 +196,8 @@ class CanOpenAdapter:
         driver.flush(now)
         await asyncio.sleep(LEAVE_WAIT)
 
-    def _stop_pending(self) -> None:
-        for fut in self._pending.values():
-            fut.cancel()
-        self._pending.clear()
-
-    def _hub_port(self) -> HubPort:
-        if self._hub is None:
-            raise AdapterError("the adapter is not running")
-        return self._hub
+    def publish_capabilities(self, d: _Drive) -> None:
+        self._hub_port().set_capabilities(d.id, self._capabilities(d))
 
     def _capabilities(self, d: _Drive) -> Capabilities:
         return Capabilities(
@@ -317,12 +208,12 @@ class CanOpenAdapter:
 
     # ------------------------------------------------------------ outputs
 
-    def _before_step(self, now: float) -> None:
+    def before_step(self, now: float) -> None:
         if now >= self._next_refresh:
             self._refresh(now)
             self._next_refresh = now + self.options.cycle
 
-    def _after_step(self) -> None:
+    def after_step(self, now: float) -> None:
         """The next refresh comes with the engine's next cycle (SYNC and RPDOs): the
         wishes are made just before the cycle that sends them, in the same pass of the
         driver, so the refresh costs no wake-up of its own."""
@@ -332,7 +223,7 @@ class CanOpenAdapter:
             if cycle_at is not None and cycle_at < self._next_refresh:
                 self._next_refresh = cycle_at
 
-    def _wake_at(self) -> float | None:
+    def wake_at(self) -> float | None:
         engine = self.engine
         if engine is None or engine.next_cycle is None:
             return None  # listening (or left): no cycle, no wish to refresh for it
@@ -366,13 +257,12 @@ class CanOpenAdapter:
 
     # ------------------------------------------------------------ actions
 
-    def _handle(self, now: float, action: Action) -> None:
-        self._handlers[type(action)](now, action)
-
+    @handles(LineClaimed)
     def _on_claimed(self, now: float, action: LineClaimed) -> None:
         log.info("CANopen %s: no other master heard: the line is the gateway's", self.name)
         self.claimed.set()
 
+    @handles(MasterHeard)
     def _on_master_heard(self, now: float, action: MasterHeard) -> None:
         """Another master on the line (CiA 301: one NMT master, one SYNC producer). Before
         the first frame: the line is refused, nothing was sent. Later: reported on every
@@ -388,6 +278,7 @@ class CanOpenAdapter:
         for d in self.drives.values():
             self._doubt(d, now, f"another master on the line: {action.text}")
 
+    @handles(Conflict)
     def _on_conflict(self, now: float, action: Conflict) -> None:
         d = self.drives[action.node]
         self._doubt(d, now, f"node {d.node}: {action.what}")
@@ -426,10 +317,12 @@ class CanOpenAdapter:
             node=d.node,
         )
 
+    @handles(NodeSeen)
     def _on_seen(self, now: float, action: NodeSeen) -> None:
         d = self.drives[action.node]
         self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
+    @handles(Configured)
     def _on_configured(self, now: float, action: Configured) -> None:
         d = self.drives[action.node]
         d.problem = None
@@ -464,12 +357,14 @@ class CanOpenAdapter:
         ms = min(0xFFFF, math.ceil(o.heartbeat * o.heartbeat_factor))
         return f"0x1016:1 watches node {o.node_id}'s heartbeat ({ms} ms)"
 
+    @handles(NodeUp)
     def _on_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.node]
         d.up = True
         d.input_key = None
         d.reset_seen = self._hub_port().desired(d.id).fault_reset_seq
 
+    @handles(NodeDown)
     def _on_down(self, now: float, action: NodeDown) -> None:
         d = self.drives[action.node]
         d.up = d.online = False
@@ -478,6 +373,7 @@ class CanOpenAdapter:
         hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
         hub.event(d.id, EventKind.COMM, f"drive offline: {action.reason}", node=d.node)
 
+    @handles(NodeProblem)
     def _on_problem(self, now: float, action: NodeProblem) -> None:
         d = self.drives[action.node]
         text = f"not configured: node {d.node}: {action.text}; the drive is not started"
@@ -491,6 +387,7 @@ class CanOpenAdapter:
         d.up = d.online = False
         self._hub_port().update(d.id, comm=CommState.OFFLINE, running=False)
 
+    @handles(Inputs)
     def _on_inputs(self, now: float, action: Inputs) -> None:
         d = self.drives[action.node]
         if not d.up:
@@ -512,6 +409,7 @@ class CanOpenAdapter:
             return
         hub.update(d.id, **changes)
 
+    @handles(EmcyIn)
     def _on_emcy(self, now: float, action: EmcyIn) -> None:
         d = self.drives[action.node]
         emcy = action.emcy
@@ -533,6 +431,7 @@ class CanOpenAdapter:
             node=d.node,
         )
 
+    @handles(FaultInfo)
     def _on_fault_info(self, now: float, action: FaultInfo) -> None:
         d = self.drives[action.node]
         raw = action.reads.get((cia402.ERROR_CODE, 0))
@@ -553,11 +452,7 @@ class CanOpenAdapter:
                 d.id, EventKind.FAULT, "fault read: " + "; ".join(parts), code=code, node=d.node
             )
 
-    def _on_sdo_done(self, now: float, action: SdoDone) -> None:
-        fut = self._pending.pop(action.token, None)
-        if fut is not None and not fut.done():
-            fut.set_result(action)
-
+    @handles(Report)
     def _on_report(self, now: float, action: Report) -> None:
         log.info("CANopen %s: %s", self.name, action.text)
         targets = [self.drives[action.node]] if action.node in self.drives else []
@@ -566,34 +461,14 @@ class CanOpenAdapter:
 
     # ------------------------------------------------------------ parameters
 
-    def _drive(self, drive_id: str) -> _Drive:
-        d = self._by_id.get(drive_id)
-        if d is None:
-            raise DriveOffline(f"drive {drive_id} is not on bus {self.name}")
-        return d
-
     async def sdo(self, drive_id: str, index: int, subindex: int, write: bytes | None) -> bytes:
         """One SDO transfer with a drive; the bytes read (empty for a write). An abort is
         a ParameterError with the CiA 301 code and text."""
         d = self._drive(drive_id)
-        engine, link = self.engine, self.link
-        if engine is None or link is None:
-            raise DriveOffline(f"drive {d.id}: bus {self.name} is not running")
-        try:
-            token = engine.submit(d.node, index, subindex, write)
-        except NodeUnavailable as exc:
-            raise DriveOffline(f"drive {d.id} is not online ({exc})") from None
-        fut: asyncio.Future[SdoDone] = asyncio.get_running_loop().create_future()
-        self._pending[token] = fut
-        link.wake()
         bound = 4 * self.options.sdo_timeout + 1.0
-        try:
-            async with asyncio.timeout(bound):
-                done = await fut
-        except TimeoutError:
-            raise GatewayTimeout(f"drive {d.id}: no SDO answer within {bound:g} s") from None
-        finally:
-            self._pending.pop(token, None)
+        done = await self.exchange(
+            d, lambda engine: engine.submit(d.node, index, subindex, write), bound, "SDO answer"
+        )
         if done.result is None:
             raise DriveOffline(f"drive {d.id}: {done.error}")
         result = done.result
@@ -651,37 +526,26 @@ class CanOpenAdapter:
 
     # ------------------------------------------------------------ diagnostics
 
-    def diagnostics(self) -> dict[str, Any]:
+    def line_diagnostics(self, engine: Master | None) -> dict[str, Any]:
         o = self.options
         line: dict[str, Any] = {
-            "interface": o.interface,
-            "channel": o.channel,
-            "bitrate_expected": o.bitrate,
             "node_id": o.node_id,
             "nmt_master": o.nmt_master,
             "sync_period": o.sync_period,
-            "simulated": o.simulate,
-            "running": self.engine is not None,
         }
-        engine, link = self.engine, self.link
         if engine is not None:
             line.update(engine.figures)
-        if link is not None:
-            line.update(link.diagnostics())
-        drives: dict[str, Any] = {}
-        for d in self.drives.values():
-            entry: dict[str, Any] = {} if engine is None else engine.node_diagnostics(d.node)
-            entry |= {
-                "node": d.node,
-                "eds": d.opts.eds.file,
-                "mode": d.opts.mode.value,
-                "online": d.online,
-                "problem": d.problem,
-                "quick_stop_option": d.quick_stop_option,
-            }
-            drives[d.id] = entry
-        line["drives"] = drives
         return line
+
+    def drive_diagnostics(self, d: _Drive) -> dict[str, Any]:
+        return {
+            "node": d.node,
+            "eds": d.opts.eds.file,
+            "mode": d.opts.mode.value,
+            "online": d.online,
+            "problem": d.problem,
+            "quick_stop_option": d.quick_stop_option,
+        }
 
 
 _STOPPED_DESIRED = DesiredCommand()
@@ -705,41 +569,3 @@ def failsafe_of(option: int | None, consumer: str | None) -> tuple[bool | None, 
     if option == 0:
         return False, text + ": the drive keeps running"
     return None, text + ": its effect is not known"
-
-
-LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
-    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
-)
-"""The master's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
-
-
-class _Line(CanLine[CanFrame, Event, Action]):
-    """The master's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`):
-    the link's events as the master's (:class:`~adapters.link.canline.CanLine`), its frames
-    and reports, the refresh of the wishes once per cycle."""
-
-    def __init__(self, adapter: CanOpenAdapter) -> None:
-        super().__init__(LINK_EVENTS)
-        self.adapter = adapter
-        self._handlers = adapter._handlers
-
-    # every action passes here: exact type tests first (the engine's classes are final
-    # dataclasses), no call in between
-    def frame(self, action: Action) -> CanFrame | None:
-        return action.frame if type(action) is Send else None
-
-    def handle(self, now: float, action: Action) -> None:
-        self._handlers[type(action)](now, action)
-
-    def before_step(self, now: float) -> None:
-        self.adapter._before_step(now)
-
-    def after_step(self, now: float) -> None:
-        self.adapter._after_step()
-
-    def wake_at(self) -> float | None:
-        return self.adapter._wake_at()
-
-    def hold_until(self, now: float) -> float | None:
-        engine = self.adapter.engine
-        return None if engine is None else engine.hold_until(now)

@@ -1,5 +1,5 @@
 """The CANopen line's CAN link: the shared python-can link (:mod:`adapters.link.can`)
-carrying :class:`~adapters.canopen.frames.CanFrame` (11-bit COB-ID, at most 8 data
+carrying :class:`~adapters.canopen.codec.frames.CanFrame` (11-bit COB-ID, at most 8 data
 bytes: CiA 301 uses the base frame format), and the real line's link factory
 (:class:`CanOpenBus`)."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TypeAlias
 
-from adapters.canopen.frames import CanFrame
+from adapters.canopen.codec.frames import CanFrame
 from adapters.link.can import CanConfig, CanEvent, CanLinks
 from adapters.link.can import CanLink as SharedCanLink
 

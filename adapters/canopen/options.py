@@ -17,11 +17,11 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
-from adapters.canopen import cia402
+from adapters.can.bits import frame_bits
+from adapters.canopen.codec import cia402
+from adapters.canopen.codec.od import Dictionary, Variable, obj_name, parse_object
 from adapters.canopen.errors import EdsError
-from adapters.canopen.od import Dictionary, Variable, obj_name, parse_object
 from adapters.link.can import REFUSED_INTERFACES
-from adapters.link.canbits import frame_bits
 from gateway.config import DriveConfig, shipped_file
 from gateway.schema import Table
 

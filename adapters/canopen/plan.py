@@ -1,5 +1,6 @@
-"""A drive's bring-up plan: the SDO writes the engine makes at every connect, built from
-the drive's config and its object dictionary (sizes from the EDS).
+"""What the engine is given: the master's config from the bus keys (:func:`master_config`)
+and each drive's bring-up plan, the SDO writes the engine makes at every connect, built
+from the drive's config and its object dictionary (sizes from the EDS).
 
 First a Shutdown written to the controlword by SDO: a drive found running when the
 gateway (re)starts stops before it is configured (safety rule 1).
@@ -22,17 +23,40 @@ from __future__ import annotations
 
 import math
 
-from adapters.canopen import cia402, frames
-from adapters.canopen.cia402 import Cw
-from adapters.canopen.frames import MappingEntry
+from adapters.canopen.codec import cia402, frames
+from adapters.canopen.codec.cia402 import Cw
+from adapters.canopen.codec.frames import MappingEntry
+from adapters.canopen.codec.od import Dictionary, Variable, obj_name
 from adapters.canopen.master.control import VL_OPERATION_BITS
-from adapters.canopen.master.events import NodeConfig, PdoField, SdoStep
-from adapters.canopen.od import Dictionary, Variable, obj_name
+from adapters.canopen.master.events import MasterConfig, NodeConfig, PdoField, SdoStep
 from adapters.canopen.options import BusOptions, DriveOptions, Mode
 
 COB_MASK = 0x800007FF  # valid bit and the 11-bit id (bits 29-30 are the node's)
 TRANSMISSION_SYNC = 1  # synchronous: every SYNC (CiA 301 table 70)
 TRANSMISSION_EVENT = 255  # event-driven (device profile), with the event timer
+LISTEN_MIN = 0.3  # s: the shortest listening before the first frame (one master per line)
+
+
+def listen_time(options: BusOptions) -> float:
+    """How long the engine listens before its first frame: long enough to hear two of the
+    gateway's own SYNCs and heartbeats, as another instance of it would send them."""
+    return max(LISTEN_MIN, 3 * options.cycle, 2 * options.heartbeat / 1000.0)
+
+
+def master_config(o: BusOptions) -> MasterConfig:
+    """The gateway's own node behaviour on the line, from the bus keys."""
+    return MasterConfig(
+        nmt_master=o.nmt_master,
+        sync_period=o.sync_period,
+        pdo_period=o.pdo_period,
+        sdo_timeout=o.sdo_timeout,
+        heartbeat_factor=o.heartbeat_factor,
+        boot_timeout=o.boot_timeout,
+        retry=o.retry,
+        own_node_id=o.node_id,
+        own_heartbeat=o.heartbeat / 1000.0,
+        listen=listen_time(o),
+    )
 
 
 def _field(var: Variable) -> PdoField:

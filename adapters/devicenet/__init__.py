@@ -1,8 +1,7 @@
-"""DeviceNet scanner for a Group 2 Only slave (WEG CFW-08).
+"""DeviceNet scanner for Group 2 Only slaves (the WEG CFW-08), in layers:
 
-Codec layer (sans-IO, fact sheet Part 2): ``frame`` (the CAN frame), ``ids``
-(identifiers, predefined connection set), ``explicit`` (explicit message bodies),
-``fragment`` (fragmentation protocol), ``dupmac`` (Duplicate MAC ID check),
-``cip`` (general status, services, classes), ``objects`` (class 1/3/5 numbers),
-``datatypes`` (CIP elementary types), ``errors`` (typed decode errors).
+``codec/`` (sans-IO, fact sheet Part 2: frames, identifiers, explicit messages,
+fragmentation, Duplicate MAC ID check, CIP, objects, data types, EDS), ``scanner/`` (the
+engine), ``contract`` (what a device profile gives the adapter), ``cfw08/`` (the device),
+``sim/`` (its simulator), then ``options``, ``link``, ``adapter`` and ``cli``.
 """

@@ -1,7 +1,7 @@
 """The DeviceNet adapter: python-can link + scanner engine + device profiles, as a DriveAdapter.
 
-Each drive has the :class:`~adapters.devicenet.profile.DnProfile` its device registers
-(``adapters.devicenet.profile.PROFILES``); the adapter names no device. Per drive, once
+Each drive has the :class:`~adapters.devicenet.contract.DnProfile` its device registers
+(``adapters.devicenet.contract.PROFILES``); the adapter names no device. Per drive, once
 the scanner has it online (allocated, identity and sizes checked, EPR set), the profile
 configures it through explicit messages (:meth:`DnProfile.on_connect`). Until that
 succeeds the scanner sends idle (zero-length) I/O and the drive stays ``connecting``: it
@@ -14,77 +14,55 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from typing import Any
 
-from adapters.devicenet.datatypes import AttributeValue
-from adapters.devicenet.eds import Param
-from adapters.devicenet.errors import DeviceNetDecodeError
-from adapters.devicenet.explicit import Request, Response
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.link import (
-    DeviceNetBus,
-    Link,
-    LinkConfig,
-    LinkEvent,
-    RxFrame,
-)
-from adapters.devicenet.objects import INACTIVITY_EPR_FACTOR
-from adapters.devicenet.options import ADR_MAC, BusOptions, DriveOptions, parse_bus
-from adapters.devicenet.profile import (
+from adapters.can.adapter import BusSpec, CanAdapter, Drive, handles
+from adapters.devicenet.adr import AdrWatch
+from adapters.devicenet.codec.datatypes import AttributeValue
+from adapters.devicenet.codec.eds import Param
+from adapters.devicenet.codec.explicit import Request, Response
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.objects import INACTIVITY_EPR_FACTOR
+from adapters.devicenet.contract import (
     RESET_OFFLINE_WINDOW,
     DnProfile,
+    NodeOptions,
     NotConfigured,
     load_profile,
 )
+from adapters.devicenet.errors import DeviceNetDecodeError
+from adapters.devicenet.link import DeviceNetBus, LinkEvent, RxFrame
+from adapters.devicenet.options import BusOptions, parse_bus
 from adapters.devicenet.scanner import (
     Action,
-    BadFrame,
-    BusErrorIn,
     Event,
     ExplicitResult,
-    FrameIn,
     IdentityCheck,
     InputData,
     IoConflict,
     LineFault,
     LineOnline,
-    LinkDown,
     NodeConfig,
     NodeDown,
-    NodeUnavailable,
     NodeUp,
     Phase,
     Report,
     ReportKind,
     Scanner,
     ScannerConfig,
-    Send,
-    TxFailed,
 )
-from adapters.devicenet.scanner.probe import (
-    Finished,
-    LineProbe,
-    NodeInfo,
-    ProbeAction,
-    ProbeConfig,
-    Progress,
-)
-from adapters.link.can import CanLinks
 from adapters.link.candriver import CanDriver
-from adapters.link.canline import CanLine, LinkEvents, leave_line
-from adapters.link.config import missing_options, unsimulated
+from adapters.link.canline import leave_line
 from gateway.adapter import (
     EventKind,
-    HubPort,
     ParamInfo,
     ParamTable,
     ParamValue,
     param_table,
 )
-from gateway.config import BusConfig, DriveConfig
+from gateway.config import DriveConfig
 from gateway.devices import devices_of
 from gateway.errors import (
     AdapterError,
@@ -93,7 +71,7 @@ from gateway.errors import (
     LineHeld,
     ParameterError,
 )
-from gateway.model import CommState, DesiredCommand, Device
+from gateway.model import CommState, DesiredCommand
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
@@ -101,7 +79,6 @@ log = logging.getLogger(__name__)
 LEAVE_BOUND = 1.0  # s: the shortest bound on the wait for Release answers on shutdown
 LEAVE_WAIT = 0.02  # s: the longest wait between two steps while leaving
 SCANNER_SERIAL_BASE = 0x44470000  # our Duplicate MAC ID check serial ("DG" + MAC)
-ADR_INTERVAL = 1.0  # s between two looks at MAC 63 while an adr drive is missing
 IDLE = "idle"
 # Doubtful readings (issue 32 item 12): a drive whose poll responses conflicted is doubtful
 # until this many of its inputs in a row came without a conflict (at least this many poll
@@ -121,9 +98,8 @@ REPORT_EVENTS: dict[ReportKind, EventKind] = {
 
 
 @dataclass(slots=True)
-class _Drive:
-    cfg: DriveConfig
-    opts: DriveOptions
+class _Drive(Drive):
+    opts: NodeOptions
     profile: DnProfile
     configured: bool = False
     setup: asyncio.Task[None] | None = None
@@ -147,10 +123,6 @@ class _Drive:
     conflict_said_at: float | None = None
 
     @property
-    def id(self) -> str:
-        return self.cfg.id
-
-    @property
     def mac(self) -> int:
         return self.cfg.address
 
@@ -161,7 +133,7 @@ class _Drive:
 
 @dataclass(frozen=True, slots=True)
 class _Port:
-    """One drive as its profile sees it (adapters.devicenet.profile.DrivePort)."""
+    """One drive as its profile sees it (adapters.devicenet.contract.DrivePort)."""
 
     adapter: DeviceNetAdapter
     drive: _Drive
@@ -181,7 +153,7 @@ class _Port:
         self.adapter._hub_port().event(self.drive.id, kind, text, **data)
 
     def capabilities_changed(self) -> None:
-        self.adapter._publish_capabilities(self.drive)
+        self.adapter.publish_capabilities(self.drive)
 
     def values_changed(self) -> None:
         d = self.drive
@@ -207,74 +179,40 @@ def eds_param_table(params: Mapping[int, Param]) -> ParamTable:
     )
 
 
-class DeviceNetAdapter:
+class DeviceNetAdapter(
+    CanAdapter[CanFrame, Event, Action, Scanner, _Drive, BusOptions, ExplicitResult]
+):
     """One DeviceNet line scanned by the gateway, with the drives of :data:`PROFILES`."""
 
-    devices: ClassVar[frozenset[Device]] = devices_of("devicenet")  # the registry's
-    address_range: ClassVar[tuple[int, int]] = (0, 63)
+    spec = BusSpec(BusOptions, parse_bus, DeviceNetBus, ExplicitResult)
+    devices = devices_of("devicenet")  # the registry's
+    address_range = (0, 63)
 
     @classmethod
-    def parse_bus_options(cls, table: Table) -> BusOptions:
-        return parse_bus(table)
-
-    @classmethod
-    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
+    def parse_drive_options(cls, table: Table, drive: DriveConfig) -> NodeOptions:
         """The drive's keys, as the profile of its device reads them."""
         return load_profile(drive.device).parse_options(table, drive)
 
-    def __init__(
-        self,
-        bus: BusConfig,
-        *,
-        links: CanLinks[CanFrame] | None = None,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        """``links``: the line, as the composition root chose it (a simulated line for
-        ``simulate = true``); None: the configured interface and channel."""
-        self.bus = bus
-        self.name = bus.name
-        if not isinstance(bus.options, BusOptions):
-            raise missing_options(bus.name)
-        self.options: BusOptions = bus.options
-        o = self.options
-        self.links: CanLinks[CanFrame] | None = links
-        """None for ``simulate = true`` without a simulated line: refused when it runs."""
-        if links is None and not o.simulate:
-            self.links = DeviceNetBus(LinkConfig(o.interface, o.channel, o.bitrate))
-        self.clock = clock
-        self.drives: dict[int, _Drive] = {}
-        self._by_id: dict[str, _Drive] = {}
-        for d in bus.drives:
-            if d.address == self.options.mac:
-                raise AdapterError(
-                    f"drive {d.id} has the scanner's MAC ID {d.address} (bus key 'mac')"
-                )
-            opts: DriveOptions = d.options
-            drive = _Drive(d, opts, load_profile(d.device)(d.id, opts))
-            self.drives[d.address] = drive
-            self._by_id[d.id] = drive
-        self.engine: Scanner | None = None
-        self.link: Link | None = None
-        self._driver: CanDriver[CanFrame, Event, Action] | None = None
+    def new_drive(self, cfg: DriveConfig) -> _Drive:
+        if cfg.address == self.options.mac:
+            raise AdapterError(
+                f"drive {cfg.id} has the scanner's MAC ID {cfg.address} (bus key 'mac')"
+            )
+        opts: NodeOptions = cfg.options
+        return _Drive(cfg, opts, load_profile(cfg.device)(cfg.id, opts))
+
+    def setup(self) -> None:
         self._next_refresh = 0.0
         self._refreshed_cycle = -1  # the poll cycles counted at the last refresh
-        self._hub: HubPort | None = None
-        self._pending: dict[int, asyncio.Future[ExplicitResult]] = {}
-        self._adr: LineProbe | None = None
-        self._adr_next = 0.0
-        self._missing_since: dict[int, float] = {}
-        self.claimed = asyncio.Event()
-        """Set once the scanner passed its Duplicate MAC ID check (the daemon's READY)."""
-        self._handlers: dict[type, Callable[[float, Any], None]] = {
-            LineOnline: self._on_line_online,
-            LineFault: self._on_line_fault,
-            NodeUp: self._on_node_up,
-            NodeDown: self._on_node_down,
-            InputData: self._on_input,
-            IoConflict: self._on_conflict,
-            ExplicitResult: self._on_result,
-            Report: self._on_report,
-        }
+        self.adr = AdrWatch(
+            self.name,
+            self.options,
+            self.drives,
+            clock=self.clock,
+            hub=self._hub_port,
+            queue=lambda frame: self._driver.queue(frame) if self._driver is not None else None,
+        )
+        """Automatic Device Replacement of the ``adr`` drives."""
 
     # ------------------------------------------------------------ configuration
 
@@ -325,46 +263,20 @@ class DeviceNetAdapter:
 
     # ------------------------------------------------------------ run
 
-    async def run(self, hub: HubPort) -> None:
-        links = self.links
-        if links is None:
-            raise unsimulated(self.name)
-        self._hub = hub
-        for d in self.drives.values():
-            hub.update(d.id, comm=CommState.OFFLINE)
-            self._publish_capabilities(d)
-        link = links.link()
-        engine = Scanner(self.scanner_config(), self.node_configs())
+    def make_engine(self) -> Scanner:
         self._next_refresh = 0.0
         self._refreshed_cycle = -1
-        async with link:
-            self.link, self.engine = link, engine
-            driver = self._driver = CanDriver(engine, link, _Line(self), self.clock)
-            try:
-                await links.start()
-                await driver.run()
-            finally:
-                try:
-                    await self._leave(link, engine, driver)
-                    await self._stop_tasks()
-                finally:
-                    await links.stop()  # a simulated line's devices, after the Release
-                for d in self.drives.values():
-                    hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
-                self.link = self.engine = self._driver = None
+        return Scanner(self.scanner_config(), self.node_configs())
 
-    async def _stop_tasks(self) -> None:
+    async def stop_work(self) -> None:
         tasks = [t for d in self.drives.values() for t in (d.setup, d.status) if t is not None]
         for task in tasks:
             task.cancel()
         for task in tasks:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
-        for fut in self._pending.values():
-            fut.cancel()
-        self._pending.clear()
 
-    def _before_step(self, now: float) -> None:
+    def before_step(self, now: float) -> None:
         """Desired commands reach the outputs once per poll: every ``poll_interval``, and
         no more than once per poll cycle (a cycle longer than the interval polls each node
         once; refreshing the outputs meanwhile would cost a pass over every drive, every
@@ -384,23 +296,26 @@ class DeviceNetAdapter:
             or engine.line.cycles != self._refreshed_cycle
         )
 
-    def _wake_at(self) -> float | None:
-        adr = self._adr.next_deadline() if self._adr is not None else None
+    def wake_at(self) -> float | None:
+        adr = self.adr.deadline()
         # mid-cycle the refresh waits for the cycle's end: an event (its last poll reply,
         # or the scanner's own poll timeout), which steps the driver anyway
         refresh = self._next_refresh if self._refresh_due() else None
         times = [t for t in (refresh, adr) if t is not None]
         return min(times) if times else None
 
-    def _received(self, now: float, event: LinkEvent) -> None:
-        if self._adr is not None and isinstance(event, RxFrame):
-            self._adr_actions(now, self._adr.step(now, event.frame))
+    def after_step(self, now: float) -> None:
+        engine = self.engine
+        if engine is not None:
+            self.adr.tick(now, engine)
 
-    async def _leave(
-        self, link: Link, engine: Scanner, driver: CanDriver[CanFrame, Event, Action]
-    ) -> None:
+    def received(self, now: float, event: LinkEvent) -> None:
+        if self.adr.probe is not None and isinstance(event, RxFrame):
+            self.adr.received(now, event.frame)
+
+    async def leave(self, engine: Scanner, driver: CanDriver[CanFrame, Event, Action]) -> None:
         """Release every node (fact sheet 2.10 step 8), bounded."""
-        if not link.is_open or not engine.online:
+        if not engine.online:
             return
         # the Releases go out request_spacing apart, each answered within explicit_timeout
         spread = len(engine.nodes) * engine.config.request_spacing
@@ -411,20 +326,14 @@ class DeviceNetAdapter:
 
     # ------------------------------------------------------------ actions
 
-    def _handle(self, now: float, action: Action) -> None:
-        self._handlers[type(action)](now, action)
-
-    def _hub_port(self) -> HubPort:
-        if self._hub is None:
-            raise AdapterError("the adapter is not running")
-        return self._hub
-
+    @handles(LineOnline)
     def _on_line_online(self, now: float, action: LineOnline) -> None:
         log.info("DeviceNet %s: scanner MAC %d online", self.name, self.options.mac)
         self.claimed.set()
         for d in self.drives.values():
             self._hub_port().update(d.id, comm=CommState.CONNECTING)
 
+    @handles(LineFault)
     def _on_line_fault(self, now: float, action: LineFault) -> None:
         """The scanner's MAC ID is answered on the line: another master is there (fact
         sheet 2.3: a device failing its check stays off the line). Nothing but the two
@@ -438,6 +347,7 @@ class DeviceNetAdapter:
             "on this line: stop it (one master per line)"
         )
 
+    @handles(NodeUp)
     def _on_node_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.mac]
         self._disarm(d)
@@ -448,6 +358,7 @@ class DeviceNetAdapter:
             self._configure(d), name=f"devicenet-setup-{d.id}"
         )
 
+    @handles(NodeDown)
     def _on_node_down(self, now: float, action: NodeDown) -> None:
         d = self.drives[action.mac]
         for task in (d.setup, d.status):
@@ -470,6 +381,7 @@ class DeviceNetAdapter:
         hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
         hub.event(d.id, EventKind.COMM, text, mac=d.mac)
 
+    @handles(InputData)
     def _on_input(self, now: float, action: InputData) -> None:
         d = self.drives[action.mac]
         if d.doubtful:
@@ -497,6 +409,7 @@ class DeviceNetAdapter:
             d.doubtful = False
             self._hub_port().update(d.id, doubtful=False)
 
+    @handles(IoConflict)
     def _on_conflict(self, now: float, action: IoConflict) -> None:
         """Two answers to one poll (issue 32 item 12): the drive's readings are doubtful
         until :data:`DOUBT_CLEAN_INPUTS` clean inputs in a row; one event when it starts,
@@ -522,95 +435,13 @@ class DeviceNetAdapter:
         )
         d.conflict_said_at, d.conflicts_unsaid = now, 0
 
-    def _on_result(self, now: float, action: ExplicitResult) -> None:
-        fut = self._pending.pop(action.token, None)
-        if fut is not None and not fut.done():
-            fut.set_result(action)
-
+    @handles(Report)
     def _on_report(self, now: float, action: Report) -> None:
         kind = REPORT_EVENTS[action.kind]
         hub = self._hub_port()
         targets = [self.drives[action.mac]] if action.mac in self.drives else self.drives.values()
         for d in targets:
             hub.event(d.id, kind, action.text, **action.data)
-
-    # ------------------------------------------------------------ Automatic Device Replacement
-
-    def _adr_drives(self, engine: Scanner) -> list[_Drive]:
-        """Drives with ``adr = true`` (none while a configured drive holds MAC 63)."""
-        if ADR_MAC in self.drives or not engine.online:
-            return []
-        return [d for d in self.drives.values() if d.opts.adr]
-
-    def _tick_adr(self, now: float, engine: Scanner) -> None:
-        """Seed 6.1: while an ``adr`` drive is missing, look at MAC 63 for a drive with its
-        identity (every ``ADR_INTERVAL``); one found is re-addressed and reset, then comes
-        up at the missing drive's MAC ID and is reprogrammed at connect (startup_params)."""
-        drives = self._adr_drives(engine)
-        for d in drives:
-            if engine.nodes[d.mac].phase is Phase.ONLINE:
-                self._missing_since.pop(d.mac, None)
-            else:
-                self._missing_since.setdefault(d.mac, now)
-        if self._adr is None:
-            if not self._missing(now) or now < self._adr_next:
-                return
-            o = self.options
-            config = ProbeConfig(
-                mac=o.mac, macs=(ADR_MAC,), timeout=o.explicit_timeout, claim=False, window=1
-            )
-            self._adr = LineProbe(config, self._adr_target)
-        self._adr_actions(now, self._adr.step(now))
-
-    def _missing(self, now: float) -> list[_Drive]:
-        """``adr`` drives missing long enough to be replaced (not merely slow to start)."""
-        after = 2 * (self.options.explicit_timeout + self.options.dupmac_timeout)
-        return [
-            self.drives[mac] for mac, since in self._missing_since.items() if now - since >= after
-        ]
-
-    def _adr_target(self, info: NodeInfo) -> int | None:
-        now = self.clock()
-        matches = [d for d in self._missing(now) if _same_identity(d.opts, info)]
-        if len(matches) == 1:
-            return matches[0].mac
-        if len(matches) > 1:
-            names = ", ".join(d.id for d in matches)
-            text = (
-                f"ADR: the drive at MAC {ADR_MAC} (serial {info.serial_number}) matches "
-                f"several missing drives ({names}): not re-addressed"
-            )
-            for d in matches:
-                self._hub_port().event(d.id, EventKind.CONFIG, text)
-        return None
-
-    def _adr_actions(self, now: float, actions: list[ProbeAction]) -> None:
-        for action in actions:
-            if isinstance(action, CanFrame):
-                if self._driver is not None:
-                    self._driver.queue(action)
-            elif isinstance(action, Finished):
-                self._adr = None
-                self._adr_next = now + ADR_INTERVAL
-            elif isinstance(action, Progress) and action.found is not None:
-                self._adr_found(action.found)
-
-    def _adr_found(self, info: NodeInfo) -> None:
-        target = info.readdressed
-        d = self.drives.get(target) if target is not None else None
-        if d is None:
-            if info.problem is not None:
-                log.info("DeviceNet %s: ADR at MAC %d: %s", self.name, ADR_MAC, info.problem)
-            return
-        self._missing_since.pop(d.mac, None)
-        self._hub_port().event(
-            d.id,
-            EventKind.CONFIG,
-            f"ADR: a drive with the identity of {d.id} (serial {info.serial_number}) appeared "
-            f"at MAC {ADR_MAC}: set to MAC {d.mac} and reset (seed 6.1); it is reprogrammed "
-            "when it connects (startup_params)",
-            serial_number=info.serial_number,
-        )
 
     # ------------------------------------------------------------ outputs
 
@@ -699,36 +530,24 @@ class DeviceNetAdapter:
 
     # ------------------------------------------------------------ parameters
 
-    def _drive(self, drive_id: str) -> _Drive:
-        d = self._by_id.get(drive_id)
-        if d is None:
-            raise DriveOffline(f"drive {drive_id} is not on bus {self.name}")
-        return d
-
     async def _request(self, d: _Drive, body: Request) -> Response:
-        engine, link = self.engine, self.link
-        if engine is None or link is None:
-            raise DriveOffline(f"drive {d.id}: bus {self.name} is not running")
-        try:
-            token = engine.submit(d.mac, body)
-        except NodeUnavailable as exc:
-            raise DriveOffline(f"drive {d.id} is not online ({exc})") from None
-        fut: asyncio.Future[ExplicitResult] = asyncio.get_running_loop().create_future()
-        self._pending[token] = fut
-        link.wake()
-        bound = 4 * self.options.explicit_timeout + 1.0
-        try:
-            async with asyncio.timeout(bound):  # not wait_for: it can swallow a cancellation
-                result = await fut
-        except TimeoutError:
-            raise GatewayTimeout(f"drive {d.id}: no answer within {bound:g} s") from None
-        finally:
-            self._pending.pop(token, None)
+        result = await self.exchange(
+            d, lambda engine: engine.submit(d.mac, body), self._answer_bound(), "answer"
+        )
         if result.response is not None:
             return result.response
         if result.timed_out:
             raise GatewayTimeout(f"drive {d.id}: {result.error}")
         raise DriveOffline(f"drive {d.id}: {result.error}")
+
+    def _answer_bound(self) -> float:
+        """How long an explicit request may take before the adapter gives up on it: its
+        own retries (the scanner ends every request it started within them) and its turn
+        behind the requests already on the line, ``explicit_window`` at a time (63 drives
+        configuring at once wait that long on a busy host)."""
+        engine = self.engine
+        ahead = 0 if engine is None else engine.explicit_turns_ahead()
+        return (4 + ahead) * self.options.explicit_timeout + 1.0
 
     async def explicit(self, drive_id: str, body: Request) -> Response:
         """Any explicit request to a drive (tools, tests); the reply as it came."""
@@ -744,7 +563,7 @@ class DeviceNetAdapter:
         d = self._drive(drive_id)
         await d.profile.write_param(_Port(self, d), number, subindex, value)
 
-    def _publish_capabilities(self, d: _Drive) -> None:
+    def publish_capabilities(self, d: _Drive) -> None:
         """The profile's capabilities, once it has them, with the parameter table of the
         drive's EDS (the lookup the front ends name parameter values with,
         gateway.adapter.ParamInfo); without an EDS, the profile's own table."""
@@ -789,36 +608,18 @@ class DeviceNetAdapter:
 
     # ------------------------------------------------------------ diagnostics
 
-    def diagnostics(self) -> dict[str, Any]:
-        o = self.options
-        line: dict[str, Any] = {
-            "interface": o.interface,
-            "channel": o.channel,
-            "bitrate_expected": o.bitrate,
-            "mac": o.mac,
-            "simulated": o.simulate,
-            "running": self.engine is not None,
+    def line_diagnostics(self, engine: Scanner | None) -> dict[str, Any]:
+        return {"mac": self.options.mac} if engine is None else engine.line_diagnostics()
+
+    def drive_diagnostics(self, d: _Drive) -> dict[str, Any]:
+        return {
+            "mac": d.mac,
+            "connection": d.opts.connection.value,
+            "configured": d.configured,
+            "problem": d.problem,
+            "bad_inputs": d.bad_inputs,
+            **d.profile.diagnostics(),
         }
-        engine, link = self.engine, self.link
-        if engine is not None:
-            line.update(engine.line_diagnostics())
-        if link is not None:
-            line.update(link.diagnostics())
-        drives: dict[str, Any] = {}
-        for d in self.drives.values():
-            entry: dict[str, Any] = {
-                "mac": d.mac,
-                "connection": d.opts.connection.value,
-                "configured": d.configured,
-                "problem": d.problem,
-                "bad_inputs": d.bad_inputs,
-                **d.profile.diagnostics(),
-            }
-            if engine is not None:
-                entry.update(engine.node_diagnostics(d.mac))
-            drives[d.id] = entry
-        line["drives"] = drives
-        return line
 
 
 # ---------------------------------------------------------------- helpers
@@ -827,59 +628,3 @@ class DeviceNetAdapter:
 def motion_free(desired: DesiredCommand) -> DesiredCommand:
     """``desired`` without run, jog or speed: a ramp stop (a quick or coast stop kept)."""
     return replace(desired, run=False, jog=False, speed_rpm=None, speed_pct=None)
-
-
-def _same_identity(opts: DriveOptions, info: NodeInfo) -> bool:
-    """The node at MAC 63 shows what this drive's config (or EDS) expects of it."""
-    revision_ok = opts.revision is None or (
-        info.revision is not None
-        and info.revision[0] == opts.revision[0]
-        and info.revision[1] >= opts.revision[1]
-    )
-    return (
-        info.vendor_id == opts.vendor_id
-        and (opts.product_code is None or info.product_code == opts.product_code)
-        and (not opts.product_name or info.product_name == opts.product_name)
-        and (opts.product_type is None or info.product_type == opts.product_type)
-        and revision_ok
-    )
-
-
-LINK_EVENTS: LinkEvents[CanFrame, Event] = LinkEvents(
-    FrameIn, BusErrorIn, BadFrame, LinkDown, TxFailed
-)
-"""The scanner's events for what the CAN link reports (:mod:`adapters.link.canline`)."""
-
-
-class _Line(CanLine[CanFrame, Event, Action]):
-    """The scanner's line as the CAN driver loop sees it (:mod:`adapters.link.candriver`):
-    the link's events as the scanner's (:class:`~adapters.link.canline.CanLine`), its
-    frames and reports, the poll-time output refresh and the ADR probe."""
-
-    def __init__(self, adapter: DeviceNetAdapter) -> None:
-        super().__init__(LINK_EVENTS)
-        self.adapter = adapter
-
-    def frame(self, action: Action) -> CanFrame | None:
-        return action.frame if isinstance(action, Send) else None
-
-    def handle(self, now: float, action: Action) -> None:
-        self.adapter._handle(now, action)
-
-    def before_step(self, now: float) -> None:
-        self.adapter._before_step(now)
-
-    def after_step(self, now: float) -> None:
-        engine = self.adapter.engine
-        if engine is not None:
-            self.adapter._tick_adr(now, engine)
-
-    def wake_at(self) -> float | None:
-        return self.adapter._wake_at()
-
-    def received(self, now: float, event: LinkEvent) -> None:
-        self.adapter._received(now, event)
-
-    def hold_until(self, now: float) -> float | None:
-        engine = self.adapter.engine
-        return engine.hold_until(now) if engine is not None else None

@@ -1,5 +1,5 @@
 """The DeviceNet line's CAN link: the shared python-can link (:mod:`adapters.link.can`)
-carrying :class:`~adapters.devicenet.frame.CanFrame` (11-bit identifier, at most 8 data
+carrying :class:`~adapters.devicenet.codec.frame.CanFrame` (11-bit identifier, at most 8 data
 bytes: fact sheet 2.13), and the real line's link factory (:class:`DeviceNetBus`)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import TypeAlias
 
 import can
 
-from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.link.can import (
     REFUSED_INTERFACES,
     CanConfig,

@@ -36,7 +36,8 @@ A SocketCAN socket's receive queue is bounded by SO_RCVBUF; a frame that arrives
 queue is full is dropped by the kernel without a word (python-can cannot read the drop
 count, SO_RXQ_OVFL). The default (``net.core.rmem_default``, 208 KiB) holds only about 300
 frames, a quarter of a second of a busy 500 kbit/s line: a garbage-collection pause or a
-loaded machine lost explicit responses that way (docs/decisions.md). The link asks for
+loaded machine lost explicit responses that way
+(docs/decisions/0030-socketcan-receive-buffer.md). The link asks for
 :data:`RX_BUFFER_BYTES` (SO_RCVBUFFORCE with CAP_NET_ADMIN, else SO_RCVBUF, which the
 kernel caps at ``net.core.rmem_max``) and reports what it got as ``rx_buffer_bytes``.
 

@@ -2,7 +2,8 @@
 
 Fact sheet Part 3 "Errors and bus-off on socketcan" [PC][LNX]: error frames arrive with
 ``is_error_frame``; the error class bits are in the identifier and the controller
-details in ``data[1]``. The link hands the two over; this module names what they mean.
+details in ``data[1]``. The link (:mod:`.can`) reports each as the conditions this
+module names; what they make of the line's health is :mod:`adapters.can.health`.
 """
 
 from __future__ import annotations
@@ -65,26 +66,3 @@ def decode_error_frame(error_class: int, data: bytes) -> frozenset[LineCondition
         detail = data[CONTROLLER_DETAIL_INDEX]
         found.update(cond for bit, cond in CONTROLLER_BITS.items() if detail & bit)
     return frozenset(found)
-
-
-class LineHealth(Enum):
-    """The line as the scanner sees it, worst condition first."""
-
-    BUS_OFF = "bus-off"
-    ERROR_PASSIVE = "error passive"
-    ERROR_WARNING = "error warning"
-    OK = "ok"
-
-
-def health_after(current: LineHealth, conditions: frozenset[LineCondition]) -> LineHealth:
-    """The line health after an error frame: a restart or a return to error active
-    clears it, otherwise the worst condition wins."""
-    if LineCondition.BUS_OFF in conditions:
-        return LineHealth.BUS_OFF
-    if conditions & {LineCondition.RESTARTED, LineCondition.ERROR_ACTIVE}:
-        return LineHealth.OK
-    if LineCondition.ERROR_PASSIVE in conditions:
-        return LineHealth.ERROR_PASSIVE if current is not LineHealth.BUS_OFF else current
-    if LineCondition.ERROR_WARNING in conditions and current is LineHealth.OK:
-        return LineHealth.ERROR_WARNING
-    return current

@@ -24,5 +24,5 @@ def unsimulated(bus: str) -> ConfigError:
         WHERE,
         f"buses.{bus}.simulate",
         "simulate = true, but the adapter was given no simulated line: the composition "
-        "root (gateway.daemon) makes it from the bus's simulator package",
+        "root (gateway.runtime.daemon) makes it from the bus's simulator package",
     )

@@ -1,7 +1,7 @@
 """One master per line: a serial port held exclusively, and who holds it when it is taken.
 
 Two locks, both taken before the first byte is sent (docs/operations.md, "One master per
-line"; the choice in docs/decisions.md):
+line"; the choice in docs/decisions/0014-serial-port-lock.md):
 
 * ``flock(LOCK_EX | LOCK_NB)`` on the open device (pyserial's ``exclusive=True``), taken
   before pyserial changes any setting of the port: a second master is refused before it

@@ -178,7 +178,7 @@ class StreamDriver(Generic[EventT]):
             # is slept here, in a select on the port: cheaper than the loop turn a timer
             # costs, and bytes that come meanwhile are stepped first, as on the timer's
             # path. The loop is held that long at most (plus the kernel's wake-up); never
-            # a reply wait (docs/decisions.md, "Line timing without busy-waiting").
+            # a reply wait (docs/decisions/0023-short-idle-slept-in-step.md).
             while deadline is not None and due < MAX_DUE_STEPS:
                 wait = deadline - self._time()
                 if wait > 0:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from adapters.mcd600.simparams import NetworkCommsAction
+from adapters.mcd600.paramtable import NetworkCommsAction
 
 NETWORK_COMMS_NAMES: Final[dict[str, NetworkCommsAction]] = {
     "soft_trip_and_log": NetworkCommsAction.SOFT_TRIP_AND_LOG,

@@ -20,7 +20,7 @@ Keys (all optional)::
 
 Simulator only (``simulate = true``; a real starter ignores them)::
 
-    sim_params = { 4 = 1, 9 = 1 }   the simulated starter's parameters (simparams.py)
+    sim_params = { 4 = 1, 9 = 1 }   the simulated starter's parameters (paramtable.py)
     sim_time_scale = 1.0    the simulated power section runs this many times faster
 """
 
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Final
 
 from adapters.mcd600.failsafe import NETWORK_COMMS_NAMES, failsafe_warning
 from adapters.mcd600.layout import Mode
-from adapters.mcd600.simparams import PARAM_DEFS, NetworkCommsAction
+from adapters.mcd600.paramtable import PARAM_DEFS, NetworkCommsAction
 from adapters.mcd600.words import MotorSet
 
 if TYPE_CHECKING:

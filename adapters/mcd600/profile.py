@@ -43,7 +43,7 @@ from adapters.mcd600.poller import DataPoller
 from adapters.mcd600.programming import IDLE, PARAM_NUMBER_MAX, PARAM_VALUE_MAX, ParamRequest
 from adapters.mcd600.trips import trip_text
 from adapters.mcd600.words import CURRENT_RAW_MAX, ControlWord, StatusWord
-from adapters.profibus.profile import (
+from adapters.profibus.contract import (
     AddressRange,
     DiagEvent,
     DiagKind,
@@ -87,7 +87,7 @@ NEEDS_PARAMETER_MODE = (
 
 
 class Mcd600Profile(DpProfileBase):
-    """:class:`adapters.profibus.profile.DpProfile` for the MCD 600 PROFIBUS card."""
+    """:class:`adapters.profibus.contract.DpProfile` for the MCD 600 PROFIBUS card."""
 
     device: ClassVar[Device] = Device.MCD600
     addresses: ClassVar[AddressRange] = AddressRange(

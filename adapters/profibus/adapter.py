@@ -1,17 +1,17 @@
 """The Profibus DP line as a :class:`gateway.adapter.DriveAdapter` ("profibus").
 
 One master engine (:mod:`.master`) on one serial link (:mod:`.link`, :mod:`.driver`), one
-device profile per drive (:data:`adapters.profibus.profile.PROFILES`). Per drive:
+device profile per drive (:data:`adapters.profibus.contract.PROFILES`). Per drive:
 
 * start-up states -> comm "connecting"; absent -> "offline" (one event);
 * data exchange reached -> outputs at a safe value (the profile's ``unconfigured_outputs``
   where it has that hook: the WEG drives' stop in both data profiles; else its outputs for
   a stopped command), then ``profile.on_connect`` (scales, start-up parameters) through a
-  DP-V1 :class:`RecordChannel`; a failure leaves the drive "not configured" (comm
-  connecting, an event, retried with back-off, the same safe outputs), success sets the
-  capabilities and makes it configured. An ``on_connect`` failure whose exception has
-  ``reparameterise = True`` (a parameter the slave takes only without cyclic data was
-  written) takes the slave out of data exchange and parameterises it again;
+  DP-V1 :class:`RecordChannel` (:mod:`.channel`); a failure leaves the drive "not
+  configured" (comm connecting, an event, retried with back-off, the same safe outputs),
+  success sets the capabilities and makes it configured. An ``on_connect`` failure whose
+  exception has ``reparameterise = True`` (a parameter the slave takes only without cyclic
+  data was written) takes the slave out of data exchange and parameterises it again;
 * a profile with ``failsafe_needs_watchdog = True`` (the drive's reaction to a lost master
   relies on the DP watchdog) is published ``failsafe`` false while its watchdog is 0 (off);
   ``safety_warnings`` (``check-config``) asks the profile's hook of the same name;
@@ -46,7 +46,18 @@ from typing import Any, ClassVar, Final
 
 from adapters.link.config import missing_options, unsimulated
 from adapters.profibus import options as opts
-from adapters.profibus.dp import GlobalControl
+from adapters.profibus.channel import Channel, RecordJobs
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.contract import (
+    BUS,
+    PROFILES,
+    SET_SLAVE_ADD_DEFAULT,
+    DiagKind,
+    DpProfile,
+    EventSink,
+    ProfileFactory,
+    SlaveSetup,
+)
 from adapters.profibus.driver import LineDriver
 from adapters.profibus.link import OPEN_ERRORS, PortHeld, SerialLink, SerialLinks, profibus_port
 from adapters.profibus.master import (
@@ -57,7 +68,6 @@ from adapters.profibus.master import (
     LineNoise,
     Master,
     RecordDone,
-    RecordFailure,
     SlaveDown,
     SlaveFault,
     SlaveParams,
@@ -65,21 +75,10 @@ from adapters.profibus.master import (
     SlaveStateChanged,
     SlaveUp,
 )
-from adapters.profibus.profile import (
-    BUS,
-    PROFILES,
-    SET_SLAVE_ADD_DEFAULT,
-    DiagKind,
-    DpProfile,
-    EventSink,
-    ProfileFactory,
-    RecordAccessError,
-    SlaveSetup,
-)
 from gateway.adapter import EventKind, HubPort, ParamValue
 from gateway.config import BusConfig, DriveConfig
 from gateway.devices import devices_of
-from gateway.errors import DriveOffline, GatewayError, GatewayTimeout, UnknownDrive
+from gateway.errors import DriveOffline, GatewayError, UnknownDrive
 from gateway.loader import load
 from gateway.model import CommState, DesiredCommand, Device, Source, StopAction
 from gateway.schema import Table
@@ -151,26 +150,6 @@ class _Drive:
     @property
     def address(self) -> int:
         return self.config.address
-
-
-class _Channel:
-    """DP-V1 MSAC_C1 access to one slave (the profiles' RecordChannel)."""
-
-    def __init__(self, adapter: ProfibusAdapter, drive: _Drive) -> None:
-        self._adapter = adapter
-        self._drive = drive
-
-    async def read_record(self, slot: int, index: int, length: int) -> bytes:
-        address = self._drive.address
-        return await self._adapter._record(
-            self._drive, lambda m, now: m.read_record(address, slot, index, length, now)
-        )
-
-    async def write_record(self, slot: int, index: int, data: bytes) -> None:
-        address = self._drive.address
-        await self._adapter._record(
-            self._drive, lambda m, now: m.write_record(address, slot, index, data, now)
-        )
 
 
 class ProfibusAdapter:
@@ -254,7 +233,7 @@ class ProfibusAdapter:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._link: SerialLink | None = None
         self._driver: LineDriver | None = None
-        self._futures: dict[int, asyncio.Future[RecordDone]] = {}
+        self._jobs = RecordJobs(self.master, lambda: self._driver)
         self._port = self.options.port  # a simulated line's: once it started
         self._port_state = PortState.CLOSED
         self._port_error: str | None = None
@@ -393,9 +372,7 @@ class ProfibusAdapter:
         await self._detach()
         self._port_state = PortState.CLOSED
         self._line().close()
-        for future in self._futures.values():
-            if not future.done():
-                future.cancel()
+        self._jobs.cancel()
 
     # ------------------------------------------------------------------ engine actions
 
@@ -465,24 +442,8 @@ class ProfibusAdapter:
         drive = self._drive_at(action.address)
         if drive is not None:
             kind = FAULT_EVENTS.get(action.kind, EventKind.CONFIG)
-            text = action.text + self._gsd_hint(drive, action.slave_cfg)
+            text = action.text + _gsd_hint(self._overrides.get(drive.id), action.slave_cfg)
             self._event(drive, kind, text, fault=action.kind.value)
-
-    def _gsd_hint(self, drive: _Drive, slave_cfg: bytes | None) -> str:
-        """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""
-        override = self._overrides.get(drive.id)
-        if override is None or override.gsd is None or slave_cfg is None:
-            return ""
-        from adapters.profibus.gsd import match_modules
-
-        modules = match_modules(override.gsd, slave_cfg)
-        if modules is None:
-            return "; the slave's configuration is no module of the GSD"
-        names = ", ".join(repr(m.name) for m in modules)
-        return (
-            f"; the slave's configuration is GSD module {names}: configure that, "
-            "or program the drive for the one sent"
-        )
 
     def _on_inputs(self, action: InputsReceived) -> None:
         drive = self._drive_at(action.address)
@@ -513,7 +474,7 @@ class ProfibusAdapter:
         try:
             if self._hub is not None:
                 async with drive.lock:
-                    changes = await drive.profile.read_codes(_Channel(self, drive))
+                    changes = await drive.profile.read_codes(Channel(self._jobs, drive))
                 if changes and drive.up:
                     self._hub.update(drive.id, **changes)
         except GatewayError as exc:
@@ -542,11 +503,6 @@ class ProfibusAdapter:
         for ev in events:
             self._event(drive, DIAG_KINDS[ev.kind], ev.text, **dict(ev.data))
 
-    def _on_record(self, action: RecordDone) -> None:
-        future = self._futures.pop(action.job, None)
-        if future is not None and not future.done():
-            future.set_result(action)
-
     # ------------------------------------------------------------------ helpers
 
     def _event(self, drive: _Drive, kind: EventKind, text: str, **data: Any) -> None:
@@ -574,7 +530,7 @@ class ProfibusAdapter:
         if hub is None:
             return
         pause = CONNECT_BACKOFF[0]
-        channel = _Channel(self, drive)
+        channel = Channel(self._jobs, drive)
         while drive.up:
             try:
                 async with drive.lock:
@@ -630,23 +586,6 @@ class ProfibusAdapter:
 
         return sink
 
-    async def _record(self, drive: _Drive, submit: Callable[[Master, float], int]) -> bytes:
-        loop = asyncio.get_running_loop()
-        if self._driver is None or not drive.up:
-            raise DriveOffline(f"drive {drive.id} is not in data exchange")
-        future: asyncio.Future[RecordDone] = loop.create_future()
-        job = submit(self.master, loop.time())
-        self._futures[job] = future
-        self._driver.poke()
-        try:
-            done = await future
-        except asyncio.CancelledError:
-            self.master.cancel_record(job)
-            raise
-        finally:
-            self._futures.pop(job, None)
-        return _record_result(drive, done)
-
     def _check_control(self) -> None:
         """clear_on_lost_control: Clear while any drive's command is the gateway's own."""
         self._control_timer = None
@@ -682,7 +621,7 @@ class ProfibusAdapter:
         if not drive.up:
             raise DriveOffline(f"drive {drive_id} is not in data exchange")
         async with drive.lock:
-            return await drive.profile.read_param(_Channel(self, drive), number, subindex)
+            return await drive.profile.read_param(Channel(self._jobs, drive), number, subindex)
 
     async def write_param(
         self, drive_id: str, number: int, subindex: int, value: ParamValue
@@ -691,7 +630,7 @@ class ProfibusAdapter:
         if not drive.up:
             raise DriveOffline(f"drive {drive_id} is not in data exchange")
         async with drive.lock:
-            await drive.profile.write_param(_Channel(self, drive), number, subindex, value)
+            await drive.profile.write_param(Channel(self._jobs, drive), number, subindex, value)
 
     def global_control(
         self,
@@ -773,6 +712,22 @@ def _overridden(setup: SlaveSetup, override: opts.SetupOverride | None) -> Slave
     return replace(setup, **changes)
 
 
+def _gsd_hint(override: opts.SetupOverride | None, slave_cfg: bytes | None) -> str:
+    """Which module of the drive's GSD the slave's own configuration is (Cfg_Fault)."""
+    if override is None or override.gsd is None or slave_cfg is None:
+        return ""
+    from adapters.profibus.codec.gsd import match_modules
+
+    modules = match_modules(override.gsd, slave_cfg)
+    if modules is None:
+        return "; the slave's configuration is no module of the GSD"
+    names = ", ".join(repr(m.name) for m in modules)
+    return (
+        f"; the slave's configuration is GSD module {names}: configure that, "
+        "or program the drive for the one sent"
+    )
+
+
 def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlaveParams:
     return SlaveParams(
         address=address,
@@ -788,23 +743,6 @@ def _slave_params(address: int, setup: SlaveSetup, watchdog: float) -> SlavePara
     )
 
 
-def _record_result(drive: _Drive, done: RecordDone) -> bytes:
-    """The data of a finished DP-V1 job, or the error the RecordChannel contract names."""
-    if done.error is not None:
-        table = drive.profile.record_error_texts
-        text = done.error.text_in(table) if table else done.error.text
-        raise RecordAccessError(
-            text, done.error.error_code_1, done.error.error_code_2, done.error.error_decode
-        )
-    if done.failure is RecordFailure.TIMEOUT:
-        raise GatewayTimeout(done.text)
-    if done.failure in (RecordFailure.OFFLINE, RecordFailure.CANCELLED):
-        raise DriveOffline(done.text)
-    if done.failure is not None:
-        raise RecordAccessError(done.text, 0, 0, 0)
-    return done.data or b""
-
-
 _ACTION_HANDLERS: Final[dict[type, Callable[[ProfibusAdapter, Any], None]]] = {
     SlaveStateChanged: ProfibusAdapter._on_state,
     SlaveUp: ProfibusAdapter._on_up,
@@ -812,5 +750,5 @@ _ACTION_HANDLERS: Final[dict[type, Callable[[ProfibusAdapter, Any], None]]] = {
     SlaveFault: ProfibusAdapter._on_fault,
     InputsReceived: ProfibusAdapter._on_inputs,
     DiagnosisRead: ProfibusAdapter._on_diag,
-    RecordDone: ProfibusAdapter._on_record,
+    RecordDone: lambda adapter, action: adapter._jobs.done(action),
 }

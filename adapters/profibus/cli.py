@@ -27,13 +27,13 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
+from adapters.profibus.codec.fdl import MAX_STATION, StationType
+from adapters.profibus.contract import PROFILES, load_profile
 from adapters.profibus.driver import LineDriver
-from adapters.profibus.fdl import MAX_STATION, StationType
 from adapters.profibus.link import OPEN_ERRORS, PortHeld, Rs485, open_link
+from adapters.profibus.master.scan import Scanner, SlaveInfo
+from adapters.profibus.master.timing import BAUD_RATES, BusParams
 from adapters.profibus.options import DriveOptions
-from adapters.profibus.profile import PROFILES, load_profile
-from adapters.profibus.scan import Scanner, SlaveInfo
-from adapters.profibus.timing import BAUD_RATES, BusParams
 from gateway.config import Config, DriveConfig
 from gateway.model import Device
 
@@ -249,14 +249,14 @@ def cmd_scan(args: argparse.Namespace) -> int:
 class GsdMatch:
     """A slave matched to a GSD file (and to its module, where its Get_Cfg is one)."""
 
-    gsd: Any  # adapters.profibus.gsd.Gsd
+    gsd: Any  # adapters.profibus.codec.gsd.Gsd
     modules: tuple[str, ...] | None
     cfg: bytes | None
 
 
 def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
     """The GSD of ``directory`` with the slave's Ident_Number (the first by file name)."""
-    from adapters.profibus.gsd import find_in_dir, match_modules
+    from adapters.profibus.codec.gsd import find_in_dir, match_modules
 
     if directory is None or info.ident_number is None:
         return None
@@ -269,7 +269,7 @@ def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
 
 
 def _station_text(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) -> str:
-    from adapters.profibus.events import describe_cfg
+    from adapters.profibus.master.events import describe_cfg
 
     parts = [STATION_NAMES[station]]
     if info is not None and info.ident_number is not None:
@@ -311,7 +311,11 @@ def _device_of(gsd: Any) -> Device | None:
 
 def stanza(address: int, match: GsdMatch) -> str:
     """A ``[[buses.profibus.drives]]`` table for a matched slave, ready to paste."""
-    from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+    from adapters.profibus.codec.chkcfg import (
+        decode_identifiers,
+        total_input_bytes,
+        total_output_bytes,
+    )
 
     device = _device_of(match.gsd)
     lines = [

@@ -4,8 +4,8 @@ The driver loop is the shared one (:class:`adapters.link.stream.StreamDriver`: s
 precise timers on the loop, late reply deadlines); this module gives it the FDL
 stream codec (:class:`FdlStream`: a whole telegram per read, or the streaming decoder with
 its noise and "receiving" events) and says which master actions are requests
-(:class:`~adapters.profibus.events.Transmit`, confirmed with
-:class:`~adapters.profibus.events.Written`).
+(:class:`~adapters.profibus.master.events.Transmit`, confirmed with
+:class:`~adapters.profibus.master.events.Written`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any, Final
 
 from adapters.link.serial import SerialLink
 from adapters.link.stream import ReplyEngine, StreamDriver, Transmission
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     Discarded,
     NeedMore,

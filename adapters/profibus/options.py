@@ -47,13 +47,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
-from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.codec.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.codec.gsd import Gsd, GsdError, GsdSetupError, build_setup
+from adapters.profibus.codec.gsd import load as load_gsd
+from adapters.profibus.contract import BUILTIN_TELEGRAM
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.gsd import Gsd, GsdError, GsdSetupError, build_setup
-from adapters.profibus.gsd import load as load_gsd
 from adapters.profibus.link import URL_SCHEMES, Rs485, is_url
-from adapters.profibus.profile import BUILTIN_TELEGRAM
-from adapters.profibus.timing import BAUD_RATES, BusParams, bus_problems, defaults_for
+from adapters.profibus.master.timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
 from gateway.schema import Table
@@ -253,7 +253,7 @@ def parse_drive_options(
 ) -> DriveOptions:
     """The master's per-drive keys; ``profile_options`` come from the profile's parser.
 
-    ``builtin`` is the profile's own :class:`~adapters.profibus.profile.SlaveSetup` (its
+    ``builtin`` is the profile's own :class:`~adapters.profibus.contract.SlaveSetup` (its
     ``input_len`` and ``output_len`` are checked against a GSD module or ``cfg``);
     ``telegram`` says which of the profile's settings fixes that telegram (its
     ``telegram_text``), for the error when they differ.

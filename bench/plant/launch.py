@@ -7,7 +7,7 @@
   then runs the command line of ``drive-gateway`` (``run --config ...`` or
   ``sim devicenet ...``);
 - ``--record``, for ``run`` only: every bus cycle of each line (Profibus master: first
-  request to end of the cycle, :class:`~adapters.profibus.figures.LineFigures`.cycle;
+  request to end of the cycle, :class:`~adapters.profibus.master.figures.LineFigures`.cycle;
   DeviceNet scanner: poll cycle; CANopen master: time between two SYNC cycles,
   ``Master._cycle``), as (monotonic end time, seconds) pairs, and twice a
   second the number of drives online; written at ``--record`` (the status part every
@@ -16,7 +16,7 @@
   line's error counters (retries, timeouts, bad telegrams: whole run, come-up included);
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
 
-The daemon is the real one (``gateway.daemon.Daemon``), set up as ``drive-gateway run``
+The daemon is the real one (``gateway.runtime.daemon.Daemon``), set up as ``drive-gateway run``
 sets it up; only the two figure hooks above are added.
 """
 
@@ -58,7 +58,7 @@ def _hook_gc() -> None:
 def _hook_cycles() -> None:
     """Record each line's cycles (see the module docstring)."""
     from adapters.devicenet.scanner.scheduler import Scheduler
-    from adapters.profibus.figures import LineFigures, Samples
+    from adapters.profibus.master.figures import LineFigures, Samples
 
     profibus = CYCLES["profibus"]
 
@@ -121,8 +121,8 @@ def _write(path: str, online: dict[str, int], total: int, final: bool) -> None:
 
 async def _daemon(config_path: str, record: str | None) -> int:
     from gateway.config import load
-    from gateway.daemon import Daemon
     from gateway.model import CommState
+    from gateway.runtime.daemon import Daemon
 
     daemon = Daemon(load(config_path))
     total = len(daemon.config.drives)
@@ -164,7 +164,7 @@ def main() -> None:
         profiler.enable()
     try:
         if argv[:1] == ["run"] and "--config" in argv:
-            from gateway.cli import setup_logging
+            from gateway.cli.run import setup_logging
 
             setup_logging(args.log_level)
             _hook_cycles()

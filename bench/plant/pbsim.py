@@ -36,7 +36,7 @@ from collections import deque
 from typing import Any, Final
 
 from adapters.profibus.cli import build_line
-from adapters.profibus.timing import BITS_PER_CHAR, BusParams
+from adapters.profibus.master.timing import BITS_PER_CHAR, BusParams
 from bench.plant import pin_from_env
 from bench.plant.canbus import fine_timer_slack
 from gateway.config import load

@@ -16,12 +16,12 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from gateway.errors import CommandRejected
+from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.hub import Hub
 from gateway.modbus.command import ClientMemory, CommandWord, HoldingWrite, build_command
 from gateway.modbus.health import (
@@ -52,9 +52,6 @@ from gateway.modbus.server import (
     GatewayServer,
 )
 from gateway.model import DriveCommand, DriveState, Source
-
-if TYPE_CHECKING:
-    from gateway.daemon import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -253,7 +250,7 @@ class GatewayUnit:
 class ModbusFrontEnd:
     """Serve every drive with a ``modbus_unit`` and the gateway unit until cancelled."""
 
-    def __init__(self, runtime: Runtime) -> None:
+    def __init__(self, runtime: RuntimeView) -> None:
         self.runtime = runtime
         self.section = runtime.config.modbus
         self.hub = runtime.hub
@@ -300,6 +297,19 @@ class ModbusFrontEnd:
             adapter_restarts=restarts,
             frame_timeouts=c.frame_timeouts,
             connections_over_limit=c.connections_over_limit,
+        )
+
+    def counted(self) -> FrontEndCounters:
+        c = self.counters
+        return FrontEndCounters(
+            requests={"request": c.requests},
+            exceptions=c.exceptions,
+            commands_accepted=c.commands_accepted,
+            commands_refused=c.commands_refused,
+            connections_accepted=c.connections_accepted,
+            connections_refused=c.connections_refused,
+            connections_over_limit=c.connections_over_limit,
+            connections_open=self._server.connections_open if self._server else 0,
         )
 
     async def run(self) -> None:

@@ -24,17 +24,15 @@ import collections
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import orjson
 
 from gateway.adapter import Event
+from gateway.frontend import RuntimeView
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.web.history import TrendHistory
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, health_json
-
-if TYPE_CHECKING:
-    from gateway.daemon import Runtime
 
 PUSH_PERIOD = 0.25  # s between pushes: at most 4 updates per second per drive
 SAMPLE_EVERY = 2  # pushes per trend sample (SAMPLE_PERIOD = 0.5 s, 2 Hz)
@@ -99,7 +97,7 @@ class Feed:
 
     def __init__(
         self,
-        runtime: Runtime,
+        runtime: RuntimeView,
         history: TrendHistory | None = None,
         clock: Callable[[], float] = time.time,
         commands: bool = False,

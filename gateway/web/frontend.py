@@ -26,7 +26,7 @@ import logging
 import re
 from collections.abc import Awaitable, Callable
 from importlib import resources
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import orjson
 from aiohttp import WSCloseCode, WSMsgType, web
@@ -35,14 +35,12 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from gateway import jsontext
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
+from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.model import DriveCommand, Source, client_label
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
 from gateway.web.metrics import WebCounters, make_registry
-from gateway.web.settings import IpNetwork
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
-
-if TYPE_CHECKING:
-    from gateway.daemon import Runtime
+from gateway.webconfig import IpNetwork
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +115,7 @@ def _json(body: Any, status: int = 200) -> web.Response:
 class WebFrontEnd:
     """Serve the status page, the API and the metrics until cancelled."""
 
-    def __init__(self, runtime: Runtime) -> None:
+    def __init__(self, runtime: RuntimeView) -> None:
         self.runtime = runtime
         self.section = runtime.config.web
         self.hub = runtime.hub
@@ -129,6 +127,15 @@ class WebFrontEnd:
         self.ready = asyncio.Event()  # set while the server listens
         self._writers: set[asyncio.Task[None]] = set()
         self._sockets: set[web.WebSocketResponse] = set()
+
+    def counted(self) -> FrontEndCounters:
+        c = self.counters
+        return FrontEndCounters(
+            refused=dict(c.refused),
+            commands_accepted=c.commands["accepted"],
+            commands_refused=c.commands["refused"],
+            connections_open=c.clients_open,
+        )
 
     # ------------------------------------------------------------ life cycle
 

@@ -2,18 +2,19 @@
 
 A registry of the web front end's own (never the library's global one) holds one custom
 collector, :class:`GatewayCollector`, which reads the hub's states, the adapters'
-``diagnostics()``, the other front ends' counters and the web feed's own at scrape time:
-nothing is updated per sample on a fieldbus path. The process figures come from the
-library's ``ProcessCollector`` on the same registry. Every metric is listed, with its
-labels, in docs/operations.md ("Web status page and metrics"); :data:`METRICS` is that
-list, checked by the tests.
+``diagnostics()``, the other front ends' counters (``FrontEnd.counted()``, typed in
+:mod:`gateway.frontend`) and the web feed's own at scrape time: nothing is updated per
+sample on a fieldbus path. The process figures come from the library's
+``ProcessCollector`` on the same registry. Every metric is listed, with its labels, in
+docs/operations.md ("Web status page and metrics"); :data:`METRICS` is that list, checked
+by the tests.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Iterator, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from prometheus_client import CollectorRegistry, ProcessCollector
 from prometheus_client.core import (
@@ -24,6 +25,7 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
+from gateway.frontend import RuntimeView
 from gateway.model import CommState, DriveStatus
 from gateway.web.views import (
     BUS_FIGURES,
@@ -34,7 +36,6 @@ from gateway.web.views import (
 )
 
 if TYPE_CHECKING:
-    from gateway.daemon import Runtime
     from gateway.web.feed import FeedCounters
 
 NS = "drive_gateway"
@@ -108,7 +109,7 @@ class WebCounters:
 class GatewayCollector(Collector):
     """Reads the running gateway at scrape time (see the module docstring)."""
 
-    def __init__(self, runtime: Runtime, feed: FeedCounters, web: WebCounters) -> None:
+    def __init__(self, runtime: RuntimeView, feed: FeedCounters, web: WebCounters) -> None:
         self.runtime = runtime
         self.feed = feed
         self.web = web
@@ -217,37 +218,36 @@ class GatewayCollector(Collector):
         yield from (response, station_retries, station_timeouts)
 
     def _modbus(self) -> Iterator[Metric]:
-        front_end: Any = self.runtime.front_ends.get("modbus")
-        counters = getattr(front_end, "counters", None)
+        front_end = self.runtime.front_ends.get("modbus")
         requests = _counter(f"{NS}_modbus_requests")
         exceptions = _counter(f"{NS}_modbus_exceptions")
         commands = _counter(f"{NS}_modbus_commands", ["result"])
         connections = _counter(f"{NS}_modbus_connections", ["result"])
         open_now = _gauge(f"{NS}_modbus_connections_open")
-        if counters is not None:
-            requests.add_metric([], counters.requests)
-            exceptions.add_metric([], counters.exceptions)
-            commands.add_metric(["accepted"], counters.commands_accepted)
-            commands.add_metric(["refused"], counters.commands_refused)
-            connections.add_metric(["accepted"], counters.connections_accepted)
-            connections.add_metric(["refused"], counters.connections_refused)
-            connections.add_metric(["over_limit"], counters.connections_over_limit)
-            server = getattr(front_end, "_server", None)
-            open_now.add_metric([], float(getattr(server, "connections_open", 0) or 0))
+        if front_end is not None:
+            counted = front_end.counted()
+            requests.add_metric([], sum(counted.requests.values()))
+            exceptions.add_metric([], counted.exceptions)
+            commands.add_metric(["accepted"], counted.commands_accepted)
+            commands.add_metric(["refused"], counted.commands_refused)
+            connections.add_metric(["accepted"], counted.connections_accepted)
+            connections.add_metric(["refused"], counted.connections_refused)
+            connections.add_metric(["over_limit"], counted.connections_over_limit)
+            open_now.add_metric([], float(counted.connections_open))
         yield from (requests, exceptions, commands, connections, open_now)
 
     def _zenoh(self) -> Iterator[Metric]:
-        front_end: Any = self.runtime.front_ends.get("zenoh")
-        counters = getattr(front_end, "counters", None)
+        front_end = self.runtime.front_ends.get("zenoh")
         requests = _counter(f"{NS}_zenoh_requests", ["kind"])
         commands = _counter(f"{NS}_zenoh_commands", ["result"])
         dropped = _counter(f"{NS}_zenoh_dropped")
-        if counters is not None:
-            requests.add_metric(["put"], counters.puts)
-            requests.add_metric(["query"], counters.queries)
-            commands.add_metric(["accepted"], counters.commands_accepted)
-            commands.add_metric(["refused"], counters.commands_refused)
-            dropped.add_metric([], getattr(front_end, "overflow", 0))
+        if front_end is not None:
+            counted = front_end.counted()
+            for kind, count in counted.requests.items():
+                requests.add_metric([kind], count)
+            commands.add_metric(["accepted"], counted.commands_accepted)
+            commands.add_metric(["refused"], counted.commands_refused)
+            dropped.add_metric([], counted.dropped)
         yield from (requests, commands, dropped)
 
     def _web(self) -> Iterator[Metric]:
@@ -273,7 +273,7 @@ def _maybe(
         family.add_metric(labels, value)
 
 
-def make_registry(runtime: Runtime, feed: FeedCounters, web: WebCounters) -> CollectorRegistry:
+def make_registry(runtime: RuntimeView, feed: FeedCounters, web: WebCounters) -> CollectorRegistry:
     """The front end's own registry: the gateway's collector and the process figures."""
     registry = CollectorRegistry(auto_describe=False)
     registry.register(GatewayCollector(runtime, feed, web))

@@ -15,13 +15,11 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from gateway.frontend import RuntimeView
 from gateway.model import DriveState
 from gateway.web.history import current_unit
-
-if TYPE_CHECKING:
-    from gateway.daemon import Runtime
 
 Path = tuple[str, ...]
 
@@ -46,7 +44,7 @@ BUS_FIGURES: tuple[Figure, ...] = (
     Figure("frames_tx", (("telegrams",), ("frames_tx",))),
     Figure("frames_rx", (("frames_rx",),)),
 )
-"""Line-level figures (Profibus master: adapters/profibus/figures.py; DeviceNet scanner:
+"""Line-level figures (Profibus master: adapters/profibus/master/figures.py; DeviceNet scanner:
 adapters/devicenet/scanner/engine.py ``line_diagnostics``; CANopen master: a cycle is a
 SYNC, adapters/canopen/master/engine.py ``figures``)."""
 
@@ -122,7 +120,7 @@ def _scalars(diag: Mapping[str, Any]) -> dict[str, Any]:
 # ---------------------------------------------------------------- drives
 
 
-def drive_row(runtime: Runtime, state: DriveState) -> dict[str, Any]:
+def drive_row(runtime: RuntimeView, state: DriveState) -> dict[str, Any]:
     """One drive as the table and ``/api/drives`` show it: the state's JSON, the unit of
     its current in the trend and the command it is given."""
     row = state.to_json()
@@ -131,14 +129,14 @@ def drive_row(runtime: Runtime, state: DriveState) -> dict[str, Any]:
     return row
 
 
-def drives_json(runtime: Runtime) -> list[dict[str, Any]]:
+def drives_json(runtime: RuntimeView) -> list[dict[str, Any]]:
     return [drive_row(runtime, s) for s in runtime.hub.states()]
 
 
 # ---------------------------------------------------------------- buses
 
 
-def bus_diagnostics(runtime: Runtime) -> dict[str, dict[str, Any]]:
+def bus_diagnostics(runtime: RuntimeView) -> dict[str, dict[str, Any]]:
     """Each bus's adapter diagnostics as it gives them ({} while it has none)."""
     out: dict[str, dict[str, Any]] = {}
     for bus in runtime.config.buses:
@@ -150,7 +148,9 @@ def bus_diagnostics(runtime: Runtime) -> dict[str, dict[str, Any]]:
     return out
 
 
-def buses_json(runtime: Runtime, diags: Mapping[str, Mapping[str, Any]]) -> list[dict[str, Any]]:
+def buses_json(
+    runtime: RuntimeView, diags: Mapping[str, Mapping[str, Any]]
+) -> list[dict[str, Any]]:
     """Per bus: its live list (each station's state) and its figures."""
     hub = runtime.hub
     out = []
@@ -186,7 +186,7 @@ def buses_json(runtime: Runtime, diags: Mapping[str, Mapping[str, Any]]) -> list
     return out
 
 
-def health_json(runtime: Runtime) -> dict[str, Any]:
+def health_json(runtime: RuntimeView) -> dict[str, Any]:
     """``/api/health``: the gateway's health, as the Zenoh health query answers it."""
     body = runtime.health()
     body["ts"] = round(time.time(), 3)

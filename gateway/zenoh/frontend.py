@@ -31,7 +31,7 @@ Threading model and delivery:
 - The hub's subscription calls back when a change arrives while none waits; the
   changes are taken in the loop's next turn (so those an adapter makes in one
   cycle are encoded, then put back to back) without a task, a future or an event
-  per turn: the fan-out's hot path (docs/decisions.md, "State fan-out").
+  per turn: the fan-out's hot path (docs/decisions/0012-zenoh-fan-out-hot-path.md).
 - Every state the hub's subscription yields gets its own put (on an uncongested
   link every committed state arrives, unless the same drive changed twice in one
   turn of the loop: the subscription keeps the newest). The settle and heartbeat
@@ -55,42 +55,34 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import zenoh
 
-from gateway import paramsbackup
-from gateway.adapter import EventKind, ParamValue
-from gateway.errors import CommandRejected, GatewayError, UnknownDrive
+from gateway.adapter import EventKind
+from gateway.errors import CommandRejected, UnknownDrive
+from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
 from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
+from gateway.zenoh.params import ParamQueries
+from gateway.zenoh.replies import Pending, Replies
 from gateway.zenoh.requests import (
     Answer,
-    BackupRequest,
-    BadRequest,
-    ParamRequest,
     command_accepted,
     command_refused,
     encode_json,
     encode_state,
     error_body,
-    param_result,
-    parse_backup_request,
     parse_command,
-    parse_param_request,
     too_large,
 )
 from gateway.zenoh.session import zenoh_config
-from gateway.zenoh.worker import Worker, WorkerStopped
-
-if TYPE_CHECKING:
-    from gateway.daemon import Runtime
+from gateway.zenoh.worker import Worker
 
 log = logging.getLogger(__name__)
 
-PARAM_TIMEOUT = 8.0  # s; below Zenoh's default query timeout (10 s), so a client gets an answer
 CLOSE_TIMEOUT = 10.0  # s the I/O thread may take to flush and close the session
 HEARTBEAT_SLACK = 0.001  # s; timers may fire this early
 SETTLE = 0.05  # s without a change after which a drive's newest state is put with BLOCK
@@ -104,28 +96,18 @@ DIAG_BATCH = 16
 HANDOVER_LIMIT = 1024
 """Puts and queries handed from Zenoh's threads to the loop and not yet taken; beyond
 it they are dropped (and counted in ``overflow``): a flood queues without a bound nowhere."""
-PARAM_REQUEST_LIMIT = 64
-"""Parameter requests under way at once; one more is refused as busy."""
 _ONLINE = CommState.ONLINE  # a module constant: an Enum class attribute is slow to look up
 DEFER_LIMIT = 256  # changes per drive held for a put while the I/O thread has the drive's lock
 
 
 @dataclass
 class ZenohCounters:
-    """Requests taken from Zenoh since start (read by ``/metrics``, gateway/web/metrics.py)."""
+    """Requests taken from Zenoh since start (``/metrics`` reads them through ``counted``)."""
 
     puts: int = 0  # command puts taken on the loop
     queries: int = 0  # queries taken on the loop (state, command, params, health)
     commands_accepted: int = 0
     commands_refused: int = 0
-
-
-@dataclass(eq=False)
-class _Pending:
-    """A query waiting for its answer."""
-
-    incoming: Incoming
-    answered: bool = False
 
 
 def _drop_put(publisher: Any, drive_id: str, payload: bytes) -> None:
@@ -154,7 +136,7 @@ def _endpoints_of(config: Any) -> tuple[str, str, str]:
 class ZenohFrontEnd:
     """Serves the hub on Zenoh until cancelled; cancellation closes the session cleanly."""
 
-    def __init__(self, runtime: Runtime) -> None:
+    def __init__(self, runtime: RuntimeView) -> None:
         self.runtime = runtime
         self.hub = runtime.hub
         self.section = runtime.config.zenoh
@@ -185,18 +167,27 @@ class ZenohFrontEnd:
         self._handover_waiting = 0  # puts and queries handed to the loop, not yet taken
         self.overflow = 0  # puts and queries dropped: HANDOVER_LIMIT were waiting
         self.counters = ZenohCounters()
-        self._pending: set[_Pending] = set()
-        self._requests: set[asyncio.Task[None]] = set()
-        self._handlers: dict[KeyKind, Callable[[_Pending], None]] = {
+        self._replies = Replies(self._worker)
+        self._params = ParamQueries(runtime, self.keys, self._drive_ids, self._replies)
+        self._handlers: dict[KeyKind, Callable[[Pending], None]] = {
             KeyKind.STATE: self._query_state,
             KeyKind.COMMAND: self._query_command,
-            KeyKind.PARAM: self._query_param,
+            KeyKind.PARAM: self._params.query,
             KeyKind.HEALTH: self._query_health,
         }
 
     @property
     def worker(self) -> Worker:
         return self._worker
+
+    def counted(self) -> FrontEndCounters:
+        c = self.counters
+        return FrontEndCounters(
+            requests={"put": c.puts, "query": c.queries},
+            dropped=self.overflow,
+            commands_accepted=c.commands_accepted,
+            commands_refused=c.commands_refused,
+        )
 
     # ------------------------------------------------------------ life cycle
 
@@ -240,7 +231,7 @@ class ZenohFrontEnd:
         self._serving = False
         self.ready.clear()
         self._changes = {}
-        pending_tasks = [*tasks, *self._requests]
+        pending_tasks = [*tasks, *self._params.tasks]
         for task in pending_tasks:
             task.cancel()
         await asyncio.gather(*pending_tasks, return_exceptions=True)
@@ -250,8 +241,7 @@ class ZenohFrontEnd:
                 newest is not None and self.hub.state(drive_id).seq > newest[0]
             ):
                 self._confirm(drive_id, 0.0, from_hub=True)
-        for pending in list(self._pending):
-            self._answer(pending, [Answer.refusal("the gateway is shutting down")])
+        self._replies.refuse_all("the gateway is shutting down")
         done = self._worker.stop(final=self._io_close)
         try:
             await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(done)), CLOSE_TIMEOUT)
@@ -572,174 +562,38 @@ class ZenohFrontEnd:
     # ------------------------------------------------------------ queries (loop)
 
     def _on_query(self, incoming: Incoming) -> None:
-        pending = _Pending(incoming)
         if not self._serving:
             with contextlib.suppress(Exception):
                 incoming.query.drop()
             return
-        self._pending.add(pending)
+        pending = self._replies.take(incoming)
         self.counters.queries += 1
         try:
             self._handlers[incoming.kind](pending)
         except Exception as exc:
             log.exception("zenoh query on %s failed", incoming.key)
-            self._answer(pending, [Answer.error(error_body(exc))])
+            self._replies.answer(pending, [Answer.error(error_body(exc))])
 
-    def _answer(self, pending: _Pending, answers: list[Answer]) -> None:
-        """Answer a query exactly once (later calls are ignored), from the I/O thread."""
-        if pending.answered:
-            return
-        pending.answered = True
-        self._pending.discard(pending)
-        query = pending.incoming.query
-        try:
-            self._worker.post(partial(ZenohLink.reply, query, answers))
-        except WorkerStopped:
-            with contextlib.suppress(Exception):
-                query.drop()
-
-    def _refuse(self, pending: _Pending, text: str) -> None:
-        self._answer(pending, [Answer.refusal(text)])
-
-    def _query_state(self, pending: _Pending) -> None:
+    def _query_state(self, pending: Pending) -> None:
         incoming = pending.incoming
         if not incoming.targets and is_concrete(incoming.key):
-            self._refuse(pending, f"no drive state at {incoming.key}")
+            self._replies.refuse(pending, f"no drive state at {incoming.key}")
             return
         answers = [
             Answer(True, encode_state(self.hub.state(d)), self.keys.key(KeyKind.STATE, d))
             for d in incoming.targets
         ]
-        self._answer(pending, answers)
+        self._replies.answer(pending, answers)
 
-    def _query_command(self, pending: _Pending) -> None:
+    def _query_command(self, pending: Pending) -> None:
         incoming = pending.incoming
         parsed = self.keys.parse(incoming.key)
         if not is_concrete(incoming.key) or parsed is None:
-            self._refuse(pending, "a command names one drive: <prefix>/drives/<id>/command")
+            self._replies.refuse(pending, "a command names one drive: <prefix>/drives/<id>/command")
             return
         body = self._apply_command(parsed.drive_id, incoming.payload, incoming.client)
-        self._answer(pending, [Answer.reply(incoming.key, body)])
+        self._replies.answer(pending, [Answer.reply(incoming.key, body)])
 
-    def _query_param(self, pending: _Pending) -> None:
-        incoming = pending.incoming
-        parsed = self.keys.parse(incoming.key)
-        if not is_concrete(incoming.key) or parsed is None:
-            self._refuse(pending, "a parameter query names one drive and one parameter")
-            return
-        if len(self._requests) >= PARAM_REQUEST_LIMIT:
-            self._refuse(pending, f"busy: {PARAM_REQUEST_LIMIT} parameter requests are under way")
-            return
-        if not parsed.rest:  # <prefix>/drives/<id>/params: the whole backup document
-            self._query_backup(pending, parsed.drive_id)
-            return
-        try:
-            payload = incoming.payload
-            if isinstance(payload, Oversize):
-                raise BadRequest(too_large(payload.size))
-            req = parse_param_request(parsed.rest, payload)
-        except BadRequest as exc:
-            self._refuse(pending, exc.text)
-            return
-        if parsed.drive_id not in self._drive_ids:
-            self._refuse(pending, f"no drive {parsed.drive_id!r}")
-            return
-        task = asyncio.create_task(
-            self._serve_param(pending, parsed.drive_id, req), name=f"zenoh-param-{parsed.drive_id}"
-        )
-        self._requests.add(task)
-        task.add_done_callback(self._requests.discard)
-
-    async def _serve_param(self, pending: _Pending, drive_id: str, req: ParamRequest) -> None:
-        key = pending.incoming.key
-        info = self.hub.capabilities(drive_id).params.get(req.number)
-        try:
-            if req.value is not None:
-                await asyncio.wait_for(
-                    self.hub.write_param(drive_id, req.number, req.value, req.subindex),
-                    PARAM_TIMEOUT,
-                )
-                body = param_result(req, req.value, info)
-            else:
-                value = await asyncio.wait_for(
-                    self.hub.read_param(drive_id, req.number, req.subindex), PARAM_TIMEOUT
-                )
-                body = param_result(req, value, info)
-        except asyncio.CancelledError:
-            self._refuse(pending, "the gateway is shutting down")
-            raise
-        except GatewayError as exc:
-            self._answer(pending, [Answer.error(error_body(exc))])
-        except TimeoutError:
-            self._refuse(pending, f"no answer from drive {drive_id} in {PARAM_TIMEOUT:g} s")
-        except Exception as exc:
-            log.exception("parameter request %s failed", key)
-            self._answer(pending, [Answer.error(error_body(exc))])
-        else:
-            self._answer(pending, [Answer.reply(key, body)])
-
-    def _query_backup(self, pending: _Pending, drive_id: str) -> None:
-        """``<prefix>/drives/<id>/params``: the drive's parameter backup document
-        (gateway.paramsbackup); ``?numbers=1-20,100`` chooses the parameters, ``?describe``
-        answers the identity, the table and ``writable_params`` without reading them."""
-        if drive_id not in self._drive_ids:
-            self._refuse(pending, f"no drive {drive_id!r}")
-            return
-        try:
-            request = parse_backup_request(pending.incoming.parameters)
-        except (BadRequest, paramsbackup.BackupError) as exc:
-            self._refuse(pending, str(exc))
-            return
-        task = asyncio.create_task(
-            self._serve_backup(pending, drive_id, request), name=f"zenoh-backup-{drive_id}"
-        )
-        self._requests.add(task)
-        task.add_done_callback(self._requests.discard)
-
-    async def _serve_backup(self, pending: _Pending, drive_id: str, request: BackupRequest) -> None:
-        hub = self.hub
-        table = hub.capabilities(drive_id).params
-
-        async def read(number: int, subindex: int) -> ParamValue:
-            return await asyncio.wait_for(hub.read_param(drive_id, number, subindex), PARAM_TIMEOUT)
-
-        try:
-            state = hub.state(drive_id).to_json()
-            diag = self.runtime.drive_diagnostics(drive_id)
-            drive = await paramsbackup.identify(state, diag, table, read)
-            gateway = f"{self.runtime.config.gateway.name} {self.runtime.version}"
-            if request.describe:
-                body: dict[str, Any] = {
-                    "gateway": gateway,
-                    "drive": drive.to_json(),
-                    "state": state,
-                    "table": paramsbackup.table_to_json(table),
-                    "writable": sorted(hub.policy(drive_id).writable_params),
-                    "writable_entries": paramsbackup.entries_to_json(
-                        hub.policy(drive_id).writable_entries
-                    ),
-                }
-            else:
-                backup = await paramsbackup.take(
-                    drive,
-                    table,
-                    request.numbers,
-                    read,
-                    gateway=gateway,
-                    entries=hub.policy(drive_id).writable_entries,
-                )
-                body = backup.to_json()
-        except asyncio.CancelledError:
-            self._refuse(pending, "the gateway is shutting down")
-            raise
-        except paramsbackup.BackupError as exc:
-            self._refuse(pending, str(exc))
-        except Exception as exc:
-            log.exception("parameter backup of %s failed", drive_id)
-            self._answer(pending, [Answer.error(error_body(exc))])
-        else:
-            self._answer(pending, [Answer.reply(pending.incoming.key, body)])
-
-    def _query_health(self, pending: _Pending) -> None:
+    def _query_health(self, pending: Pending) -> None:
         body = self.runtime.health()
-        self._answer(pending, [Answer.reply(self.keys.key(KeyKind.HEALTH), body)])
+        self._replies.answer(pending, [Answer.reply(self.keys.key(KeyKind.HEALTH), body)])

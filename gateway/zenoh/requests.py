@@ -80,13 +80,13 @@ def _sanitise(obj: Any) -> Any:
 def encode_state(state: DriveState) -> bytes:
     """The published form of a state: ``DriveState.to_json()`` as compact JSON.
 
-    Hot path of the fan-out. The state's fields, in their order (its ``__dict__``
-    holds them and nothing else), go to orjson with the enums given as their JSON
-    text; orjson writes a non-finite number as null. A value it cannot write (an
+    Hot path of the fan-out. The state's fields, in the order of the JSON form
+    (:data:`gateway.model.PUBLISHED_FIELDS`), go to orjson with the enums given as their
+    JSON text; orjson writes a non-finite number as null. A value it cannot write (an
     integer beyond 64 bits, a mapping that is no dict, a key that is no string)
     falls back to ``to_json`` with every non-finite number made null.
     """
-    doc = state.__dict__.copy()
+    doc = state.__dict__.copy()  # its fields in PUBLISHED_FIELDS order (checked at import)
     doc["status"] = _STATUS_TEXT[doc["status"]]  # an IntEnum: its hash is int's
     # the plain Enums by their value (hashing one runs Python code); spelt out, not a
     # loop over the names: a tenth of the encoder's work

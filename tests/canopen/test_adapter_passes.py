@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import itertools
 
-from adapters.canopen.adapter import CanOpenAdapter, _Line, listen_time
+from adapters.can.adapter import AdapterLine as _Line
+from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.master import Master
+from adapters.canopen.plan import listen_time
 from gateway.config import parse
-from gateway.daemon import build_hub
+from gateway.runtime.daemon import build_hub
 
 SYNC_PERIOD = 0.01
 LATE = (0.0005, 0.0001, 0.0003, 0.0)  # s: each pass this late, in turn

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.canopen import cia402
-from adapters.canopen.cia402 import Cw, DeviceCommand, State
+from adapters.canopen.codec import cia402
+from adapters.canopen.codec.cia402 import Cw, DeviceCommand, State
 from adapters.canopen.errors import Cia402DecodeError
 
 # CiA 402-2 statusword table: a typical word for every state.

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from adapters.canopen import codes
+from adapters.canopen.codec import codes
 
 
 def test_abort_texts() -> None:

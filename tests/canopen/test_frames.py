@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.canopen import codes
-from adapters.canopen import frames as f
+from adapters.canopen.codec import codes
+from adapters.canopen.codec import frames as f
 from adapters.canopen.errors import (
     CanOpenDecodeError,
     EmcyDecodeError,

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from adapters.canopen import codes
-from adapters.canopen import frames as f
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec import codes
+from adapters.canopen.codec import frames as f
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.master import (
     Conflict,
     FrameIn,

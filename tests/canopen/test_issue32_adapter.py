@@ -17,9 +17,9 @@ from adapters.canopen.adapter import (
 from adapters.canopen.master import Configured, Conflict, Master, MasterHeard
 from gateway.adapter import EventKind
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.errors import LineHeld
 from gateway.hub import Hub
+from gateway.runtime.daemon import build_hub
 
 
 def _adapter(bus_keys: dict[str, Any] | None = None, **drive: Any) -> tuple[CanOpenAdapter, Hub]:

@@ -1,5 +1,5 @@
 """The CANopen master engine, stepped with an injected clock against a scripted node
-(CiA 301 SDO server and NMT slave, CiA 402 transitions from adapters.canopen.cia402)."""
+(CiA 301 SDO server and NMT slave, CiA 402 transitions from adapters.canopen.codec.cia402)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.canopen import cia402, codes
-from adapters.canopen import frames as f
-from adapters.canopen.cia402 import DeviceCommand, State
+from adapters.canopen.codec import cia402, codes
+from adapters.canopen.codec import frames as f
+from adapters.canopen.codec.cia402 import DeviceCommand, State
 from adapters.canopen.master import (
     STOPPED,
     Configured,

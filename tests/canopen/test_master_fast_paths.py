@@ -12,9 +12,9 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.canopen import cia402
-from adapters.canopen import frames as f
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec import cia402
+from adapters.canopen.codec import frames as f
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.errors import CanOpenDecodeError
 from adapters.canopen.master import Action, Event, FrameIn, Master, PdoField
 from adapters.canopen.master.engine import _pdo_struct, _unpack

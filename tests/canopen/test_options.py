@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
+from adapters.can.bits import frame_bits
 from adapters.canopen.options import BusOptions, Mode, cycle_bits, min_sync_period
 from adapters.canopen.plan import node_config
-from adapters.link.canbits import frame_bits
 from gateway.config import parse, shipped_file
 from gateway.errors import ConfigErrors
 

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from gateway.cli_tools import param_ref
+from gateway.cli.tools import param_ref
 from gateway.config import parse_param_ref
 
 

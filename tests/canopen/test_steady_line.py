@@ -7,8 +7,7 @@ What a SYNC cycle carries once the drives stand still: the SYNC, one TPDO1 of ev
 (transmission type 1), an RPDO1 to a node only when its data changes or every
 ``RPDO_REFRESH`` (CiA 301 §7.2.2: the drive holds the last RPDO), no other PDO (the
 EDS's TPDO2 is valid on every SYNC until the bring-up switches it off), the heartbeats.
-On the bench's CAN line the extra TPDO2 of every node filled the bus (docs/decisions.md,
-"Third round: CANopen master").
+On the bench's CAN line the extra TPDO2 of every node filled the bus (docs/decisions/0048-canopen-unused-pdos-off.md).
 """
 
 from __future__ import annotations
@@ -19,8 +18,8 @@ from typing import Any
 
 import canopen
 
-from adapters.canopen import frames as f
 from adapters.canopen.adapter import CanOpenAdapter
+from adapters.canopen.codec import frames as f
 from adapters.canopen.master import FrameIn, Master, Send
 from adapters.canopen.master.engine import RPDO_REFRESH
 from adapters.canopen.sim.node import SimNode, SimNodeConfig

@@ -14,8 +14,8 @@ from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import match_predefined
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import match_predefined
 from adapters.devicenet.scanner import (
     Action,
     FrameIn,

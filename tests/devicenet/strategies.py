@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     Body,
@@ -20,8 +20,8 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     SuccessResponse,
 )
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.objects import AllocationChoice
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.objects import AllocationChoice
 
 macs = st.integers(0, 63)
 bytes8 = st.integers(0, 0xFF)

@@ -8,7 +8,7 @@ import importlib
 import re
 from pathlib import Path
 
-from adapters.devicenet.profile import DnProfile, DrivePort
+from adapters.devicenet.contract import DnProfile, DrivePort
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "architecture.md"

@@ -30,8 +30,12 @@ from adapters.devicenet.cfw08 import (
     rpm_to_counts,
     state_changes,
 )
+from adapters.devicenet.codec.explicit import (
+    ExplicitMessage,
+    GetAttributeSingle,
+    SetAttributeSingle,
+)
 from adapters.devicenet.errors import AssemblyDecodeError, DeviceNetDecodeError
-from adapters.devicenet.explicit import ExplicitMessage, GetAttributeSingle, SetAttributeSingle
 from gateway.errors import FrameDecodeError, FrameEncodeError
 from gateway.model import DesiredCommand, Direction, DriveStatus
 

@@ -23,7 +23,7 @@ from adapters.devicenet.cfw08 import (
     state_changes,
 )
 from adapters.devicenet.cfw08.profile import Cfw08Profile
-from adapters.devicenet.ids import PredefinedMessage
+from adapters.devicenet.codec.ids import PredefinedMessage
 from adapters.devicenet.scanner import (
     InputData,
     IoConflict,

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.cip import (
+from adapters.devicenet.codec.cip import (
     ALLOCATION_REJECTIONS,
     GENERAL_STATUS_TEXT,
     AllocationRejection,
@@ -17,14 +17,14 @@ from adapters.devicenet.cip import (
     allocation_rejection,
     general_status_text,
 )
-from adapters.devicenet.errors import DataTypeDecodeError, DeviceNetDecodeError
-from adapters.devicenet.objects import (
+from adapters.devicenet.codec.objects import (
     AllocationChoice,
     AllocationInfo,
     ConnectionAttribute,
     ConnectionState,
     WatchdogAction,
 )
+from adapters.devicenet.errors import DataTypeDecodeError, DeviceNetDecodeError
 from gateway.errors import FrameEncodeError
 
 # Fact sheet 2.6, verbatim.

@@ -9,7 +9,8 @@ import socket
 import pytest
 
 from adapters.devicenet.cli import node_configs, parse_nodes
-from gateway.cli import build_parser, main
+from gateway.cli import main
+from gateway.cli.parser import build_parser
 
 
 def test_parse_nodes() -> None:

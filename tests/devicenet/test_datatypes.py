@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.datatypes import (
+from adapters.devicenet.codec.datatypes import (
     CipType,
     decode_short_string,
     decode_value,

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.dupmac import WEG_VENDOR_ID, DupMacCheck, DupMacKind
+from adapters.devicenet.codec.dupmac import WEG_VENDOR_ID, DupMacCheck, DupMacKind
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.errors import DeviceNetDecodeError, DupMacDecodeError, UnexpectedCanId
-from adapters.devicenet.frame import CanFrame
 from gateway.errors import FrameEncodeError
 from tests.devicenet.strategies import frames, macs
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.devicenet.eds import (
+from adapters.devicenet.codec.eds import (
     ConnectionType,
     DeviceInfo,
     Document,

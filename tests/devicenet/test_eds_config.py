@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 
 from adapters.devicenet.adapter import DeviceNetAdapter
-from adapters.devicenet.dupmac import DupMacCheck
-from adapters.devicenet.options import SCANNER_VENDOR_ID, DriveOptions
+from adapters.devicenet.cfw08.options import DriveOptions
+from adapters.devicenet.codec.dupmac import DupMacCheck
+from adapters.devicenet.options import SCANNER_VENDOR_ID
 from adapters.devicenet.scanner import Scanner, Send
 from adapters.devicenet.sim.simulated import sim_configs
 from gateway.config import load

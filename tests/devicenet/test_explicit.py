@@ -6,10 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.cip import AllocationRejection, GeneralStatus, allocation_rejection
-from adapters.devicenet.datatypes import CipType, decode_value, encode_value
-from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.cip import AllocationRejection, GeneralStatus, allocation_rejection
+from adapters.devicenet.codec.datatypes import CipType, decode_value, encode_value
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     BodyFormat,
@@ -24,7 +23,8 @@ from adapters.devicenet.explicit import (
     SuccessResponse,
     error_text,
 )
-from adapters.devicenet.objects import AllocationChoice
+from adapters.devicenet.codec.objects import AllocationChoice
+from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError
 from gateway.errors import FrameEncodeError
 from tests.devicenet.strategies import messages
 

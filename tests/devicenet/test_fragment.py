@@ -8,17 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.errors import (
-    FragmentAckError,
-    FragmentAckTimeout,
-    FragmentationError,
-    FragmentDecodeError,
-    FragmentOutOfSequence,
-    ReassembledTooLong,
-    ReassemblyTimeout,
-)
-from adapters.devicenet.explicit import ExplicitMessage, SuccessResponse
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.explicit import ExplicitMessage, SuccessResponse
+from adapters.devicenet.codec.fragment import (
     ExplicitFragment,
     ExplicitReassembler,
     ExplicitSender,
@@ -31,6 +22,15 @@ from adapters.devicenet.fragment import (
     explicit_payloads,
     fragment_explicit,
     fragment_io,
+)
+from adapters.devicenet.errors import (
+    FragmentAckError,
+    FragmentAckTimeout,
+    FragmentationError,
+    FragmentDecodeError,
+    FragmentOutOfSequence,
+    ReassembledTooLong,
+    ReassemblyTimeout,
 )
 from gateway.errors import FrameEncodeError
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanFrame
-from adapters.devicenet.frame import CanFrame
 from gateway.errors import FrameDecodeError, FrameEncodeError
 from tests.support.canframes import DATA, IDENTIFIERS, carried
 

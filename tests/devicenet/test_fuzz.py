@@ -14,20 +14,20 @@ from hypothesis import strategies as st
 
 from adapters.devicenet.cfw08 import INPUT_DECODERS, OUTPUT_DECODERS, decode_parameter
 from adapters.devicenet.cfw08.objects import Kind, decode_attribute
-from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value
-from adapters.devicenet.dupmac import DupMacCheck
-from adapters.devicenet.errors import DeviceNetDecodeError
-from adapters.devicenet.explicit import BodyFormat, ExplicitMessage
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.datatypes import CipType, decode_short_string, decode_value
+from adapters.devicenet.codec.dupmac import DupMacCheck
+from adapters.devicenet.codec.explicit import BodyFormat, ExplicitMessage
+from adapters.devicenet.codec.fragment import (
     ExplicitFragment,
     ExplicitReassembler,
     IoFragment,
     IoReassembler,
     decode_explicit_frame,
 )
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import decode_can_id, match_predefined
-from adapters.devicenet.objects import AllocationInfo
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import decode_can_id, match_predefined
+from adapters.devicenet.codec.objects import AllocationInfo
+from adapters.devicenet.errors import DeviceNetDecodeError
 from adapters.devicenet.scanner import FrameIn, IoKind, NodeConfig
 from adapters.devicenet.sim.node import SimNodeConfig
 from adapters.link.canerror import decode_error_frame

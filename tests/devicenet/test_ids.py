@@ -6,8 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.devicenet.errors import InvalidCanId
-from adapters.devicenet.ids import (
+from adapters.devicenet.codec.ids import (
     CanId,
     Group3Message,
     Group4Message,
@@ -20,6 +19,7 @@ from adapters.devicenet.ids import (
     match_predefined,
     predefined_can_id,
 )
+from adapters.devicenet.errors import InvalidCanId
 from gateway.errors import FrameDecodeError, FrameEncodeError
 from tests.devicenet.strategies import macs
 

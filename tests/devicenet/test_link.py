@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import can
 import pytest
 
-from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.link import (
     CanLink,
     LinkConfig,

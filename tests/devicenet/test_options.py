@@ -8,7 +8,8 @@ import pytest
 
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.cfw08 import AssemblyPair
-from adapters.devicenet.options import BusOptions, DriveOptions, SimOptions
+from adapters.devicenet.cfw08.options import DriveOptions, SimOptions
+from adapters.devicenet.options import BusOptions
 from adapters.devicenet.scanner import IoKind
 from gateway.config import load
 from gateway.errors import AdapterError, ConfigErrors

@@ -36,19 +36,19 @@ def test_outputs_are_refreshed_once_per_cycle_when_a_cycle_outlasts_the_interval
 
     # no cycle under way (nothing polled yet, or COS/cyclic nodes only): every interval
     for now in (1.0, 1.0005, 1.001, 1.002):
-        adapter._before_step(now)
+        adapter.before_step(now)
     assert refreshed == [1.0, 1.001, 1.002]
 
     # a cycle of 63 nodes takes ~25 ms at 500 kbit/s: one refresh until it ends
     schedule.cycle_started = 1.0025
     refreshed.clear()
     for i in range(1, 25):
-        adapter._before_step(1.0025 + i * 0.001)
+        adapter.before_step(1.0025 + i * 0.001)
     assert refreshed == []
-    assert adapter._wake_at() is None  # the cycle's end (an event) steps the driver
+    assert adapter.wake_at() is None  # the cycle's end (an event) steps the driver
     line.cycles = 1  # it ended, the next one began in the same step
-    adapter._before_step(1.03)
+    adapter.before_step(1.03)
     assert refreshed == [1.03]
-    adapter._before_step(1.04)
+    adapter.before_step(1.04)
     assert refreshed == [1.03]
-    assert adapter._wake_at() is None
+    assert adapter.wake_at() is None

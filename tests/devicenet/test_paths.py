@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from adapters.devicenet.codec.objects import LogicalPath, assembly_path, decode_path
 from adapters.devicenet.errors import DataTypeDecodeError
-from adapters.devicenet.objects import LogicalPath, assembly_path, decode_path
 from gateway.errors import FrameEncodeError
 
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
-from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.scanner.probe import Finished, LineProbe, ProbeConfig, Progress, Refused
 
 

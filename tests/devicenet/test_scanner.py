@@ -13,9 +13,9 @@ from dataclasses import replace
 import pytest
 
 from adapters.devicenet.cfw08 import Out21
-from adapters.devicenet.cip import GeneralStatus
-from adapters.devicenet.datatypes import CipType, encode_value
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.cip import GeneralStatus
+from adapters.devicenet.codec.datatypes import CipType, encode_value
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     ErrorResponse,
@@ -25,14 +25,14 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     SuccessResponse,
 )
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.fragment import (
     ExplicitFragment,
     FragmentType,
     IoReassembler,
     fragment_io,
 )
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.objects import AllocationChoice, ConnectionInstance
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.objects import AllocationChoice, ConnectionInstance
 from adapters.devicenet.scanner import (
     BusErrorIn,
     ExplicitResult,
@@ -310,6 +310,21 @@ def test_explicit_requests_interleave_with_polls() -> None:
     assert [results[t].response for t in tokens[:5]] == [SuccessResponse(0x0E, b"\x02\x00")] * 5
     assert results[tokens[5]].response == ErrorResponse(GeneralStatus.ATTRIBUTE_NOT_SUPPORTED)
     assert len(lin.inputs(2)) > before + 5  # polls went on meanwhile
+
+
+def test_explicit_turns_ahead_count_the_lines_window() -> None:
+    """A request waits its turn behind those already on the line, explicit_window at a time:
+    the adapter's bound for an answer grows with it (63 drives configuring at once)."""
+    lin = line(*range(2, 12))
+    lin.run(0.3)
+    assert lin.scanner.explicit_turns_ahead() == 0
+    window = FAST.explicit_window
+    for mac in range(2, 2 + window + 1):
+        lin.scanner.submit(mac, GetAttributeSingle(1, 1, 1))
+    assert lin.scanner.explicit_turns_ahead() == 2  # window + 1 requests: two turns
+    lin.run(0.3)
+    lin.take(ExplicitResult)
+    assert lin.scanner.explicit_turns_ahead() == 0
 
 
 def test_fragmentation_both_ways() -> None:

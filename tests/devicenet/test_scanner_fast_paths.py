@@ -11,9 +11,9 @@ from typing import Any
 
 import pytest
 
-from adapters.devicenet.cip import CipClass
-from adapters.devicenet.explicit import GetAttributeSingle
-from adapters.devicenet.objects import IdentityAttribute
+from adapters.devicenet.codec.cip import CipClass
+from adapters.devicenet.codec.explicit import GetAttributeSingle
+from adapters.devicenet.codec.objects import IdentityAttribute
 from adapters.devicenet.scanner import Scanner
 from adapters.devicenet.scanner.node import Node
 from tests.devicenet.test_scanner import FAST, line

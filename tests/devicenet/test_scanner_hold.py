@@ -11,15 +11,15 @@ from dataclasses import replace
 
 import pytest
 
-from adapters.devicenet.cip import CipClass
-from adapters.devicenet.explicit import GetAttributeSingle
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import match_predefined
-from adapters.devicenet.objects import IdentityAttribute
+from adapters.can.bits import frame_bits_min
+from adapters.devicenet.codec.cip import CipClass
+from adapters.devicenet.codec.explicit import GetAttributeSingle
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import match_predefined
+from adapters.devicenet.codec.objects import IdentityAttribute
 from adapters.devicenet.scanner import BusErrorIn, FrameIn, TxFailed
 from adapters.devicenet.scanner.node import Phase
 from adapters.devicenet.scanner.scheduler import HOLD_MAX
-from adapters.link.canbits import frame_bits_min
 from adapters.link.canerror import LineCondition
 from tests.devicenet.harness import Line
 from tests.devicenet.test_scanner import FAST, node, sim
@@ -173,7 +173,7 @@ class HeldLine(Line):
         self.wire: deque[tuple[float, object, CanFrame]] = deque()
         self.bus_free = 0.0
         self.hold_end: float | None = None
-        self.kept: list[FrameIn] = []
+        self.kept: list[FrameIn[CanFrame]] = []
         self.holds = 0
         self.held_frames = 0
 
@@ -276,7 +276,7 @@ def test_a_held_steady_line_polls_every_node_every_cycle(macs: tuple[int, ...]) 
 
 
 def test_the_adapter_line_asks_its_scanner() -> None:
-    from adapters.devicenet.adapter import _Line
+    from adapters.can.adapter import AdapterLine as _Line
 
     lin = steady()
     start_cycle(lin)
@@ -284,7 +284,7 @@ def test_the_adapter_line_asks_its_scanner() -> None:
     class Adapter:
         engine: object = lin.scanner
 
-    line = _Line(Adapter())  # type: ignore[arg-type]
+    line: _Line[CanFrame, object, object] = _Line(Adapter())  # type: ignore[arg-type]
     assert line.hold_until(lin.now) == lin.scanner.hold_until(lin.now) is not None
     Adapter.engine = None  # not running
     assert line.hold_until(lin.now) is None

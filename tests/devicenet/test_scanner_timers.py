@@ -17,9 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from adapters.devicenet.cfw08 import Out21
-from adapters.devicenet.cip import CipClass
-from adapters.devicenet.explicit import GetAttributeSingle
-from adapters.devicenet.objects import IdentityAttribute
+from adapters.devicenet.codec.cip import CipClass
+from adapters.devicenet.codec.explicit import GetAttributeSingle
+from adapters.devicenet.codec.objects import IdentityAttribute
 from adapters.devicenet.scanner import IoKind, LinkDown, NodeUnavailable, Phase, Scanner
 from adapters.devicenet.scanner.node import Node
 from adapters.devicenet.scanner.timers import SteadyTimers

@@ -9,9 +9,9 @@ import pytest
 
 from adapters.devicenet.cfw08 import In71, Out21, encode_parameter
 from adapters.devicenet.cfw08.objects import STANDARD_OBJECTS, AttributeSpec, Kind, wire_size
-from adapters.devicenet.cip import GeneralStatus
-from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.cip import GeneralStatus
+from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     Body,
@@ -25,15 +25,15 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     SuccessResponse,
 )
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.fragment import (
     ExplicitFragment,
     ExplicitReassembler,
     ExplicitSender,
     FragmentAck,
     decode_explicit_frame,
 )
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.objects import AllocationChoice, ConnectionState
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.objects import AllocationChoice, ConnectionState
 from adapters.devicenet.sim.node import Cfw08Node, SimNodeConfig, SimPhase
 
 MAC = 5

@@ -18,9 +18,9 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from adapters.profibus.sim.slave import SlaveCounters
 from gateway.config import load
-from gateway.daemon import READY_BOUND, Daemon
 from gateway.model import DriveState
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import READY_BOUND, Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.timing import scaled
 from tests.zenoh.client import Client

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.sim.runner import SimRunner
 from gateway.config import DEFAULT_CONFIG, load, shipped_file
 from gateway.errors import ConfigErrors
@@ -61,6 +61,9 @@ sync_period = 0.02
 sdo_timeout = 0.3
 retry = 0.2
 heartbeat = 100
+# the drives' consumer time 1 s: these tests are about the command paths, and a loaded
+# host's gaps in the gateway's heartbeat (hundreds of ms under a full test run) are not
+heartbeat_factor = 10
 {drives}"""
 
 

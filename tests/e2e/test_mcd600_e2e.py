@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest_asyncio
 
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.profibus.sim.slave import DpSlave
 from gateway.model import DriveState, DriveStatus
 from tests.e2e.harness import (
@@ -43,7 +43,7 @@ FLC_A = 100
 NULL16 = 0xFFFF  # docs/modbus-map.md: a uint16 register with no value
 NULL_INT16 = 0x8000
 MOTOR_OVERLOAD = 2  # guide 4.5
-# simulated parameters (adapters/mcd600/simparams.py): start ramp time 1 s, initial current
+# simulated parameters (adapters/mcd600/paramtable.py): start ramp time 1 s, initial current
 # 100 %FLC, current limit 300 %FLC, stop time 1 s
 SIM_PARAMS = "{ 4 = 1, 5 = 100, 6 = 300, 9 = 1 }"
 STOP_TIME = 9

@@ -28,10 +28,10 @@ import pytest
 import pytest_asyncio
 
 from adapters.devicenet.sim import SimRunner
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.mcd600.simparams import AUTO_RESET_ACTION, AUTO_RESET_DELAY, AutoResetAction
+from adapters.mcd600.paramtable import AUTO_RESET_ACTION, AUTO_RESET_DELAY, AutoResetAction
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.profibus.sim.slave import DpSlave
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.cli import main
 from gateway.model import DriveState, DriveStatus
 from tests.e2e.harness import (

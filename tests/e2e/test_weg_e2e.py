@@ -24,7 +24,7 @@ import pytest
 import pytest_asyncio
 
 from adapters.profibus.sim.slave import DpSlave
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.adapter import EventKind
 from gateway.config import DEFAULT_CONFIG
 from gateway.model import CommState, Direction, DriveState, DriveStatus

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from gateway.adapter import ADAPTERS, DriveAdapter, adapter_names, load_adapter
-from gateway.config import BusConfig
+from gateway.adapter import DriveAdapter
+from gateway.config import ADAPTERS, BusConfig, adapter_names, load_adapter
 from gateway.errors import AdapterError
 from tests.support.fake_adapter import FakeAdapter, FakeBusOptions
 
@@ -28,11 +28,11 @@ def test_the_table_names_classes_as_strings() -> None:
 def test_the_core_imports_no_adapter_until_one_is_loaded() -> None:
     probe = (
         "import json, sys\n"
-        "import gateway.cli, gateway.config, gateway.daemon, gateway.hub\n"
+        "import gateway.cli, gateway.config, gateway.runtime.daemon, gateway.hub\n"
         "import gateway.zenoh.frontend, gateway.modbus.frontend\n"
         # pyserial is imported by pymodbus itself (its serial transports), not by the core
         "before = sorted(m for m in sys.modules if m.split('.')[0] in ('adapters', 'can', 'canopen'))\n"
-        "from gateway.adapter import load_adapter\n"
+        "from gateway.config import load_adapter\n"
         "cls = load_adapter('profibus')\n"
         "after = 'adapters.profibus.adapter' in sys.modules\n"
         "print(json.dumps([before, after, cls.__module__]))\n"

@@ -39,7 +39,7 @@ def test_no_command_prints_help_and_fails(capsys: pytest.CaptureFixture[str]) ->
 
 
 def test_run_defaults_to_the_demo_config() -> None:
-    from gateway.cli import build_parser
+    from gateway.cli.parser import build_parser
 
     args = build_parser().parse_args(["run"])
     assert args.config.endswith("config/demo.toml")

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from gateway.config import load
-from gateway.daemon import Backoff, Daemon
 from gateway.model import CommState
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import Backoff, Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.plugins import pythonpath
 
@@ -204,7 +204,7 @@ async def test_a_crash_is_logged_with_its_traceback_and_restarted_after_the_back
             pauses.append(super().after_crash(ran_for))
             return 0.0  # the test does not wait for the real pauses
 
-    monkeypatch.setattr("gateway.daemon.Backoff", Recorded)
+    monkeypatch.setattr("gateway.runtime.daemon.Backoff", Recorded)
     cfg = tmp_path / "site.toml"
     cfg.write_text(config_text(tmp_path / "log", crash_after=2, start_running=False))
     daemon = Daemon(load(cfg), notifier=Notifier({}))
@@ -259,7 +259,7 @@ async def test_a_front_end_that_cannot_bind_stops_the_start_without_ready(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Used to report READY after READY_BOUND and retry the bind for ever (issue 18)."""
-    monkeypatch.setattr("gateway.daemon.READY_BOUND", 0.5)
+    monkeypatch.setattr("gateway.runtime.daemon.READY_BOUND", 0.5)
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()

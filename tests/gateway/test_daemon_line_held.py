@@ -12,10 +12,10 @@ import pytest
 
 from gateway.adapter import HubPort
 from gateway.config import load
-from gateway.daemon import EXIT_LINE_HELD, Daemon
 from gateway.errors import LineHeld
 from gateway.model import CommState
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import EXIT_LINE_HELD, Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 
 HELD = "serial port /dev/ttyTEST is held by pid 1 (init): another master is on this line"

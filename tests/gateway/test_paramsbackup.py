@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from gateway import paramsbackup as pb
 from gateway.adapter import ParamInfo, ParamValue, param_table
-from gateway.cli_params import ProgressOut
+from gateway.cli.params import ProgressOut
 from gateway.errors import GatewayTimeout, ParameterError
 
 TABLE = param_table(

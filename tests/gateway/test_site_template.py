@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from gateway.cli import left_to_fill, main
+from gateway.cli import main
+from gateway.cli.check import left_to_fill
 from gateway.config import load
 from gateway.model import Device
 

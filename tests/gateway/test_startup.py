@@ -17,7 +17,7 @@ from tests.support.net import free_port, zenoh_endpoint
 from tests.support.plugins import pythonpath
 
 ROOT = Path(__file__).resolve().parents[2]
-EXIT_STARTUP = 2  # gateway.daemon.EXIT_STARTUP
+EXIT_STARTUP = 2  # gateway.runtime.daemon.EXIT_STARTUP
 WAIT = 120  # s, a bound only: the daemon exits as soon as the bind fails
 
 

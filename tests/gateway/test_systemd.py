@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.systemd import Notifier
+from gateway.runtime.systemd import Notifier
 
 ROOT = Path(__file__).resolve().parents[2]
 UNIT = ROOT / "config" / "drive-gateway.service"

@@ -5,7 +5,8 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.link.canerror import LineCondition, LineHealth, decode_error_frame, health_after
+from adapters.can.health import LineHealth, health_after
+from adapters.link.canerror import LineCondition, decode_error_frame
 
 C = LineCondition
 

@@ -235,9 +235,9 @@ def test_act_quietly_swallows_an_adapter_error_and_nothing_else() -> None:
 
 def test_the_adapters_give_their_engines_classes() -> None:
     """Each CAN adapter's line maps every link event to its own engine's event."""
-    from adapters.canopen import adapter as co
+    from adapters.can import adapter as co
+    from adapters.can import adapter as dn
     from adapters.canopen import master as com
-    from adapters.devicenet import adapter as dn
     from adapters.devicenet import scanner as dns
 
     for events, engine in ((co.LINK_EVENTS, com), (dn.LINK_EVENTS, dns)):

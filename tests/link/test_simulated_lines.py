@@ -19,8 +19,8 @@ from adapters.link.serial import SerialPort
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.simulated import SimulatedLine
 from gateway.config import BusConfig, Config, parse
-from gateway.daemon import SIMULATORS, Daemon, build_hub, simulated_line
 from gateway.errors import ConfigError
+from gateway.runtime.daemon import SIMULATORS, Daemon, build_hub, simulated_line
 
 
 def profibus(**bus: Any) -> Config:

@@ -15,7 +15,7 @@ from typing import Any
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.options import Mcd600Options
 from adapters.mcd600.profile import Mcd600Profile
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.words import ControlWord
 from gateway.config import DriveConfig
 from gateway.model import DesiredCommand, Device, DriveState, DriveStatus

@@ -8,8 +8,7 @@ import pytest
 
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.monitoring import REQUESTS
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.mcd600.simparams import (
+from adapters.mcd600.paramtable import (
     CURRENT_LIMIT,
     INITIAL_CURRENT,
     NETWORK_COMMS,
@@ -17,8 +16,9 @@ from adapters.mcd600.simparams import (
     STOP_TIME,
     NetworkCommsAction,
 )
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.trips import MOTOR_OVERLOAD, NETWORK_FORCED_TRIP
-from adapters.profibus.dp import GlobalControl
+from adapters.profibus.codec.dp import GlobalControl
 from gateway.model import DriveStatus
 from tests.mcd600.loop import Loop
 

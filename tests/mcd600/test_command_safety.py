@@ -12,12 +12,12 @@ import pytest
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.monitoring import StarterState
 from adapters.mcd600.options import Mcd600Options, safety_warning
+from adapters.mcd600.paramtable import COMMAND_SOURCE, CommandSource, NetworkCommsAction
 from adapters.mcd600.profile import Mcd600Profile
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.mcd600.simparams import COMMAND_SOURCE, CommandSource, NetworkCommsAction
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.trips import EXCESS_START_TIME
-from gateway.adapter import Capabilities, safety_warnings
-from gateway.config import DriveConfig
+from gateway.adapter import Capabilities
+from gateway.config import DriveConfig, safety_warnings
 from gateway.config import parse as parse_config
 from gateway.errors import CommandRejected, GatewayError
 from gateway.hub import Hub
@@ -173,7 +173,7 @@ def test_check_config_warning(keys: dict[str, Any], watchdog: float, words: str)
 
 @pytest.mark.parametrize(("watchdog", "words"), [(0.5, "not fail-safe"), (0.0, "watchdog = 0")])
 def test_check_config_through_the_profibus_adapter(watchdog: float, words: str) -> None:
-    """The hook check-config calls (gateway.adapter.safety_warnings) reaches the profile."""
+    """The hook check-config calls (gateway.config.safety_warnings) reaches the profile."""
     drive = {"id": "ss1", "device": "MCD 600", "address": 5, "comm_timeout": 0}
     bus = {"adapter": "profibus", "port": "/dev/null", "watchdog": watchdog, "drives": [drive]}
     config = parse_config({"buses": {"pb": bus}}, "site.toml")

@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.profile import Mcd600Profile
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.profibus.profile import DpProfile, SimDevice
+from adapters.mcd600.sim.starter import Mcd600Sim
+from adapters.profibus.contract import DpProfile, SimDevice
 from gateway.errors import FrameDecodeError
 from gateway.model import DesiredCommand, Device, DriveState
 from tests.mcd600.loop import drive_config

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.options import Mcd600Options
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.profibus.options import DriveOptions
 from adapters.profibus.sim.devices import make_device
 from gateway.config import DEFAULT_CONFIG, load

@@ -9,14 +9,14 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Any
 
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.trips import MOTOR_OVERLOAD
 from adapters.profibus.adapter import ProfibusAdapter
 from gateway.adapter import EventKind
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.hub import EventSubscription, Hub
 from gateway.model import CommState, DriveCommand, DriveStatus, Source
+from gateway.runtime.daemon import build_hub
 from tests.support import simulated
 
 ADDRESS = 6

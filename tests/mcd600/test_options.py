@@ -11,7 +11,7 @@ from adapters.mcd600.layout import Mode
 from adapters.mcd600.options import Mcd600Options, parse_user_prm, user_prm_data
 from adapters.mcd600.profile import Mcd600Profile
 from adapters.mcd600.words import MotorSet
-from adapters.profibus.profile import PROFILES, load_profile
+from adapters.profibus.contract import PROFILES, load_profile
 from gateway.errors import ConfigError, GatewayError
 from gateway.model import Device
 from gateway.schema import Table

@@ -8,8 +8,7 @@ from typing import Any
 import pytest
 
 from adapters.mcd600.layout import Mode
-from adapters.mcd600.programming import ParamRequest
-from adapters.mcd600.simparams import (
+from adapters.mcd600.paramtable import (
     COMMAND_SOURCE,
     CURRENT_LIMIT,
     MODEL_FLC,
@@ -17,6 +16,7 @@ from adapters.mcd600.simparams import (
     STOP_TIME,
     CommandSource,
 )
+from adapters.mcd600.programming import ParamRequest
 from gateway.errors import DriveOffline, GatewayTimeout, ParameterError
 from gateway.model import DesiredCommand
 from tests.mcd600.loop import Loop, running_bus

@@ -9,8 +9,7 @@ import pytest
 from adapters.mcd600.layout import LAYOUTS, InputTelegram, Mode, OutputTelegram
 from adapters.mcd600.monitoring import DataRequest, StarterState
 from adapters.mcd600.options import Mcd600Options
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.mcd600.simparams import (
+from adapters.mcd600.paramtable import (
     AUTO_RESET_ACTION,
     AUTO_RESET_DELAY,
     AUTO_RESET_MAX,
@@ -24,9 +23,10 @@ from adapters.mcd600.simparams import (
     AutoResetAction,
     CommandSource,
 )
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.trips import EXCESS_START_TIME as EXCESS_START_TRIP
 from adapters.mcd600.words import ControlWord, MotorSet, StatusWord
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.contract import RecordAccessError
 from gateway.errors import FrameDecodeError
 from tests.mcd600.loop import drive_config
 

@@ -13,11 +13,11 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
 from gateway.config import load
-from gateway.daemon import Daemon
 from gateway.hub import Hub
 from gateway.modbus.frontend import ModbusFrontEnd
 from gateway.model import DriveState
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import free_port
 from tests.support.timing import scaled

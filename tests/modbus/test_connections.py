@@ -12,11 +12,11 @@ import pytest
 
 from gateway import __version__
 from gateway.config import load
-from gateway.daemon import Daemon
 from gateway.modbus.frontend import ModbusFrontEnd
 from gateway.modbus.health import parse_version
 from gateway.modbus.server import ModbusBindError
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.systemd import Notifier
 from tests.modbus.conftest import D1, INPUTS, TIMEOUT, StartGateway, config_text, connect, mbap
 from tests.support.net import free_port
 

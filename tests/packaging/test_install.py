@@ -78,7 +78,7 @@ def test_the_sdist_carries_what_a_build_and_an_install_need(dist: dict[str, Path
         "Makefile",
         "packaging/install.py",
         "docs/operations.md",
-        "gateway/cli.py",
+        "gateway/cli/__init__.py",
         "adapters/profibus/weg/paramtable.py",
         *(f"config/{n}" for n in DATA),
     ):

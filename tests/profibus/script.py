@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from adapters.profibus.fdl import DataTelegram, ShortAck, decode_telegram
+from adapters.profibus.codec.fdl import DataTelegram, ShortAck, decode_telegram
 from adapters.profibus.master import Action, FrameIn, Master, Transmit, Written
 
 h = bytes.fromhex

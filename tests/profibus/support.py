@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from adapters.profibus.adapter import ProfibusAdapter
-from adapters.profibus.profile import (
+from adapters.profibus.contract import (
     PROFILES,
     DiagEvent,
     DiagKind,
@@ -30,10 +30,10 @@ from adapters.profibus.sim.echo import ECHO_IDENT, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from gateway.adapter import Capabilities, ParamValue
 from gateway.config import BusConfig, Config, DriveConfig, parse
-from gateway.daemon import build_hub
 from gateway.errors import GatewayError, ParameterError
 from gateway.hub import Hub
 from gateway.model import DesiredCommand, Device, Direction, DriveState, DriveStatus, SpeedScale
+from gateway.runtime.daemon import build_hub
 from gateway.schema import Table
 from tests.support import simulated
 

@@ -7,7 +7,7 @@ import select
 
 import pytest
 
-from adapters.profibus.fdl import SD3, decode_telegram
+from adapters.profibus.codec.fdl import SD3, decode_telegram
 from bench import bench_profibus as bench
 
 

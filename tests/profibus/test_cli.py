@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 from adapters.profibus.cli import SlaveSpec, build_line, parse_spec, run_sim, scan
-from adapters.profibus.fdl import StationType
+from adapters.profibus.codec.fdl import StationType
+from adapters.profibus.master.timing import BusParams
 from adapters.profibus.sim.echo import EchoSim
-from adapters.profibus.timing import BusParams
 from gateway.cli import main
 from tests.profibus.support import line_config
 

@@ -6,10 +6,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus import dpv1
-from adapters.profibus import wegrecord as weg
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec import wegrecord as weg
+from adapters.profibus.codec.wegrecord import WegSelect, WegValue, WegWrite
 from adapters.profibus.errors import DecodeFailure, WegRecordDecodeError
-from adapters.profibus.wegrecord import WegSelect, WegValue, WegWrite
 from gateway.errors import FrameEncodeError
 
 h = bytes.fromhex

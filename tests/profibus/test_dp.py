@@ -9,9 +9,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus import chkcfg, diag, dp
-from adapters.profibus.chkcfg import CompactId, Configuration, IoDirection, IoLength, SpecialId
-from adapters.profibus.diag import (
+from adapters.profibus.codec import chkcfg, diag, dp
+from adapters.profibus.codec.chkcfg import (
+    CompactId,
+    Configuration,
+    IoDirection,
+    IoLength,
+    SpecialId,
+)
+from adapters.profibus.codec.diag import (
     AlarmDiag,
     AlarmSpecifier,
     AlarmType,
@@ -24,7 +30,7 @@ from adapters.profibus.diag import (
     StatusDiag,
     StatusType,
 )
-from adapters.profibus.dp import (
+from adapters.profibus.codec.dp import (
     DataExchange,
     Dpv1Status,
     GetCfgRequest,
@@ -38,8 +44,7 @@ from adapters.profibus.dp import (
     SlaveDiagRequest,
     SlaveSap,
 )
-from adapters.profibus.errors import DecodeFailure, DpDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     FcbState,
     RequestFc,
@@ -48,6 +53,7 @@ from adapters.profibus.fdl import (
     ResponseStatus,
     decode_telegram,
 )
+from adapters.profibus.errors import DecodeFailure, DpDecodeError
 from gateway.errors import FrameEncodeError
 
 h = bytes.fromhex

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus import dpv1
-from adapters.profibus.diag import AlarmDiag, AlarmSpecifier, AlarmType
-from adapters.profibus.dpv1 import (
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.diag import AlarmDiag, AlarmSpecifier, AlarmType
+from adapters.profibus.codec.dpv1 import (
     WEG_ERROR_CODE_1_TEXTS,
     AlarmAck,
     Dpv1ErrorResponse,
@@ -19,8 +19,7 @@ from adapters.profibus.dpv1 import (
     WriteRequest,
     WriteResponse,
 )
-from adapters.profibus.errors import DecodeFailure, Dpv1DecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     RequestFc,
     RequestFunction,
@@ -28,6 +27,7 @@ from adapters.profibus.fdl import (
     ResponseStatus,
     decode_telegram,
 )
+from adapters.profibus.errors import DecodeFailure, Dpv1DecodeError
 from gateway.errors import FrameEncodeError
 
 h = bytes.fromhex

@@ -8,8 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus.errors import DecodeFailure, FdlDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     NEED_MORE,
     SHORT_ACK,
     DataTelegram,
@@ -30,6 +29,7 @@ from adapters.profibus.fdl import (
     decode_telegram,
     fcs,
 )
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from gateway.errors import FrameDecodeError, FrameEncodeError
 
 h = bytes.fromhex

@@ -17,8 +17,8 @@ import pytest
 import serial
 
 from adapters.link.stream import SLEEP_LIMIT
+from adapters.profibus.codec.fdl import SHORT_ACK
 from adapters.profibus.driver import LineDriver
-from adapters.profibus.fdl import SHORT_ACK
 from adapters.profibus.link import Rs485, in_thread, is_pty, open_link, open_port, set_rs485
 from adapters.profibus.master import FrameIn, Transmit, Written
 from tests.profibus.support import until

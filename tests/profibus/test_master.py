@@ -6,10 +6,9 @@ import dataclasses
 
 import pytest
 
-from adapters.profibus.diag import SlaveDiag
-from adapters.profibus.dp import GlobalControl
-from adapters.profibus.fdl import SHORT_ACK, DataTelegram, ResponseFc, ResponseStatus
-from adapters.profibus.figures import Samples
+from adapters.profibus.codec.diag import SlaveDiag
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.fdl import SHORT_ACK, DataTelegram, ResponseFc, ResponseStatus
 from adapters.profibus.master import (
     DiagnosisRead,
     FaultKind,
@@ -24,6 +23,7 @@ from adapters.profibus.master import (
     SlaveStateChanged,
     SlaveUp,
 )
+from adapters.profibus.master.figures import Samples
 from adapters.profibus.sim.slave import SlaveMode
 from gateway.errors import FrameEncodeError
 from tests.profibus.script import Script

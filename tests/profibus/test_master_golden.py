@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import pytest
 
-from adapters.profibus.dp import GlobalControl
-from adapters.profibus.fdl import SHORT_ACK
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.fdl import SHORT_ACK
 from adapters.profibus.master import (
     InputsReceived,
     LineMode,
@@ -22,8 +22,8 @@ from adapters.profibus.master import (
     SlaveState,
     SlaveUp,
 )
-from adapters.profibus.scan import Scanner, SlaveInfo, status_request
-from adapters.profibus.timing import BusParams
+from adapters.profibus.master.scan import Scanner, SlaveInfo, status_request
+from adapters.profibus.master.timing import BusParams
 from tests.profibus.script import Script, h
 
 BUS = BusParams.for_baudrate(500000, latency=0.001)

@@ -17,9 +17,8 @@ from typing import Any
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus.dp import GlobalControl
-from adapters.profibus.errors import DecodeFailure, FdlDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     RequestFc,
     RequestFunction,
@@ -30,6 +29,7 @@ from adapters.profibus.fdl import (
     decode_fc,
     decode_telegram,
 )
+from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from adapters.profibus.master import (
     FrameIn,
     InputsReceived,

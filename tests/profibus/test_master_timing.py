@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from adapters.profibus.fdl import SHORT_ACK
+from adapters.profibus.codec.fdl import SHORT_ACK
 from adapters.profibus.master import (
     FaultKind,
     InputsReceived,
@@ -22,7 +22,7 @@ from adapters.profibus.master import (
     SlaveState,
     Transmit,
 )
-from adapters.profibus.timing import BusParams
+from adapters.profibus.master.timing import BusParams
 from tests.profibus.script import Script
 from tests.profibus.test_master_golden import (
     CHK_CFG,

@@ -10,9 +10,8 @@ import pytest
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.link import Rs485
 from adapters.profibus.options import BusOptions, DriveOptions
-from gateway.adapter import load_adapter
 from gateway.cli import main
-from gateway.config import parse
+from gateway.config import load_adapter, parse
 from gateway.errors import ConfigErrors
 from gateway.model import Device
 from tests.profibus.support import ADAPTER

@@ -6,10 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus import dpv1
-from adapters.profibus import profidrive as pd
-from adapters.profibus.errors import DecodeFailure, ProfidriveDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec import profidrive as pd
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     RequestFc,
     RequestFunction,
@@ -17,7 +16,7 @@ from adapters.profibus.fdl import (
     ResponseStatus,
     decode_telegram,
 )
-from adapters.profibus.profidrive import (
+from adapters.profibus.codec.profidrive import (
     Attribute,
     DataFormat,
     ParameterAddress,
@@ -27,6 +26,7 @@ from adapters.profibus.profidrive import (
     ResponseId,
     ValueBlock,
 )
+from adapters.profibus.errors import DecodeFailure, ProfidriveDecodeError
 from gateway.errors import FrameEncodeError
 
 FAST = settings(max_examples=50, deadline=None)

@@ -8,11 +8,11 @@ from typing import Any
 import pytest
 
 from adapters.mcd600.options import Mcd600Options
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.profibus.sim.devices import KINDS, SIM_DEVICES, make_device, sim_class
 from adapters.profibus.sim.echo import EchoSim
 from adapters.profibus.weg.options import WegOptions
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim
 from gateway.config import DriveConfig
 from gateway.loader import NotLoadable
 from gateway.model import Device

@@ -6,11 +6,11 @@ from typing import Any
 
 import pytest
 
-from adapters.profibus import dpv1
-from adapters.profibus.diag import SlaveDiag
-from adapters.profibus.dp import Dpv1Status, GlobalControl, SetPrm, SlaveSap, build_request
-from adapters.profibus.dp import SlaveDiagRequest as DiagReq
-from adapters.profibus.fdl import (
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.diag import SlaveDiag
+from adapters.profibus.codec.dp import Dpv1Status, GlobalControl, SetPrm, SlaveSap, build_request
+from adapters.profibus.codec.dp import SlaveDiagRequest as DiagReq
+from adapters.profibus.codec.fdl import (
     SHORT_ACK,
     DataTelegram,
     FcbState,

@@ -14,7 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     Discarded,
     NeedMore,
@@ -31,10 +31,10 @@ from adapters.profibus.master import (
     Transmit,
     Written,
 )
+from adapters.profibus.master.timing import BusParams
 from adapters.profibus.sim.echo import ECHO_IDENT, EchoSim, echo_cfg
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.slave import DpSlave
-from adapters.profibus.timing import BusParams
 
 FAST_BUS = BusParams.for_baudrate(500000, latency=0.001, absent_retry=0.2, fault_retry=0.2)
 

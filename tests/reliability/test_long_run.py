@@ -13,8 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from adapters.profibus.dp import GlobalControl, build_request
-from adapters.profibus.fdl import RequestFc, RequestFunction
+from adapters.profibus.codec.dp import GlobalControl, build_request
+from adapters.profibus.codec.fdl import RequestFc, RequestFunction
 from tests.e2e.harness import PREFIX, TIMEOUT
 from tests.profibus.test_sim_slave import MASTER, Master, echo_slave
 from tests.reliability.demo import ADDRESSES, WEG, demo_gateway, profibus_adapter

@@ -29,11 +29,11 @@ from adapters.profibus.cli import build_line
 from adapters.profibus.link import open_port
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.port import SimPort
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.config import load, parse
-from gateway.daemon import EXIT_LINE_HELD, Daemon
 from gateway.model import CommState
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import EXIT_LINE_HELD, Daemon
+from gateway.runtime.systemd import Notifier
 from tests.e2e.harness import Gateway, running_gateway
 from tests.reliability.demo import (
     ADDRESSES,

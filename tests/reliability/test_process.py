@@ -1,7 +1,7 @@
 """The gateway as a process (``python -m gateway run``): SIGHUP with a bad config file, and
 SIGKILL followed by a restart.
 
-SIGHUP reloads nothing (docs/decisions.md: a restart is the way): the gateway keeps
+SIGHUP reloads nothing (docs/decisions/0007-no-reload.md: a restart is the way): the gateway keeps
 running on the configuration it started with, checks the file on disk and logs what a
 restart would meet. SIGKILL gives the gateway no chance to stop anything: the drives do
 what their own settings say (P0313) while no master talks to them, and the restarted
@@ -26,7 +26,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from adapters.profibus.cli import build_line
 from adapters.profibus.sim.port import SimPort
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.config import parse
 from tests.e2e.harness import PREFIX, RUN, TIMEOUT, header
 from tests.reliability.demo import (

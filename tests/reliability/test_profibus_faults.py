@@ -21,7 +21,7 @@ import adapters.profibus.adapter as profibus_adapter_module
 from adapters.profibus.cli import build_line
 from adapters.profibus.sim.line import SimLine
 from adapters.profibus.sim.port import SimPort
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.config import parse
 from gateway.model import CommState
 from tests.e2e.harness import PREFIX, TIMEOUT, parsed

@@ -15,8 +15,8 @@ from typing import Any
 
 import can
 
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.profibus.weg.sim import WegSim
+from adapters.mcd600.sim.starter import Mcd600Sim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.model import Source
 from tests.e2e.harness import COAST_STOP, PREFIX, RESET, RUN, TIMEOUT, Gateway
 from tests.reliability.demo import (

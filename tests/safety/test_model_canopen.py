@@ -39,9 +39,9 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
 
-from adapters.canopen import frames as f
 from adapters.canopen.adapter import CanOpenAdapter
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec import frames as f
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.master import FrameIn, Master, Send
 from adapters.canopen.master.engine import tpdo_loss_cycles
 from adapters.canopen.sim.node import SimNode, SimNodeConfig
@@ -193,14 +193,14 @@ class CanOpenModel(RuleBasedStateMachine):
     def _pass(self, now: float) -> None:
         """One driver pass (adapters.link.candriver's order): the adapter's refresh, the
         frames received stepped, the engine's step, the frames out delivered."""
-        self.adapter._before_step(now)
+        self.adapter.before_step(now)
         while self.from_node:
             frame = self.from_node.pop(0)
             self._act(self.engine.step(now, FrameIn(frame)))
         deadline = self.engine.next_deadline()
         if deadline is None or now >= deadline:
             self._act(self.engine.step(now))
-        self.adapter._after_step()
+        self.adapter.after_step(now)
 
     def advance(self, seconds: float) -> None:
         end = self.clock.t + seconds
@@ -209,7 +209,7 @@ class CanOpenModel(RuleBasedStateMachine):
             now = self.clock.t
             times = [end, now + MAX_STEP]
             if not self.killed:
-                times += [t for t in (self.engine.next_deadline(), self.adapter._wake_at()) if t]
+                times += [t for t in (self.engine.next_deadline(), self.adapter.wake_at()) if t]
             sim_due = self.sim.next_deadline()
             if sim_due is not None:
                 times.append(sim_due)

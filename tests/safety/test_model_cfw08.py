@@ -45,9 +45,9 @@ from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, pr
 
 from adapters.devicenet.adapter import DeviceNetAdapter, _Port
 from adapters.devicenet.cfw08 import In71, In150
-from adapters.devicenet.explicit import Request, Response
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import PredefinedMessage, match_predefined
+from adapters.devicenet.codec.explicit import Request, Response
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import PredefinedMessage, match_predefined
 from adapters.devicenet.scanner import (
     ExplicitResult,
     InputData,
@@ -182,7 +182,7 @@ class Cfw08Model(RuleBasedStateMachine):
         adapter.engine = self.line.scanner
         adapter._hub = self.hub
         adapter._request = self._request  # type: ignore[method-assign]
-        adapter._publish_capabilities(adapter.drives[MAC])
+        adapter.publish_capabilities(adapter.drives[MAC])
         self.hub.update("d", comm=CommState.OFFLINE)
         self.line.power_on()
         self.advance(1.0)

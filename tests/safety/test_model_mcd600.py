@@ -3,7 +3,7 @@
 The REAL profile (:class:`adapters.mcd600.profile.Mcd600Profile`, with the adapter's first
 telegram after a (re)connection, :func:`adapters.profibus.adapter.unconfigured_outputs`) and
 the REAL hub (:class:`gateway.hub.Hub`) on an injected clock, against the REAL simulated
-starter (:class:`adapters.mcd600.sim.Mcd600Sim`: its control word handling, reset input,
+starter (:class:`adapters.mcd600.sim.starter.Mcd600Sim`: its control word handling, reset input,
 comm timeout and parameter 6-13, auto-reset, keypad, Clear), cycled every 50 ms without a
 serial line: outputs -> ``sim.exchange`` -> inputs -> ``hub.update``, as the Profibus
 adapter does once the slave is in data exchange.
@@ -48,9 +48,7 @@ from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, pr
 from adapters.mcd600.layout import Mode
 from adapters.mcd600.monitoring import StarterState
 from adapters.mcd600.options import Mcd600Options
-from adapters.mcd600.profile import Mcd600Profile
-from adapters.mcd600.sim import Mcd600Sim
-from adapters.mcd600.simparams import (
+from adapters.mcd600.paramtable import (
     AUTO_RESET_ACTION,
     AUTO_RESET_DELAY,
     AUTO_RESET_MAX,
@@ -61,9 +59,11 @@ from adapters.mcd600.simparams import (
     STOP_TIME,
     CommandSource,
 )
+from adapters.mcd600.profile import Mcd600Profile
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.mcd600.words import ControlWord
 from adapters.profibus.adapter import unconfigured_outputs
-from adapters.profibus.dp import GlobalControl
+from adapters.profibus.codec.dp import GlobalControl
 from gateway.config import DriveConfig
 from gateway.errors import CommandRejected, StopAppliedRestRefused
 from gateway.hub import DrivePolicy, Hub

@@ -4,7 +4,7 @@ One hypothesis state machine per model: the real profile (:mod:`adapters.profibu
 the adapter's output choice before a drive is configured
 (:func:`adapters.profibus.adapter.unconfigured_outputs`) and its restart when ``on_connect``
 asks for new parameters, the real :class:`gateway.hub.Hub`, and the model's real simulator
-(:mod:`adapters.profibus.weg.sim`: state machine, P0313 reaction, motor), all on one
+(:mod:`adapters.profibus.weg.sim.drive`: state machine, P0313 reaction, motor), all on one
 injected clock, one Data_Exchange every :data:`DT`. No pty: the line is the harness below,
 which does what :class:`adapters.profibus.adapter.ProfibusAdapter` does per drive.
 
@@ -44,13 +44,13 @@ from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
 from adapters.profibus.adapter import MAX_REPARAMETERISE, unconfigured_outputs
-from adapters.profibus.weg import simparams as sp
 from adapters.profibus.weg.cfw11 import Cfw11Profile
 from adapters.profibus.weg.cfw320 import Cfw320Profile
 from adapters.profibus.weg.cfw700 import Cfw700Profile
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.profile import WegProfile
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim, WegSim
+from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim, Cfw700Sim, WegSim
 from adapters.profibus.weg.spec import DataProfile
 from gateway.adapter import EventKind
 from gateway.config import DriveConfig
@@ -249,7 +249,7 @@ class WegModel(RuleBasedStateMachine):
                 for e in self.events.drain()
             ):
                 self._stop_condition()
-            remote = self.sim._remote()
+            remote = self.sim.commands.remote()
             if self.prev_remote is not None and remote != self.prev_remote:
                 self._stop_condition()  # LOC/REM switched (HMI, P0313 or the network)
             self.prev_remote = remote
@@ -355,7 +355,7 @@ class WegModel(RuleBasedStateMachine):
     def _permitted(self) -> bool:
         if self.now - self.last_stop <= GRACE:
             return True  # the stop is on its way
-        if not self.sim._remote():
+        if not self.sim.commands.remote():
             # in local (the HMI, P0313 = 3 or 4) the drive follows its local sources, not the
             # network: its motion is the local operator's (local_control shown, I3)
             return True
@@ -405,7 +405,7 @@ class WegModel(RuleBasedStateMachine):
         jogging = live and self.sim.net.jog and abs(abs(self.sim.motor.speed) - sp.JOG_RPM) < 1
         if self._lasting("jogging", jogging and not self.sim.fault):
             assert state.status is DriveStatus.RUNNING, f"I3: jogging, shown {state.status}"
-        local = live and not self.sim._remote()
+        local = live and not self.sim.commands.remote()
         if self._lasting("local", local):
             assert state.local_control, "I3: the drive is in local, not shown"
 

@@ -336,7 +336,7 @@ def qemu_command(kernel: Path, initrd: Path) -> list[str]:
     return [
         "qemu-system-x86_64",
         "-accel",
-        "tcg",  # nested KVM hangs on these machines (docs/decisions.md)
+        "tcg",  # nested KVM hangs on these machines (docs/decisions/0028-vcan-suite-in-a-vm.md)
         "-m",
         "2G",
         "-smp",

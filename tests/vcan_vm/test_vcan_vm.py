@@ -112,7 +112,7 @@ def test_the_guest_keeps_the_hosts_tmp_when_the_project_lives_there() -> None:
     script = "\n".join(line.replace("mount -t tmpfs tmpfs", "echo") for line in guards)
     for root, mounted in (
         ("/tmp/clone", ["/host/run"]),
-        ("/work/main", ["/host/tmp", "/host/run"]),
+        ("/srv/checkout", ["/host/tmp", "/host/run"]),
     ):
         run = subprocess.run(
             ["sh", "-c", f"root={root}\n{script}"], capture_output=True, text=True, check=True

@@ -20,12 +20,12 @@ from typing import Any
 import aiohttp
 
 from gateway.config import DEFAULT_CONFIG, Config, load
-from gateway.daemon import READY_BOUND, Daemon, Runtime
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState, DriveStatus
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import READY_BOUND, Daemon, Runtime
+from gateway.runtime.systemd import Notifier
 from gateway.web.frontend import WebFrontEnd
-from gateway.web.settings import WebSection
+from gateway.webconfig import WebSection
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.timing import scaled
 from tests.zenoh.client import Client

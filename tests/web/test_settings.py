@@ -10,7 +10,7 @@ import pytest
 
 from gateway.config import DEFAULT_CONFIG, load
 from gateway.errors import ConfigError, ConfigErrors, StartupError
-from gateway.web.settings import LOOPBACK
+from gateway.webconfig import LOOPBACK
 from tests.web.harness import ROOT, TOKEN_SHA256, small_gateway, web_section
 
 

@@ -15,8 +15,8 @@ import pytest_asyncio
 from pymodbus.client import AsyncModbusTcpClient
 
 from gateway.config import load
-from gateway.daemon import Daemon
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.net import free_port, zenoh_endpoint
 from tests.zenoh.client import Client
 

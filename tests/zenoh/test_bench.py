@@ -33,7 +33,7 @@ def test_a_run_is_counted_up_to_its_sentinel_and_no_further() -> None:
 
 
 def test_the_reference_is_put_with_the_gateways_qos_for_a_change() -> None:
-    # docs/decisions.md: the gateway's QoS for a change, which is zenoh-python's default
+    # docs/decisions/0011-zenoh-bench-references.md: the gateway's QoS for a change, which is zenoh-python's default
     session = bench._session()  # no endpoints: nothing leaves the process
     try:
         plain = session.declare_publisher(f"{bench.PREFIX}/raw/drives/d0/state")

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from gateway.cli import build_parser
-from gateway.cli_docs import DefaultsFormatter, bash_completion, man_page, walk, zsh_completion
-from gateway.cli_tools import ACTIONS
+from gateway.cli.docs import bash_completion, man_page, zsh_completion
+from gateway.cli.parser import DefaultsFormatter, build_parser, walk
+from gateway.cli.tools import ACTIONS
 from gateway.model import COMMAND_FIELDS
 from tests.support.net import zenoh_endpoint
 from tests.support.timing import scaled

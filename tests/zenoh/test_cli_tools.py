@@ -93,7 +93,7 @@ def test_no_gateway_is_a_clear_error(tmp_path: Path) -> None:
 
 def test_watch_says_why_a_drive_left() -> None:
     """The last comm event with a reason (not the hub's bare transitions) is in the row."""
-    from gateway.cli_tools import COLUMNS, Board
+    from gateway.cli.tools import COLUMNS, Board
 
     board = Board()
     board.on_state({"id": "cfw11", "device": "CFW-11", "comm": "online", "status": "ready"})

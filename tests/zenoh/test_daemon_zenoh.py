@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest_asyncio
 
 from gateway.config import load
-from gateway.daemon import READY_BOUND, Daemon
-from gateway.systemd import Notifier
+from gateway.runtime.daemon import READY_BOUND, Daemon
+from gateway.runtime.systemd import Notifier
 from tests.support.fake_adapter import FakeAdapter
 from tests.support.net import zenoh_endpoint
 from tests.zenoh.client import Client

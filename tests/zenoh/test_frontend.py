@@ -16,11 +16,11 @@ import zenoh
 
 from gateway.adapter import Capabilities, EventKind, ParamValue
 from gateway.config import Config, ZenohSection
-from gateway.daemon import Runtime
 from gateway.errors import ConfigError
 from gateway.hub import DrivePolicy, Hub
 from gateway.model import CommState, Device, DriveState, Source, SpeedScale
-from gateway.zenoh import frontend as frontend_module
+from gateway.runtime.daemon import Runtime
+from gateway.zenoh import params as frontend_module
 from gateway.zenoh.frontend import ZenohFrontEnd
 from tests.support.net import zenoh_endpoint
 from tests.zenoh.client import Client

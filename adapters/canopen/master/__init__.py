@@ -3,35 +3,37 @@
 CiA 402 master side: the controlword for a state and a wish), :mod:`.events` (events,
 actions, configs)."""
 
+from adapters.can.events import (
+    BadFrame,
+    BusErrorIn,
+    FrameIn,
+    LinkDown,
+    NodeUnavailable,
+    Send,
+    TxFailed,
+)
 from adapters.canopen.master.control import STOPPED, Want, controlword
 from adapters.canopen.master.engine import Master
 from adapters.canopen.master.events import (
     Action,
-    BadFrame,
-    BusErrorIn,
     Configured,
     Conflict,
     EmcyIn,
     Event,
     FaultInfo,
-    FrameIn,
     Inputs,
     LineClaimed,
-    LinkDown,
     MasterConfig,
     MasterHeard,
     NodeConfig,
     NodeDown,
     NodeProblem,
     NodeSeen,
-    NodeUnavailable,
     NodeUp,
     PdoField,
     Report,
     SdoDone,
     SdoStep,
-    Send,
-    TxFailed,
 )
 from adapters.canopen.master.node import Phase
 

@@ -7,7 +7,7 @@ Quick stop 7/10/11, Fault reset 15 on the 0 -> 1 edge of bit 7). A pure function
 the state and the wish, so every cycle sends the word for where the drive is now; the
 fault reset edge is the engine's (one pulse, never repeated).
 
-Safety (ARCHITECTURE.md rules 1, 2): a quick stop releases through Disable voltage
+Safety (docs/architecture.md, safety rules 1, 2): a quick stop releases through Disable voltage
 (transition 12), never transition 16 (it would restart the drive without a new run
 command); a drive leaves FAULT only on the gateway's reset edge or its own means.
 """
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from adapters.canopen.cia402 import Cw, State
+from adapters.canopen.codec.cia402 import Cw, State
 
 # vl mode (0x6060 = 2): controlword bits 4-6 must be set for the ramp function
 # generator to follow the target (CiA 402-2 §10.2, rfg enable, unlock, use reference).

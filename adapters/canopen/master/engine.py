@@ -35,37 +35,41 @@ import math
 import struct
 from collections.abc import Sequence
 
-from adapters.canopen import codes, frames
-from adapters.canopen.cia402 import Cw, State, decode_state
+from adapters.can.events import (
+    BadFrame,
+    BusErrorIn,
+    FrameIn,
+    LinkDown,
+    NodeUnavailable,
+    Send,
+    TxFailed,
+)
+from adapters.canopen.codec import frames
+from adapters.canopen.codec.cia402 import Cw, State, decode_state
+from adapters.canopen.codec.frames import CanFrame, Kind, NmtCommand, NmtState, SdoClientTransfer
 from adapters.canopen.errors import CanOpenDecodeError
-from adapters.canopen.frames import CanFrame, Kind, NmtCommand, NmtState, SdoClientTransfer
+from adapters.canopen.master.bringup import (
+    SDO_LATE_MAX,
+    BringUp,
+    drop_jobs,
+    queue_release,
+    read_fault,
+)
 from adapters.canopen.master.control import STOPPED, Want, controlword, target
 from adapters.canopen.master.events import (
     Action,
-    BadFrame,
-    BusErrorIn,
-    Configured,
     Conflict,
     EmcyIn,
     Event,
-    FaultInfo,
-    FrameIn,
     Inputs,
     LineClaimed,
-    LinkDown,
     MasterConfig,
     MasterHeard,
     NodeConfig,
     NodeDown,
-    NodeProblem,
-    NodeSeen,
-    NodeUnavailable,
-    NodeUp,
     PdoField,
     Report,
     SdoDone,
-    Send,
-    TxFailed,
 )
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
@@ -95,7 +99,6 @@ TPDO_CREDIT_MAX = 2
 # a late SYNC or heartbeat moves the next one: never sooner than this share of the period
 # after it (missed slots are skipped, never sent in a burst)
 SLOT_MIN_GAP = 0.9
-SDO_LATE_MAX = 4  # late answers expected at most (transfers ended without an answer)
 FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE})
 HOLD_MARGIN = 0.002  # s: a receive hold ends this long before the next SYNC (at most cycle/4)
 # s: no shorter hold (the loop's wait is rounded up to whole milliseconds, epoll: a short
@@ -123,6 +126,7 @@ class Master:
             "bad_frames": 0,
             "bus_errors": 0,
             "tx_failures": 0,
+            "tx_dropped": 0,
             "foreign_master_frames": 0,
         }
         self._left = False
@@ -134,6 +138,7 @@ class Master:
         self._claimed = config.listen <= 0  # listened without hearing another master
         self._refused = False  # another master heard while listening: silent for good
         self._listen_until: float | None = None
+        self._bringup = BringUp(config, lambda: self._releasing)
 
     # ------------------------------------------------------------ the adapter's side
 
@@ -194,10 +199,10 @@ class Master:
         if not self._claimed:
             return out  # never on the line: nothing to release
         for node in self.nodes.values():
-            self._drop_jobs(node, now, "the gateway is leaving the line", out)
+            drop_jobs(node, "the gateway is leaving the line", out)
             node.probe_at = None
             if node.consumer_set or node.phase in (Phase.CONFIGURE, Phase.START, Phase.ONLINE):
-                self._queue_release(node)
+                queue_release(node)
             if node.jobs:
                 self._start_job(node, now, out)
         self._due = self._compute_due()
@@ -344,7 +349,7 @@ class Master:
         if self._refused:
             return
         if isinstance(event, FrameIn):
-            cob = self._classify(event.frame.cob_id)
+            cob = self._classify(event.frame.arbitration_id)
             what = None if cob is None else self._master_frame(cob, event.frame)
             if what is not None:
                 self.figures["foreign_master_frames"] += 1
@@ -470,7 +475,7 @@ class Master:
     # ------------------------------------------------------------ phases
 
     def _to_probe(self, node: Node, now: float, at: float, out: list[Action]) -> None:
-        self._drop_jobs(node, now, "node lost", out)
+        drop_jobs(node, "node lost", out)
         node.phase = Phase.PROBE
         node.phase_deadline = None
         node.probe_at = at
@@ -484,86 +489,12 @@ class Master:
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
-        self._drop_jobs(node, now, f"node lost: {reason}", out)
+        drop_jobs(node, f"node lost: {reason}", out)
         self._to_probe(node, now, now + self.config.retry, out)
         node.seen = False
         node.figures["lost"] += 1
         if was_seen:
             out.append(NodeDown(node.id, reason))
-
-    def _fail(self, node: Node, now: float, text: str, code: int | None, out: list[Action]) -> None:
-        self._drop_jobs(node, now, f"bring-up failed: {text}", out)
-        node.phase = Phase.FAILED
-        node.probe_at = None
-        node.watch_heartbeat = False  # not started: its silence is no news
-        node.phase_deadline = now + self.config.failed_retry
-        node.last_problem = text
-        out.append(NodeProblem(node.id, text, code))
-        if node.consumer_set:
-            # a drive the gateway does not start must not watch its heartbeat: it would
-            # react per 0x6007 when the gateway stops (EMCY 0x8130 on a clean stop)
-            self._queue_release(node)
-
-    def _queue_release(self, node: Node) -> None:
-        for s in node.config.release:
-            node.jobs.append(Job(Purpose.RELEASE, s.index, s.subindex, s.data))
-
-    def _drop_jobs(self, node: Node, now: float, why: str, out: list[Action]) -> None:
-        """End every SDO job of the node; a transfer under way is aborted on the line
-        (CiA 301 §7.2.4.3.17, general error) so that the server starts afresh."""
-        jobs = list(node.jobs)
-        if node.current is not None:
-            jobs.insert(0, node.current)
-            transfer = node.transfer
-            if transfer is not None and transfer.result is None:
-                abort = frames.Abort(transfer.index, transfer.subindex, codes.ABORT_GENERAL)
-                out.append(
-                    Send(CanFrame(frames.sdo_rx_id(node.id), frames.encode_sdo_request(abort)))
-                )
-                node.sdo_late = min(node.sdo_late + 1, SDO_LATE_MAX)
-        node.jobs.clear()
-        node.current = node.transfer = None
-        node.sdo_deadline = None
-        for job in jobs:
-            if job.purpose is Purpose.USER:
-                out.append(SdoDone(job.token, node.id, error=why))
-
-    def _configure(self, node: Node, now: float, out: list[Action]) -> None:
-        if self.config.nmt_master:
-            out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
-        node.phase = Phase.CONFIGURE
-        node.step = 0
-        node.reports = {}
-        self._next_step(node, now, out)
-
-    def _next_step(self, node: Node, now: float, out: list[Action]) -> None:
-        steps = node.config.steps
-        if node.step < len(steps):
-            s = steps[node.step]
-            node.jobs.appendleft(Job(Purpose.WRITE, s.index, s.subindex, s.data, step=node.step))
-            return
-        pending = [k for k in node.config.reports if k not in node.reports]
-        if pending:
-            node.jobs.appendleft(Job(Purpose.REPORT, *pending[0]))
-            return
-        out.append(Configured(node.id, dict(node.reports)))
-        node.phase = Phase.START
-        node.watch_heartbeat = True
-        if node.heard_at is None:
-            node.heard_at = now
-        if self.config.nmt_master:
-            out.append(Send(frames.encode_nmt(NmtCommand.START, node.id)))
-            node.phase_deadline = now + max(self._hb_timeout(node), self.config.boot_timeout)
-        if node.heard is NmtState.OPERATIONAL and not self.config.nmt_master:
-            self._online(node, out)
-
-    def _online(self, node: Node, out: list[Action]) -> None:
-        node.phase = Phase.ONLINE
-        node.tpdo_silent = 0
-        node.tpdo_credit = 1
-        node.phase_deadline = None
-        node.last_problem = None
-        out.append(NodeUp(node.id))
 
     # ------------------------------------------------------------ SDO channel
 
@@ -632,147 +563,8 @@ class Master:
         node.figures["sdo_transfers"] += 1
         if result.abort_code is not None:
             node.figures["sdo_aborts"] += 1
-        handler = {
-            Purpose.PROBE: self._probed,
-            Purpose.WRITE: self._written,
-            Purpose.VERIFY: self._verified,
-            Purpose.REPORT: self._reported,
-            Purpose.FAULT: self._fault_read,
-            Purpose.RELEASE: self._released_one,
-        }.get(job.purpose)
-        if handler is None:
+        if not self._bringup.answered(node, now, job, result, out):
             out.append(SdoDone(job.token, node.id, result))
-            return
-        handler(node, now, job, result, out)
-
-    def _probed(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        if node.phase is not Phase.PROBE:
-            return
-        if not result.ok:
-            if result.by_server:  # it answers, but not 0x1000: no CANopen device we know
-                self._fail(node, now, f"device type 0x1000: {result.message}", None, out)
-            else:
-                node.probe_at = now + self.config.retry
-                if self.config.nmt_master and node.heard is NmtState.STOPPED:
-                    # a stopped node serves no SDO (CiA 301 §7.3.2.2.3): wake it up
-                    out.append(Send(frames.encode_nmt(NmtCommand.ENTER_PRE_OPERATIONAL, node.id)))
-            return
-        if not node.seen:
-            node.seen = True
-            out.append(NodeSeen(node.id))
-        profile = node.config.device_profile
-        device_type = int.from_bytes(result.data, "little")
-        if profile is not None and device_type & 0xFFFF != profile:
-            text = (
-                f"device type 0x1000 is 0x{device_type:08X}: profile {device_type & 0xFFFF}, "
-                f"not CiA {profile}"
-            )
-            self._fail(node, now, text, None, out)
-            return
-        if (
-            self.config.nmt_master
-            and node.config.reset_if_operational
-            and node.heard in (NmtState.OPERATIONAL, None)  # or not known: no heartbeat yet
-            and not node.reset_done
-        ):
-            node.reset_done = True
-            node.phase = Phase.RESET
-            node.phase_deadline = now + self.config.boot_timeout
-            out.append(Send(frames.encode_nmt(NmtCommand.RESET_NODE, node.id)))
-            heard = "was operational" if node.heard is not None else "sends no heartbeat"
-            out.append(Report(node.id, f"node {heard}: NMT reset node sent"))
-            return
-        self._configure(node, now, out)
-
-    def _written(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        s = node.config.steps[job.step]
-        if not result.ok:
-            who = "refused" if result.by_server else "failed"
-            text = (
-                f"{s.what}: write of 0x{s.index:04X}:{s.subindex} = 0x{s.data[::-1].hex()} "
-                f"{who}: {result.message}"
-            )
-            if s.optional and result.by_server:
-                self._pass_over(node, now, text, out)
-                return
-            self._fail(node, now, text, result.abort_code, out)
-            return
-        if s.index == 0x1017 and s.subindex == 0:
-            node.watch_heartbeat = True  # the producer runs from now on
-            node.heard_at = now
-        if (s.index, s.subindex) == (0x1016, 1) and int.from_bytes(s.data, "little"):
-            node.consumer_set = True  # it watches the gateway's heartbeat from now on
-        if s.read_back:
-            node.jobs.appendleft(Job(Purpose.VERIFY, s.index, s.subindex, step=job.step))
-            return
-        node.step += 1
-        self._next_step(node, now, out)
-
-    def _verified(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        s = node.config.steps[job.step]
-        if not result.ok:
-            text = f"{s.what}: read-back of 0x{s.index:04X}:{s.subindex} failed: {result.message}"
-            if s.optional and result.by_server:
-                self._pass_over(node, now, text, out)
-                return
-            self._fail(node, now, text, result.abort_code, out)
-            return
-        wrote = int.from_bytes(s.data, "little") & s.mask
-        read = int.from_bytes(result.data, "little") & s.mask
-        if wrote != read:
-            text = (
-                f"{s.what}: 0x{s.index:04X}:{s.subindex} reads back 0x{read:X} after "
-                f"writing 0x{wrote:X}"
-            )
-            if s.optional:
-                self._pass_over(node, now, text, out)
-                return
-            self._fail(node, now, text, None, out)
-            return
-        node.step += 1
-        self._next_step(node, now, out)
-
-    def _pass_over(self, node: Node, now: float, text: str, out: list[Action]) -> None:
-        """An optional step the node refused (an unused PDO it will not switch off):
-        reported, and the bring-up goes on with the next step."""
-        out.append(Report(node.id, f"{text} (the bring-up goes on)"))
-        node.step += 1
-        self._next_step(node, now, out)
-
-    def _reported(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        node.reports[(job.index, job.subindex)] = result.data if result.ok else b""
-        self._next_step(node, now, out)
-
-    def _released_one(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        if result.ok:
-            node.figures["released"] += 1
-            node.consumer_set = False
-            return
-        what = "leaving" if self._releasing else "not started"
-        text = (
-            f"{what}: write of 0x{job.index:04X}:{job.subindex} failed: {result.message} "
-            "(the drive reacts per 0x6007 when the gateway's heartbeat stops)"
-        )
-        out.append(Report(node.id, text))
-
-    def _fault_read(
-        self, node: Node, now: float, job: Job, result: frames.SdoResult, out: list[Action]
-    ) -> None:
-        if result.ok:
-            node.fault_reads[(job.index, job.subindex)] = result.data
-        node.fault_pending -= 1
-        if node.fault_pending <= 0:
-            out.append(FaultInfo(node.id, dict(node.fault_reads)))
 
     # ------------------------------------------------------------ frames in
 
@@ -792,6 +584,7 @@ class Master:
                     self._lose(node, now, f"CAN link down: {event.reason}", out)
         elif isinstance(event, TxFailed):
             self.figures["tx_failures"] += 1
+            self.figures["tx_dropped"] += event.dropped
         return None
 
     def _classify(self, cob_id: int) -> frames.CobId | None:
@@ -809,7 +602,7 @@ class Master:
         return cob
 
     def _on_frame(self, now: float, frame: CanFrame, out: list[Action]) -> Node | None:
-        cob = self._classify(frame.cob_id)
+        cob = self._classify(frame.arbitration_id)
         if cob is None:
             self.figures["bad_frames"] += 1
             return None
@@ -838,7 +631,7 @@ class Master:
             self._on_heartbeat(node, now, frame.data, out)
         elif kind is Kind.EMCY:
             try:
-                emcy = frames.decode_emcy(frame.data, cob_id=frame.cob_id)
+                emcy = frames.decode_emcy(frame.data, cob_id=frame.arbitration_id)
             except CanOpenDecodeError as exc:
                 self.figures["bad_frames"] += 1
                 out.append(Report(node.id, f"bad EMCY: {exc}"))
@@ -865,7 +658,7 @@ class Master:
                 node.probe_at = now  # it is there: bring it up at once
             return
         if phase is Phase.START and state is NmtState.OPERATIONAL:
-            self._online(node, out)
+            self._bringup.online(node, out)
         elif phase is Phase.ONLINE and state is not NmtState.OPERATIONAL:
             self._lose(node, now, f"the node left operational ({state.name.lower()})", out)
 
@@ -906,15 +699,8 @@ class Master:
             previous = node.state
             node.statusword, node.state = statusword, state
             if state in FAULT_STATES and previous not in FAULT_STATES:
-                self._read_fault(node)
+                read_fault(node)
         return Inputs(node.id, statusword, values[1:])
-
-    def _read_fault(self, node: Node) -> None:
-        node.fault_reads = {}
-        reads = node.config.fault_reads
-        node.fault_pending = len(reads)
-        for index, subindex in reads:
-            node.jobs.append(Job(Purpose.FAULT, index, subindex))
 
     # ------------------------------------------------------------ diagnostics
 

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from adapters.canopen.frames import CanFrame, Emcy, MappingEntry, SdoResult
-from adapters.link.canerror import LineCondition
-from gateway.errors import GatewayError
+from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, Send, TxFailed
+from adapters.canopen.codec.frames import CanFrame, Emcy, MappingEntry, SdoResult
 
 # ---------------------------------------------------------------- configuration
 
@@ -105,41 +104,11 @@ class MasterConfig:
 # ---------------------------------------------------------------- events
 
 
-@dataclass(frozen=True, slots=True)
-class FrameIn:
-    frame: CanFrame
-
-
-@dataclass(frozen=True, slots=True)
-class BadFrame:
-    reason: str
-
-
-@dataclass(frozen=True, slots=True)
-class BusErrorIn:
-    conditions: frozenset[LineCondition]
-
-
-@dataclass(frozen=True, slots=True)
-class LinkDown:
-    reason: str
-
-
-@dataclass(frozen=True, slots=True)
-class TxFailed:
-    reason: str
-    dropped: int = 0
-
-
-Event = FrameIn | BadFrame | BusErrorIn | LinkDown | TxFailed
+Event = FrameIn[CanFrame] | BadFrame | BusErrorIn | LinkDown | TxFailed
+"""The master's events: its link's (:mod:`adapters.can.events`)."""
 
 
 # ---------------------------------------------------------------- actions
-
-
-@dataclass(frozen=True, slots=True)
-class Send:
-    frame: CanFrame
 
 
 @dataclass(frozen=True, slots=True)
@@ -255,7 +224,7 @@ class Conflict:
 
 
 Action = (
-    Send
+    Send[CanFrame]
     | LineClaimed
     | MasterHeard
     | Conflict
@@ -270,7 +239,3 @@ Action = (
     | SdoDone
     | Report
 )
-
-
-class NodeUnavailable(GatewayError):
-    """The node is not operational: no SDO job for it."""

@@ -9,8 +9,8 @@ from collections import deque
 from dataclasses import dataclass, field
 from enum import Enum
 
-from adapters.canopen.cia402 import State
-from adapters.canopen.frames import CanFrame, NmtState, SdoClientTransfer
+from adapters.canopen.codec.cia402 import State
+from adapters.canopen.codec.frames import CanFrame, NmtState, SdoClientTransfer
 from adapters.canopen.master.control import STOPPED, Want
 from adapters.canopen.master.events import Inputs, NodeConfig
 

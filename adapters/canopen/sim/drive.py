@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 
-from adapters.canopen.cia402 import (
+from adapters.canopen.codec.cia402 import (
     MODE_PROFILE_VELOCITY,
     MODE_VELOCITY,
     SW_INTERNAL_LIMIT,

@@ -45,8 +45,8 @@ from canopen.objectdictionary import ODArray, ODVariable
 from canopen.pdo.base import PdoBase, PdoMap
 from canopen.sdo.exceptions import SdoAbortedError
 
-from adapters.canopen import cia402
-from adapters.canopen.codes import (
+from adapters.canopen.codec import cia402
+from adapters.canopen.codec.codes import (
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,
     ABORT_NOT_MAPPABLE,
@@ -55,7 +55,7 @@ from adapters.canopen.codes import (
     ABORT_TOO_HIGH,
     ABORT_TOO_LOW,
 )
-from adapters.canopen.frames import (
+from adapters.canopen.codec.frames import (
     COB_NMT,
     COB_SYNC,
     HEARTBEAT_BASE,
@@ -516,7 +516,7 @@ class SimNode:
             if not pdo_map.enabled or tt is None or tt > 240:
                 continue
             timer = self._tpdo.setdefault(number, _TpdoTimer())
-            data = self._tpdo_data(pdo_map)
+            data = _tpdo_data(self.local, pdo_map)
             if tt == 0:  # acyclic synchronous: on SYNC after a change
                 if data != timer.last_data:
                     self._send_tpdo(now, pdo_map, timer, data)
@@ -528,22 +528,15 @@ class SimNode:
 
     # ------------------------------------------------------------ OD access
 
-    def _check_sub(self, index: int, subindex: int) -> None:
-        """The library makes up any sub-index of an ARRAY from its first member: only
-        the EDS's own sub-indexes exist here (0x06090011 for the others)."""
-        obj = self.od.get(index)
-        if isinstance(obj, ODArray) and subindex not in obj.subindices:
-            raise SdoAbortedError(ABORT_NO_SUBINDEX)
-
     def _on_read(self, *, index: int, subindex: int, od: ODVariable) -> int | None:
-        self._check_sub(index, subindex)
+        _check_sub(self.od, index, subindex)
         get = _LIVE.get((index, subindex))
         return None if get is None else get(self.drive)
 
     def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         """Checks a write before the library stores it (raising an SDO abort refuses it)
         and hands drive inputs to the drive model."""
-        self._check_sub(index, subindex)
+        _check_sub(self.od, index, subindex)
         value = od.decode_raw(data)
         if isinstance(value, int) and not isinstance(value, bool):
             if od.min is not None and value < od.min:
@@ -667,7 +660,7 @@ class SimNode:
             if not pdo_map.enabled or tt not in (254, 255):
                 continue
             timer = self._tpdo.setdefault(number, _TpdoTimer())
-            data = self._tpdo_data(pdo_map)
+            data = _tpdo_data(self.local, pdo_map)
             inhibit = (pdo_map.inhibit_time or 0) / 10000.0  # 100 us units
             event = (pdo_map.event_timer or 0) / 1000.0
             since = None if timer.last_sent is None else now - timer.last_sent
@@ -676,11 +669,6 @@ class SimNode:
                 continue
             if changed or since is None or (event > 0 and since >= event - EPSILON):
                 self._send_tpdo(now, pdo_map, timer, data)
-
-    def _tpdo_data(self, pdo_map: PdoMap) -> bytes:
-        for var in pdo_map:
-            var.set_data(self.local.get_data(var.index, var.subindex))
-        return bytes(pdo_map.data)
 
     def _send_tpdo(self, now: float, pdo_map: PdoMap, timer: _TpdoTimer, data: bytes) -> None:
         timer.last_sent = now
@@ -708,6 +696,21 @@ class SimNode:
 
 def _nothing() -> None:
     return
+
+
+def _check_sub(od: canopen.ObjectDictionary, index: int, subindex: int) -> None:
+    """The library makes up any sub-index of an ARRAY from its first member: only the
+    EDS's own sub-indexes exist here (0x06090011 for the others)."""
+    obj = od.get(index)
+    if isinstance(obj, ODArray) and subindex not in obj.subindices:
+        raise SdoAbortedError(ABORT_NO_SUBINDEX)
+
+
+def _tpdo_data(local: canopen.LocalNode, pdo_map: PdoMap) -> bytes:
+    """A TPDO's data from the node's objects as they are now."""
+    for var in pdo_map:
+        var.set_data(local.get_data(var.index, var.subindex))
+    return bytes(pdo_map.data)
 
 
 def _maps(pdo: PdoBase) -> Mapping[int, PdoMap]:

@@ -14,15 +14,14 @@ import asyncio
 import contextlib
 from typing import Final
 
-from adapters.canopen.frames import CanFrame
+from adapters.can.simulated import SIM_START_BOUND, SimulatedLine
+from adapters.canopen.codec.frames import CanFrame
 from adapters.canopen.link import CanLink, LinkConfig
 from adapters.canopen.options import BusOptions, DriveOptions
 from adapters.canopen.sim.node import BootState, SimNodeConfig
 from adapters.canopen.sim.runner import SimRunner
-from adapters.link.can import CanLinks
 from gateway.config import BusConfig
 
-SIM_START_BOUND: Final = 2.0  # s
 SIM_DEFAULT_RATED_CURRENT: Final = 10.0  # A, for a drive whose config and EDS give none
 
 
@@ -48,35 +47,24 @@ def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
     return out
 
 
-class SimulatedBus(CanLinks[CanFrame]):
+class SimulatedBus(SimulatedLine[CanFrame, SimRunner]):
     """The bus's drives simulated on its in-process channel (see the module docstring)."""
 
     def __init__(self, bus: BusConfig, nodes: list[SimNodeConfig] | None = None) -> None:
         options: BusOptions = bus.options
-        self.name = bus.name
-        self.config = LinkConfig(options.interface, options.channel, options.bitrate)
+        config = LinkConfig(options.interface, options.channel, options.bitrate)
+        super().__init__("canopen", bus.name, config)
         self.nodes = sim_configs(bus) if nodes is None else nodes
-        self.runner: SimRunner | None = None
-        """The simulated nodes while the line runs (tests inject faults through it)."""
-        self._task: asyncio.Task[None] | None = None
 
     def link(self) -> CanLink:
         return CanLink(self.config)
 
-    async def start(self) -> None:
-        runner = SimRunner("virtual", self.config.channel, self.nodes)
-        self.runner = runner
-        task = self._task = asyncio.create_task(runner.run(), name=f"canopen-sim-{self.name}")
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(SIM_START_BOUND):
-                await runner.started.wait()
-        if task.done():
-            task.result()  # raises what broke the simulator
+    def new_runner(self) -> SimRunner:
+        return SimRunner("virtual", self.config.channel, self.nodes)
 
-    async def stop(self) -> None:
-        task, self._task = self._task, None
-        if task is None:
-            return
+    async def end(self, task: asyncio.Task[None]) -> None:
+        """The runner told to stop (it shuts its bus down and returns), awaited at most
+        :data:`SIM_START_BOUND` s; cancelled if it did not end."""
         if self.runner is not None:
             self.runner.stop()
         with contextlib.suppress(TimeoutError, asyncio.CancelledError, Exception):

@@ -4,8 +4,8 @@
   (seed 5.10) and the mapping of the assemblies to the common drive model;
 - :mod:`.objects`: the drive's DeviceNet objects and parameters as data (seed 4, 5);
 - :mod:`.profile`: :class:`~adapters.devicenet.cfw08.profile.Cfw08Profile`, the
-  :class:`~adapters.devicenet.profile.DnProfile` of the drive (connect steps P710/P313/P702,
-  parameter access, status reads), registered in ``adapters.devicenet.profile.PROFILES``.
+  :class:`~adapters.devicenet.contract.DnProfile` of the drive (connect steps P710/P313/P702,
+  parameter access, status reads), registered in ``adapters.devicenet.contract.PROFILES``.
 
 The codec names of :mod:`.assemblies` are re-exported here (the simulator and tests use them).
 """

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, ClassVar, Protocol
 
-from adapters.devicenet.datatypes import CipType, encode_value, read_value
+from adapters.devicenet.codec.datatypes import CipType, encode_value, read_value
 from adapters.devicenet.errors import AssemblyDecodeError, DataTypeDecodeError
 from gateway.adapter import Capabilities
 from gateway.errors import FrameEncodeError

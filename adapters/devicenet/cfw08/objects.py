@@ -12,8 +12,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum, Flag
 
-from adapters.devicenet.cip import CipClass
-from adapters.devicenet.datatypes import (
+from adapters.devicenet.codec.cip import CipClass
+from adapters.devicenet.codec.datatypes import (
     AttributeValue,
     CipType,
     decode_short_string,

@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
-from adapters.devicenet import objects
 from adapters.devicenet.cfw08.assemblies import (
     P070_COMM_ERROR,
     P070_TEXT,
@@ -55,12 +54,13 @@ from adapters.devicenet.cfw08.objects import (
     decode_attribute,
     encode_attribute,
 )
-from adapters.devicenet.cip import CipClass
-from adapters.devicenet.datatypes import AttributeValue
+from adapters.devicenet.cfw08.options import DriveOptions, parse_drive
+from adapters.devicenet.codec import objects
+from adapters.devicenet.codec.cip import CipClass
+from adapters.devicenet.codec.datatypes import AttributeValue
+from adapters.devicenet.codec.explicit import GetAttributeSingle, SetAttributeSingle
+from adapters.devicenet.contract import DnProfile, DrivePort, NotConfigured, reply_data
 from adapters.devicenet.errors import DeviceNetDecodeError
-from adapters.devicenet.explicit import GetAttributeSingle, SetAttributeSingle
-from adapters.devicenet.options import DriveOptions, parse_drive
-from adapters.devicenet.profile import DnProfile, DrivePort, NotConfigured, reply_data
 from adapters.devicenet.scanner.events import IoKind
 from gateway.adapter import (
     Capabilities,

@@ -7,31 +7,33 @@ message job queue, ``context`` what they share; ``node`` the per-node state. It 
 codecs only: no python-can, no asyncio (docs/architecture.md, "DeviceNet scanner").
 """
 
+from adapters.can.events import (
+    BadFrame,
+    BusErrorIn,
+    FrameIn,
+    LinkDown,
+    NodeUnavailable,
+    Send,
+    TxFailed,
+)
 from adapters.devicenet.scanner.engine import LinePhase, Scanner
 from adapters.devicenet.scanner.events import (
     Action,
-    BadFrame,
-    BusErrorIn,
     Event,
     ExplicitResult,
-    FrameIn,
     IdentityCheck,
     InputData,
     IoConflict,
     IoKind,
     LineFault,
     LineOnline,
-    LinkDown,
     NodeConfig,
     NodeDown,
     NodeIdentity,
-    NodeUnavailable,
     NodeUp,
     Report,
     ReportKind,
     ScannerConfig,
-    Send,
-    TxFailed,
 )
 from adapters.devicenet.scanner.node import Phase
 

@@ -7,10 +7,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from adapters.devicenet.fragment import UNFRAGMENTED_MAX, fragment_io
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import PredefinedId, PredefinedMessage
-from adapters.devicenet.scanner.events import Action, Report, ReportKind, ScannerConfig, Send
+from adapters.can.events import Send
+from adapters.devicenet.codec.fragment import UNFRAGMENTED_MAX, fragment_io
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import PredefinedId, PredefinedMessage
+from adapters.devicenet.scanner.events import Action, Report, ReportKind, ScannerConfig
 from adapters.devicenet.scanner.node import Node
 
 

@@ -29,34 +29,30 @@ from collections.abc import Callable, Iterable
 from enum import Enum
 from typing import Any
 
-from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
+from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, NodeUnavailable, TxFailed
+from adapters.can.health import LineHealth, health_after
+from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.explicit import Request
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import PredefinedId, PredefinedMessage, match_predefined
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanId
-from adapters.devicenet.explicit import Request
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import PredefinedId, PredefinedMessage, match_predefined
 from adapters.devicenet.scanner.context import LineContext, ms
 from adapters.devicenet.scanner.events import (
     Action,
-    BadFrame,
-    BusErrorIn,
     Event,
-    FrameIn,
     IoKind,
     LineFault,
     LineOnline,
-    LinkDown,
     NodeConfig,
-    NodeUnavailable,
     ReportKind,
     ScannerConfig,
-    TxFailed,
 )
 from adapters.devicenet.scanner.jobs import ExplicitJobs
 from adapters.devicenet.scanner.machine import NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
 from adapters.devicenet.scanner.scheduler import Scheduler
 from adapters.devicenet.scanner.timers import SteadyTimers
-from adapters.link.canerror import LineCondition, LineHealth, health_after
+from adapters.link.canerror import LineCondition
 from gateway.errors import FrameEncodeError
 
 
@@ -202,6 +198,12 @@ class Scanner:
     @property
     def left(self) -> bool:
         return all(n.phase is Phase.RELEASED for n in self.nodes.values())
+
+    def explicit_turns_ahead(self) -> int:
+        """How many turns of the line's explicit window the requests queued or in flight
+        (all nodes) take: a request submitted now starts within that many."""
+        backlog = sum(len(n.queue) + (n.current is not None) for n in self.nodes.values())
+        return -(-backlog // self._ctx.config.explicit_window)
 
     def online_macs(self) -> list[int]:
         return [m for m, n in self.nodes.items() if n.phase is Phase.ONLINE]

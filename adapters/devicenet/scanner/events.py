@@ -8,12 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 
-from adapters.devicenet.explicit import Response
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import MAX_MAC
-from adapters.devicenet.objects import AllocationChoice, ConnectionInstance
-from adapters.link.canerror import LineCondition
-from gateway.errors import GatewayError
+from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, Send, TxFailed
+from adapters.devicenet.codec.explicit import Response
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import MAX_MAC
+from adapters.devicenet.codec.objects import AllocationChoice, ConnectionInstance
 
 # ---------------------------------------------------------------- config
 
@@ -131,52 +130,11 @@ class ScannerConfig:
 # ---------------------------------------------------------------- events (in)
 
 
-@dataclass(frozen=True, slots=True)
-class FrameIn:
-    """A data frame from the bus."""
-
-    frame: CanFrame
-
-
-@dataclass(frozen=True, slots=True)
-class BadFrame:
-    """A frame the link could not turn into a CanFrame (extended id, too long...)."""
-
-    reason: str
-
-
-@dataclass(frozen=True, slots=True)
-class BusErrorIn:
-    """A SocketCAN error frame, decoded by :mod:`adapters.link.canerror`."""
-
-    conditions: frozenset[LineCondition]
-
-
-@dataclass(frozen=True, slots=True)
-class TxFailed:
-    """The link could not send (transmit buffer full, interface down): back off."""
-
-    reason: str
-    dropped: int = 1
-
-
-@dataclass(frozen=True, slots=True)
-class LinkDown:
-    """The CAN interface is down (SocketCAN ENETDOWN on a send or a receive): every
-    connection on the line is gone; nodes are allocated again once frames pass."""
-
-    reason: str
-
-
-Event = FrameIn | BadFrame | BusErrorIn | TxFailed | LinkDown
+Event = FrameIn[CanFrame] | BadFrame | BusErrorIn | TxFailed | LinkDown
+"""The scanner's events: its link's (:mod:`adapters.can.events`)."""
 
 
 # ---------------------------------------------------------------- actions (out)
-
-
-@dataclass(frozen=True, slots=True)
-class Send:
-    frame: CanFrame
 
 
 @dataclass(frozen=True, slots=True)
@@ -265,7 +223,7 @@ class LineFault:
 
 
 Action = (
-    Send
+    Send[CanFrame]
     | NodeUp
     | NodeDown
     | InputData
@@ -275,7 +233,3 @@ Action = (
     | LineOnline
     | LineFault
 )
-
-
-class NodeUnavailable(GatewayError):
-    """An explicit request for a node that is not online."""

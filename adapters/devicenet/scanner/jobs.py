@@ -13,8 +13,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 
-from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.explicit import (
     AllocateResponse,
     ErrorResponse,
     ExplicitMessage,
@@ -22,14 +21,15 @@ from adapters.devicenet.explicit import (
     Response,
     SuccessResponse,
 )
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.fragment import (
     ExplicitFragment,
     ExplicitSender,
     FragmentAck,
     Unfragmented,
     decode_explicit_frame,
 )
-from adapters.devicenet.ids import PredefinedMessage
+from adapters.devicenet.codec.ids import PredefinedMessage
+from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import ExplicitResult
 from adapters.devicenet.scanner.node import Node, Pending, Phase, Transaction

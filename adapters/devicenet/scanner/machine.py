@@ -15,20 +15,20 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from adapters.devicenet.cip import (
+from adapters.devicenet.codec.cip import (
     DEVICENET_ADDITIONAL_CODE_TEXT,
     NO_ADDITIONAL_CODE,
     AllocationRejection,
     CipClass,
     allocation_rejection,
 )
-from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value, encode_value
-from adapters.devicenet.errors import (
-    DataTypeDecodeError,
-    DeviceNetDecodeError,
-    FragmentationError,
+from adapters.devicenet.codec.datatypes import (
+    CipType,
+    decode_short_string,
+    decode_value,
+    encode_value,
 )
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     BodyFormat,
@@ -41,14 +41,19 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     error_text,
 )
-from adapters.devicenet.fragment import UNFRAGMENTED_MAX
-from adapters.devicenet.ids import PredefinedMessage
-from adapters.devicenet.objects import (
+from adapters.devicenet.codec.fragment import UNFRAGMENTED_MAX
+from adapters.devicenet.codec.ids import PredefinedMessage
+from adapters.devicenet.codec.objects import (
     INACTIVITY_EPR_FACTOR,
     AllocationChoice,
     ConnectionAttribute,
     ConnectionInstance,
     IdentityAttribute,
+)
+from adapters.devicenet.errors import (
+    DataTypeDecodeError,
+    DeviceNetDecodeError,
+    FragmentationError,
 )
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import (

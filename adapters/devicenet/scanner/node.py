@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
-from adapters.devicenet.explicit import ExplicitMessage, Request, Response
-from adapters.devicenet.fragment import ExplicitReassembler, ExplicitSender, IoReassembler
+from adapters.devicenet.codec.explicit import ExplicitMessage, Request, Response
+from adapters.devicenet.codec.fragment import ExplicitReassembler, ExplicitSender, IoReassembler
 from adapters.devicenet.scanner.events import NodeConfig
 
 

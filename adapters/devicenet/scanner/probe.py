@@ -26,11 +26,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from adapters.devicenet.cip import AllocationRejection, allocation_rejection
-from adapters.devicenet.datatypes import CipType, decode_short_string, decode_value
-from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
-from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.cip import AllocationRejection, allocation_rejection
+from adapters.devicenet.codec.datatypes import CipType, decode_short_string, decode_value
+from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     ErrorResponse,
@@ -42,15 +41,21 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     error_text,
 )
-from adapters.devicenet.fragment import (
+from adapters.devicenet.codec.fragment import (
     ExplicitReassembler,
     FragmentAck,
     Unfragmented,
     decode_explicit_frame,
 )
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import MAX_MAC, PredefinedMessage, match_predefined, predefined_can_id
-from adapters.devicenet.objects import AllocationChoice, IdentityAttribute
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import (
+    MAX_MAC,
+    PredefinedMessage,
+    match_predefined,
+    predefined_can_id,
+)
+from adapters.devicenet.codec.objects import AllocationChoice, IdentityAttribute
+from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError
 
 IDENTITY_CLASS = 1
 DEVICENET_CLASS = 3

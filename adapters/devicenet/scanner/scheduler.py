@@ -12,10 +12,10 @@ from collections import deque
 from itertools import islice
 from typing import Final
 
+from adapters.can.bits import frame_bits_min
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import IoKind
 from adapters.devicenet.scanner.node import Node, Phase
-from adapters.link.canbits import frame_bits_min
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from adapters.devicenet.cfw08.objects import Value
-from adapters.devicenet.objects import (
+from adapters.devicenet.codec.objects import (
     INACTIVITY_EPR_FACTOR,
     ConnectionInstance,
     ConnectionState,

@@ -15,18 +15,18 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import partial
 
 from adapters.devicenet import cfw08
 from adapters.devicenet.cfw08 import ASSEMBLY_SIZE
-from adapters.devicenet.cip import (
+from adapters.devicenet.codec.cip import (
     ALLOCATION_REJECTIONS,
     AllocationRejection,
     Service,
     StatusPair,
 )
-from adapters.devicenet.dupmac import DupMacCheck, DupMacKind
-from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError, InvalidCanId
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.explicit import (
     AllocateConnectionSet,
     AllocateResponse,
     ErrorResponse,
@@ -35,29 +35,24 @@ from adapters.devicenet.explicit import (
     Response,
     SuccessResponse,
 )
-from adapters.devicenet.fragment import (
-    ExplicitFragment,
-    ExplicitReassembler,
-    ExplicitSender,
-    FragmentAck,
-    decode_explicit_frame,
-)
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import (
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import (
     PredefinedId,
     PredefinedMessage,
     match_predefined,
     predefined_can_id,
 )
-from adapters.devicenet.objects import (
+from adapters.devicenet.codec.objects import (
     NO_MASTER,
     AllocationChoice,
     ConnectionInstance,
     assembly_path,
 )
+from adapters.devicenet.errors import DeviceNetDecodeError, ExplicitDecodeError, InvalidCanId
 from adapters.devicenet.sim import objects
 from adapters.devicenet.sim.connection import IoTrigger, SimConnection
 from adapters.devicenet.sim.drive import E37_TIMEOUT, SimDrive, SimDriveConfig
+from adapters.devicenet.sim.explicit import ExplicitPort
 from adapters.devicenet.sim.objects import Identity
 from gateway.sim import FaultInjector
 
@@ -174,8 +169,8 @@ class Cfw08Node:
         self.connections: dict[int, SimConnection] = {}
         self._reset_requested = False
         self._fault_at: float | None = None  # when the present fault began (P206 auto-reset)
-        self._reassembler = ExplicitReassembler()
-        self._sender: ExplicitSender | None = None
+        response = partial(self._frame, PredefinedMessage.SLAVE_EXPLICIT_RESPONSE)
+        self._port = ExplicitPort(response, self.faults, self.figures)
         self._cos_last = 0.0
         self._cos_data: bytes | None = None
         self._reset_connections()
@@ -183,7 +178,7 @@ class Cfw08Node:
             PredefinedMessage.UNCONNECTED_EXPLICIT_REQUEST: self._on_unconnected,
             PredefinedMessage.MASTER_EXPLICIT_REQUEST: self._on_explicit,
             PredefinedMessage.MASTER_POLL_COMMAND: self._on_io,
-            PredefinedMessage.MASTER_COS_CYCLIC_ACK: self._on_cos_ack,
+            PredefinedMessage.MASTER_COS_CYCLIC_ACK: _take_ack,
         }
 
     # ------------------------------------------------------------ control (tests, CLI)
@@ -286,10 +281,8 @@ class Cfw08Node:
             times.append(self._cos_last + cos.epr_ms / 1000.0)
             if cos.trigger is IoTrigger.COS:
                 times.append(self._now + self.config.cos_tick)
-        if self._reassembler.deadline is not None:
-            times.append(self._reassembler.deadline)
-        if self._sender is not None and self._sender.deadline is not None:
-            times.append(self._sender.deadline)
+        if (port := self._port.deadline()) is not None:
+            times.append(port)
         return min(times) if times else None
 
     def _advance(self, now: float) -> None:
@@ -343,7 +336,7 @@ class Cfw08Node:
         try:
             message = ExplicitMessage.decode(data)
         except ExplicitDecodeError as exc:
-            self._decode_error(exc, out)
+            self._port.refuse(exc, out)
             return
         if not message.is_request:
             return
@@ -354,7 +347,7 @@ class Cfw08Node:
             reply = self._release(message.mac, body)
         else:
             reply = _reject(AllocationRejection.INVALID_GROUP_2_ONLY_REQUEST)
-        self._reply(out, message, reply)
+        self._port.reply(now, out, message, reply)
 
     def _allocate(self, now: float, body: AllocateConnectionSet) -> Response:
         choice = AllocationChoice(body.choice)
@@ -363,7 +356,7 @@ class Cfw08Node:
             return self._rejected(AllocationRejection.OWNED_BY_ANOTHER_MASTER)
         if bits & UNSUPPORTED_BITS:
             return self._rejected(AllocationRejection.UNSUPPORTED_CHOICE)
-        if self._bad_choice(choice):
+        if _bad_choice(choice, self.allocation):
             return self._rejected(AllocationRejection.INVALID_CHOICE)
         if bits & int(self.allocation) & ~int(AC.ACK_SUPPRESSION):
             return self._rejected(AllocationRejection.ALREADY_ALLOCATED)
@@ -380,16 +373,6 @@ class Cfw08Node:
         self.master = body.allocator_mac
         self.figures.allocations += 1
         return AllocateResponse(0)
-
-    def _bad_choice(self, choice: AllocationChoice) -> bool:
-        """Fact sheet 2.5: zero, ACK suppression without COS/cyclic, explicit missing."""
-        if not int(choice):
-            return True
-        if choice & AC.ACK_SUPPRESSION and not choice & (AC.COS | AC.CYCLIC):
-            return True
-        if choice & AC.COS and choice & AC.CYCLIC:
-            return True
-        return not (choice & AC.EXPLICIT or self.allocation & AC.EXPLICIT)
 
     def _rejected(self, rejection: AllocationRejection) -> Response:
         self.figures.rejections += 1
@@ -420,8 +403,7 @@ class Cfw08Node:
         self.allocation = AllocationChoice(0)
         self.master = NO_MASTER
         self._reset_connections()
-        self._reassembler.reset()
-        self._sender = None
+        self._port.reset()
 
     def _reset_connections(self) -> None:
         pair = self.drive.pair
@@ -433,10 +415,13 @@ class Cfw08Node:
         command_id = predefined_can_id(PredefinedMessage.MASTER_POLL_COMMAND, self.mac)
         sizes = self.config.io_sizes or (ASSEMBLY_SIZE, ASSEMBLY_SIZE)
 
+        def clock() -> float:
+            return self._now
+
         def io(instance: int, produced_id: int) -> SimConnection:
             return SimConnection(
                 instance,
-                self._clock,
+                clock,
                 produced_id=produced_id,
                 consumed_id=command_id,
                 produced_size=sizes[0],
@@ -449,7 +434,7 @@ class Cfw08Node:
         self.connections = {
             ConnectionInstance.EXPLICIT: SimConnection(
                 ConnectionInstance.EXPLICIT,
-                self._clock,
+                clock,
                 produced_id=explicit_id,
                 consumed_id=request_id,
                 produced_size=0xFFFF,
@@ -460,9 +445,6 @@ class Cfw08Node:
             ConnectionInstance.COS_CYCLIC: io(ConnectionInstance.COS_CYCLIC, cos_id),
         }
 
-    def _clock(self) -> float:
-        return self._now
-
     # ------------------------------------------------------------ explicit connection
 
     def _on_explicit(self, now: float, data: bytes, out: list[CanFrame]) -> None:
@@ -470,46 +452,15 @@ class Cfw08Node:
         if not conn.established or not data or data[0] & 0x3F != self.master:
             return
         conn.consumed(now)
-        try:
-            frame = decode_explicit_frame(data)
-        except DeviceNetDecodeError:
-            return
-        if isinstance(frame, FragmentAck):
-            self._on_fragment_ack(now, frame, out)
-        elif isinstance(frame, ExplicitFragment):
-            self._on_fragment(now, frame, out)
-        else:
-            self._on_request(now, frame.message, out)
-
-    def _on_fragment_ack(self, now: float, ack: FragmentAck, out: list[CanFrame]) -> None:
-        sender = self._sender
-        if sender is None:
-            return
-        try:
-            nxt = sender.on_ack(now, ack)
-        except DeviceNetDecodeError:
-            self._sender = None
-            return
-        if nxt is not None:
-            out.append(self._frame(PredefinedMessage.SLAVE_EXPLICIT_RESPONSE, nxt))
-        if sender.done:
-            self._sender = None
-
-    def _on_fragment(self, now: float, fragment: ExplicitFragment, out: list[CanFrame]) -> None:
-        try:
-            step = self._reassembler.feed(now, fragment)
-        except DeviceNetDecodeError:
-            return
-        if step.ack is not None:
-            out.append(self._frame(PredefinedMessage.SLAVE_EXPLICIT_RESPONSE, step.ack.encode()))
-        if step.message is not None:
-            self._on_request(now, step.message, out)
+        raw = self._port.receive(now, data, out)
+        if raw is not None:
+            self._on_request(now, raw, out)
 
     def _on_request(self, now: float, raw: bytes, out: list[CanFrame]) -> None:
         try:
             message = ExplicitMessage.decode(raw)
         except ExplicitDecodeError as exc:
-            self._decode_error(exc, out)
+            self._port.refuse(exc, out)
             return
         if not message.is_request:
             return
@@ -523,37 +474,12 @@ class Cfw08Node:
             return
         else:
             reply = objects.handle(self, body)
-        self._reply(out, message, reply)
-
-    def _decode_error(self, exc: ExplicitDecodeError, out: list[CanFrame]) -> None:
-        """A malformed request gets the general status its decoder named (0x13, 0x15...)."""
-        if exc.general_status is None or exc.mac is None or exc.xid is None:
-            return
-        reply = ExplicitMessage(exc.mac, exc.xid, ErrorResponse(exc.general_status))
-        out.append(self._frame(PredefinedMessage.SLAVE_EXPLICIT_RESPONSE, reply.encode()))
-
-    def _reply(self, out: list[CanFrame], request: ExplicitMessage, body: Response) -> None:
-        if self.faults.drop():
-            self.figures.dropped += 1
-            return
-        raw = request.reply(body).encode()
-        sender = ExplicitSender(raw)
-        first = sender.start(self._now)
-        if sender.fragmented:
-            self._sender = sender  # the rest goes out as the master acknowledges (2.8)
-        out.append(self._frame(PredefinedMessage.SLAVE_EXPLICIT_RESPONSE, first))
+        self._port.reply(now, out, message, reply)
 
     # ------------------------------------------------------------ I/O
 
-    def _io_connection(self) -> SimConnection | None:
-        for instance in (ConnectionInstance.POLL, ConnectionInstance.COS_CYCLIC):
-            conn = self.connections[instance]
-            if conn.established:
-                return conn
-        return None
-
     def _on_io(self, now: float, data: bytes, out: list[CanFrame]) -> None:
-        conn = self._io_connection()
+        conn = _io_connection(self.connections)
         if conn is None:
             return
         conn.consumed(now)
@@ -566,9 +492,6 @@ class Cfw08Node:
             out.append(self._frame(PredefinedMessage.SLAVE_POLL_RESPONSE, self.drive.input_data()))
         elif conn.acknowledged:
             out.append(self._frame(PredefinedMessage.SLAVE_POLL_RESPONSE, b""))  # COS ack
-
-    def _on_cos_ack(self, now: float, data: bytes, out: list[CanFrame]) -> None:
-        return None  # acknowledges are taken; no retransmission in the simulator
 
     def _produce(self, now: float, out: list[CanFrame]) -> None:
         conn = self.connections[ConnectionInstance.COS_CYCLIC]
@@ -642,10 +565,7 @@ class Cfw08Node:
             deadline = conn.inactivity_deadline()
             if deadline is not None and now > deadline:
                 self._timed_out(conn)
-        if self._reassembler.deadline is not None and now >= self._reassembler.deadline:
-            self._reassembler.reset()
-        if self._sender is not None and self._sender.deadline and now >= self._sender.deadline:
-            self._sender = None
+        self._port.expire(now)
         self._produce(now, out)
 
     def _timed_out(self, conn: SimConnection) -> None:
@@ -674,3 +594,29 @@ class Cfw08Node:
     @property
     def pair(self) -> cfw08.AssemblyPair:
         return self.drive.pair
+
+
+def _bad_choice(choice: AllocationChoice, allocation: AllocationChoice) -> bool:
+    """Fact sheet 2.5: zero, ACK suppression without COS/cyclic, explicit missing (neither
+    asked for nor allocated already)."""
+    if not int(choice):
+        return True
+    if choice & AC.ACK_SUPPRESSION and not choice & (AC.COS | AC.CYCLIC):
+        return True
+    if choice & AC.COS and choice & AC.CYCLIC:
+        return True
+    return not (choice & AC.EXPLICIT or allocation & AC.EXPLICIT)
+
+
+def _io_connection(connections: dict[int, SimConnection]) -> SimConnection | None:
+    """The I/O connection established (polled, or COS/cyclic), if any."""
+    for instance in (ConnectionInstance.POLL, ConnectionInstance.COS_CYCLIC):
+        conn = connections[instance]
+        if conn.established:
+            return conn
+    return None
+
+
+def _take_ack(now: float, data: bytes, out: list[CanFrame]) -> None:
+    """A COS/cyclic acknowledge: taken; no retransmission in the simulator."""
+    return None

@@ -25,10 +25,9 @@ from adapters.devicenet.cfw08.objects import (
     encode_attribute,
     wire_size,
 )
-from adapters.devicenet.cip import CipClass, GeneralStatus, Service
-from adapters.devicenet.eds import Eds
-from adapters.devicenet.errors import AssemblyDecodeError, DataTypeDecodeError
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.cip import CipClass, GeneralStatus, Service
+from adapters.devicenet.codec.eds import Eds
+from adapters.devicenet.codec.explicit import (
     ErrorResponse,
     GetAttributeSingle,
     Request,
@@ -37,6 +36,7 @@ from adapters.devicenet.explicit import (
     SetAttributeSingle,
     SuccessResponse,
 )
+from adapters.devicenet.errors import AssemblyDecodeError, DataTypeDecodeError
 from adapters.devicenet.sim.drive import SimDrive
 from adapters.devicenet.sim.params import SIM_PARAMETERS
 

@@ -14,9 +14,9 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.ids import match_predefined
 from adapters.devicenet.errors import InvalidCanId
-from adapters.devicenet.frame import CanFrame
-from adapters.devicenet.ids import match_predefined
 from adapters.devicenet.link import CanLink, LinkConfig, RxFrame
 from adapters.devicenet.sim.node import Cfw08Node, SimNodeConfig
 

@@ -9,20 +9,18 @@ channel, and :meth:`SimulatedBus.stop` ends them after the adapter has left the 
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 from typing import Final
 
-from adapters.devicenet.frame import CanFrame
+from adapters.can.simulated import SimulatedLine
+from adapters.devicenet.cfw08.options import DriveOptions
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.link import CanLink, LinkConfig
-from adapters.devicenet.options import BusOptions, DriveOptions
+from adapters.devicenet.options import BusOptions
 from adapters.devicenet.sim.node import SimNodeConfig
 from adapters.devicenet.sim.objects import identity_from_eds
 from adapters.devicenet.sim.runner import SimRunner
-from adapters.link.can import CanLinks
 from gateway.config import BusConfig
 
-SIM_START_BOUND: Final = 2.0  # s
 SIM_DEFAULT_MAX_RPM: Final = 1800.0
 
 
@@ -52,35 +50,17 @@ def sim_configs(bus: BusConfig) -> list[SimNodeConfig]:
     return out
 
 
-class SimulatedBus(CanLinks[CanFrame]):
+class SimulatedBus(SimulatedLine[CanFrame, SimRunner]):
     """The bus's drives simulated on its in-process channel (see the module docstring)."""
 
     def __init__(self, bus: BusConfig) -> None:
         options: BusOptions = bus.options
-        self.name = bus.name
-        self.config = LinkConfig(options.interface, options.channel, options.bitrate)
+        config = LinkConfig(options.interface, options.channel, options.bitrate)
+        super().__init__("devicenet", bus.name, config)
         self.nodes = sim_configs(bus)
-        self.runner: SimRunner | None = None
-        """The simulated nodes while the line runs (tests inject faults through it)."""
-        self._task: asyncio.Task[None] | None = None
 
     def link(self) -> CanLink:
         return CanLink(self.config)
 
-    async def start(self) -> None:
-        runner = SimRunner(LinkConfig("virtual", self.config.channel), self.nodes)
-        self.runner = runner
-        task = self._task = asyncio.create_task(runner.run(), name=f"devicenet-sim-{self.name}")
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(SIM_START_BOUND):
-                await runner.started.wait()
-        if task.done():
-            task.result()  # raises what broke the simulator
-
-    async def stop(self) -> None:
-        task, self._task = self._task, None
-        if task is None:
-            return
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await task
+    def new_runner(self) -> SimRunner:
+        return SimRunner(LinkConfig("virtual", self.config.channel), self.nodes)

@@ -22,7 +22,10 @@ of four parts, each stepped through it with the same clock:
 
 from __future__ import annotations
 
-from adapters.profibus.events import (
+from adapters.profibus.master.acyclic import DPV1_BACKOFF, MAX_ACYCLIC_PER_TURN
+from adapters.profibus.master.common import MAX_TURN
+from adapters.profibus.master.engine import Master
+from adapters.profibus.master.events import (
     Action,
     DiagnosisRead,
     Event,
@@ -46,9 +49,6 @@ from adapters.profibus.events import (
     check_slave,
     describe_cfg,
 )
-from adapters.profibus.master.acyclic import DPV1_BACKOFF, MAX_ACYCLIC_PER_TURN
-from adapters.profibus.master.common import MAX_TURN
-from adapters.profibus.master.engine import Master
 from adapters.profibus.master.scheduler import IDLE_GUARD
 from adapters.profibus.master.station import FRAME_MEMO, MAX_PRM_ATTEMPTS, STATE_TIMEOUTS
 

@@ -20,9 +20,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
 
-from adapters.profibus import dpv1
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.fdl import DataTelegram, RequestFc, ResponseStatus
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.events import (
+from adapters.profibus.master.common import DATA_OK, Job, Pending, Reply, status_of
+from adapters.profibus.master.events import (
     Action,
     FaultKind,
     Purpose,
@@ -31,11 +33,9 @@ from adapters.profibus.events import (
     SlaveFault,
     SlaveState,
 )
-from adapters.profibus.fdl import DataTelegram, RequestFc, ResponseStatus
-from adapters.profibus.master.common import DATA_OK, Job, Pending, Reply, status_of
 from adapters.profibus.master.line import Line
 from adapters.profibus.master.station import Station
-from adapters.profibus.timing import BusParams
+from adapters.profibus.master.timing import BusParams
 from gateway.errors import FrameEncodeError
 
 MAX_ACYCLIC_PER_TURN: Final = 2  # DP-V1 request + first poll

@@ -10,9 +10,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Final
 
-from adapters.profibus import dpv1
-from adapters.profibus.events import Purpose
-from adapters.profibus.fdl import DataTelegram, ResponseFc, ResponseStatus, ShortAck
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.fdl import DataTelegram, ResponseFc, ResponseStatus, ShortAck
+from adapters.profibus.master.events import Purpose
 
 MAX_TURN: Final = 4  # telegrams of one slave in one cycle (retries not counted)
 

@@ -25,10 +25,20 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from adapters.profibus import dpv1
-from adapters.profibus.dp import GlobalControl
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.fdl import (
+    DataTelegram,
+    FcbState,
+    ResponseFc,
+    ResponseStatus,
+    ShortAck,
+    TokenTelegram,
+)
 from adapters.profibus.errors import FdlDecodeError
-from adapters.profibus.events import (
+from adapters.profibus.master.acyclic import JobQueue
+from adapters.profibus.master.common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
+from adapters.profibus.master.events import (
     Action,
     Event,
     FrameIn,
@@ -41,21 +51,11 @@ from adapters.profibus.events import (
     Written,
     check_slave,
 )
-from adapters.profibus.fdl import (
-    DataTelegram,
-    FcbState,
-    ResponseFc,
-    ResponseStatus,
-    ShortAck,
-    TokenTelegram,
-)
-from adapters.profibus.figures import LineFigures, SlaveFigures
-from adapters.profibus.master.acyclic import JobQueue
-from adapters.profibus.master.common import DPV1_PURPOSES, SHORT_ACK_PURPOSES, Pending
+from adapters.profibus.master.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.line import Line
 from adapters.profibus.master.scheduler import Scheduler
 from adapters.profibus.master.station import Station, StationContext
-from adapters.profibus.timing import BusParams
+from adapters.profibus.master.timing import BusParams
 from gateway.errors import FrameEncodeError
 
 

@@ -14,12 +14,12 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from adapters.profibus.dp import GlobalControl, global_control_request
+from adapters.profibus.codec.dp import GlobalControl, global_control_request
 from adapters.profibus.errors import DecodeFailure, FdlDecodeError
-from adapters.profibus.events import Action, Transmit
-from adapters.profibus.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.common import Job, Pending
-from adapters.profibus.timing import BITS_PER_CHAR, MAX_TELEGRAM, BusParams
+from adapters.profibus.master.events import Action, Transmit
+from adapters.profibus.master.figures import LineFigures, SlaveFigures
+from adapters.profibus.master.timing import BITS_PER_CHAR, MAX_TELEGRAM, BusParams
 
 
 class Line:

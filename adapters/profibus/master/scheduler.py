@@ -36,9 +36,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import Final
 
-from adapters.profibus.dp import GlobalControl
-from adapters.profibus.events import LineMode, Purpose, SlaveState
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.fdl import (
     MAX_STATION,
     DataTelegram,
     RequestFunction,
@@ -47,10 +46,11 @@ from adapters.profibus.fdl import (
 )
 from adapters.profibus.master.acyclic import JobQueue
 from adapters.profibus.master.common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
+from adapters.profibus.master.events import LineMode, Purpose, SlaveState
 from adapters.profibus.master.line import Line
+from adapters.profibus.master.scan import status_request
 from adapters.profibus.master.station import Station, StationContext
-from adapters.profibus.scan import status_request
-from adapters.profibus.timing import BusParams
+from adapters.profibus.master.timing import BusParams
 
 IDLE_GUARD: Final = 0.001  # s: an empty cycle never restarts sooner than this
 # The share of the shortest watchdog in data exchange that one cycle may take (data exchange

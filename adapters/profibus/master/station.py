@@ -16,8 +16,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
-from adapters.profibus.diag import SlaveDiag, describe_blocks
-from adapters.profibus.dp import (
+from adapters.profibus.codec.diag import SlaveDiag, describe_blocks
+from adapters.profibus.codec.dp import (
     DataExchange,
     GetCfgRequest,
     MasterSap,
@@ -25,8 +25,19 @@ from adapters.profibus.dp import (
     SlaveSap,
     build_request,
 )
+from adapters.profibus.codec.fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
 from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.events import (
+from adapters.profibus.master.common import (
+    DATA_OK,
+    MAX_TURN,
+    REQUEST_NAMES,
+    Pending,
+    Reply,
+    Turn,
+    show,
+    status_of,
+)
+from adapters.profibus.master.events import (
     Action,
     DiagnosisRead,
     FaultKind,
@@ -40,19 +51,8 @@ from adapters.profibus.events import (
     SlaveUp,
     describe_cfg,
 )
-from adapters.profibus.fdl import DataTelegram, FcbState, RequestFc, ResponseStatus
-from adapters.profibus.figures import LineFigures, SlaveFigures
-from adapters.profibus.master.common import (
-    DATA_OK,
-    MAX_TURN,
-    REQUEST_NAMES,
-    Pending,
-    Reply,
-    Turn,
-    show,
-    status_of,
-)
-from adapters.profibus.timing import MAX_TELEGRAM, BusParams
+from adapters.profibus.master.figures import LineFigures, SlaveFigures
+from adapters.profibus.master.timing import MAX_TELEGRAM, BusParams
 from gateway.errors import FrameEncodeError
 
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"

@@ -2,7 +2,7 @@
 
 :data:`SIM_DEVICES` maps a device to the "module:Class" of its simulator, from the device
 registry (:mod:`gateway.devices`), imported lazily (the MCD 600 lives in its own package).
-Every simulator class is a :class:`adapters.profibus.profile.SimFactory`: its
+Every simulator class is a :class:`adapters.profibus.contract.SimFactory`: its
 ``for_drive(drive)`` builds the device a configured drive describes, or a default one for
 ``None``; :func:`make_device` calls it.
 """
@@ -16,7 +16,7 @@ from gateway.loader import load
 from gateway.model import Device
 
 if TYPE_CHECKING:
-    from adapters.profibus.profile import SimDevice, SimFactory
+    from adapters.profibus.contract import SimDevice, SimFactory
     from gateway.config import DriveConfig
 
 BUS: Final = "profibus"

@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any, Final
 
-from adapters.profibus.chkcfg import CompactId, IoDirection, encode_identifiers
-from adapters.profibus.dpv1 import error_code_1_text
-from adapters.profibus.profile import RecordAccessError, SimDeviceBase
+from adapters.profibus.codec.chkcfg import CompactId, IoDirection, encode_identifiers
+from adapters.profibus.codec.dpv1 import error_code_1_text
+from adapters.profibus.contract import RecordAccessError, SimDeviceBase
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig
@@ -49,7 +49,7 @@ def _refuse(code: int) -> RecordAccessError:
 
 
 class EchoSim(SimDeviceBase):
-    """A :class:`adapters.profibus.profile.SimDevice` echoing its outputs."""
+    """A :class:`adapters.profibus.contract.SimDevice` echoing its outputs."""
 
     dpv1 = True
 

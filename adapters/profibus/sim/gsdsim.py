@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from adapters.profibus.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
-from adapters.profibus.gsd import (
+from adapters.profibus.codec.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
+from adapters.profibus.codec.gsd import (
     DPV1_STATUS_BYTES,
     Gsd,
     GsdModule,
@@ -28,8 +28,8 @@ from adapters.profibus.gsd import (
 )
 
 if TYPE_CHECKING:
-    from adapters.profibus.dp import GlobalControl
-    from adapters.profibus.profile import SimDevice
+    from adapters.profibus.codec.dp import GlobalControl
+    from adapters.profibus.contract import SimDevice
     from gateway.sim import FaultInjector
 
 SEARCH_DEPTH = 8  # modules tried in a row for Get_Cfg before the first Chk_Cfg

@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from adapters.profibus.fdl import (
+from adapters.profibus.codec.fdl import (
     DataTelegram,
     Discarded,
     NeedMore,

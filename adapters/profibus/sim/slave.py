@@ -6,8 +6,8 @@ Wait_Cfg -> Data_Exch, 1.6 Set_Prm (lock, watchdog, group), 1.7 Chk_Cfg/Get_Cfg,
 Slave_Diag with the flags a real slave sets, 1.9 Global_Control, 1.10 DP-V1 on SAP 51 (the
 request is acknowledged with E5, polls get E5 until the answer is ready, then DL with it).
 
-The device behind it is any :class:`adapters.profibus.profile.SimDevice`; the hooks it may
-leave to :class:`adapters.profibus.profile.SimDeviceBase`: ``dpv1`` (False: Set_Prm without
+The device behind it is any :class:`adapters.profibus.contract.SimDevice`; the hooks it may
+leave to :class:`adapters.profibus.contract.SimDeviceBase`: ``dpv1`` (False: Set_Prm without
 the DP-V1 status bytes, SAP 51 inactive), ``check_cfg(cfg) -> bool`` (Chk_Cfg),
 ``handles_clear`` and ``clear_mode(now, active)`` (Global_Control Clear and the Operate after
 it; by default a Clear is ``comm_lost``), ``global_control(control, now)`` (every Global_Control:
@@ -26,12 +26,11 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Final
 
-from adapters.profibus import dpv1
-from adapters.profibus.chkcfg import Configuration
-from adapters.profibus.diag import NO_MASTER, SlaveDiag
-from adapters.profibus.dp import GlobalControl, SetPrm, SlaveSap
-from adapters.profibus.errors import ProfibusDecodeError
-from adapters.profibus.fdl import (
+from adapters.profibus.codec import dpv1
+from adapters.profibus.codec.chkcfg import Configuration
+from adapters.profibus.codec.diag import NO_MASTER, SlaveDiag
+from adapters.profibus.codec.dp import GlobalControl, SetPrm, SlaveSap
+from adapters.profibus.codec.fdl import (
     BROADCAST,
     SHORT_ACK,
     DataTelegram,
@@ -42,7 +41,8 @@ from adapters.profibus.fdl import (
     ShortAck,
     SlaveFcbMemory,
 )
-from adapters.profibus.profile import RecordAccessError, SimDevice
+from adapters.profibus.contract import RecordAccessError, SimDevice
+from adapters.profibus.errors import ProfibusDecodeError
 from gateway.sim import FaultInjector
 
 log = logging.getLogger(__name__)

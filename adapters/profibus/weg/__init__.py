@@ -11,7 +11,12 @@ Modules:
 * :mod:`.words` - the cyclic words of both data profiles and the speed scales;
 * :mod:`.options` - the profile's keys of a drive's config table;
 * :mod:`.records` - parameter access over DP-V1 records 47 (PROFIdrive) and 48 (WEG);
-* :mod:`.profile` - the :class:`~adapters.profibus.profile.DpProfile` shared by the models;
+* :mod:`.scales` - the speed word's base and the ratings it comes from;
+* :mod:`.dataprofile`, :mod:`.manufacturer`, :mod:`.profidrive` - the two data profiles
+  (P0741) as strategies: control, status and speed words;
+* :mod:`.mapped` - the telegram's mapped input words (P0742..);
+* :mod:`.programming` - the drive's programming checked at connect (P0741, mapping);
+* :mod:`.profile` - the :class:`~adapters.profibus.contract.DpProfile` shared by the models;
 * :mod:`.cfw11`, :mod:`.cfw700`, :mod:`.cfw320` - the registered profile classes;
-* :mod:`.simparams`, :mod:`.sim` - the simulated drives.
+* :mod:`.sim` - the simulated drives (:mod:`.sim.drive`), split the same way.
 """

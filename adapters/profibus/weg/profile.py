@@ -10,6 +10,10 @@ Cyclic words (telegram of ``words`` 16-bit words, big-endian, both directions):
   (P0680 / P0968);
 * word 2 out: speed reference (P0685 13 bits / 4000h = P0134); in: motor speed (P0681 / same);
 * words 3..N: the parameters the drive is programmed with (P0742.. in, P0750.. / P746.. out).
+
+Words 1 and 2 are the data profile's (P0741): the profile holds the one its config names,
+from :data:`DATA_WORDS` (:mod:`.manufacturer`, :mod:`.profidrive`); words 3..N are read by
+:mod:`.mapped`, the drive's programming is checked at connect by :mod:`.programming`.
 """
 
 from __future__ import annotations
@@ -17,12 +21,11 @@ from __future__ import annotations
 import logging
 import struct
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
-from adapters.profibus.chkcfg import CompactId, IoDirection
-from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
-from adapters.profibus.profile import (
+from adapters.profibus.codec.chkcfg import CompactId, IoDirection
+from adapters.profibus.contract import (
     AddressRange,
     DiagEvent,
     DiagKind,
@@ -31,10 +34,24 @@ from adapters.profibus.profile import (
     RecordChannel,
     SlaveSetup,
 )
+from adapters.profibus.errors import DecodeFailure, ProfibusDecodeError
 from adapters.profibus.weg import words as w
+from adapters.profibus.weg.dataprofile import DataProfileWords, Order, Sent
+from adapters.profibus.weg.manufacturer import ManufacturerWords
+from adapters.profibus.weg.mapped import Mapped, read_mapped
 from adapters.profibus.weg.options import WegOptions, parse_options
 from adapters.profibus.weg.paramtable import PARAM_TABLES
+from adapters.profibus.weg.profidrive import ProfidriveWords
+from adapters.profibus.weg.programming import (
+    DataProfilePending,
+    DriveProgrammingMismatch,
+    check_data_profile,
+    expected_programming,
+    verify_programming,
+    write_startup_param,
+)
 from adapters.profibus.weg.records import RecordParams
+from adapters.profibus.weg.scales import Ratings, SpeedBase
 from adapters.profibus.weg.spec import (
     NEUTRAL_STOP_WORD,
     SIGNED,
@@ -45,8 +62,8 @@ from adapters.profibus.weg.spec import (
     scaled,
 )
 from gateway.adapter import Capabilities, ParamValue
-from gateway.errors import GatewayError, ParameterError
-from gateway.model import DesiredCommand, Device, Direction, DriveStatus, Readings, SpeedScale
+from gateway.errors import ParameterError
+from gateway.model import DesiredCommand, Device, Readings
 
 if TYPE_CHECKING:
     from gateway.config import DriveConfig
@@ -54,92 +71,13 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-MAX_13BIT_PCT: Final = 100.0 * w.WORD_MAX / w.SPEED_13BIT_BASE  # 4 x base, saturating (P681)
-MAX_PROFIDRIVE_PCT: Final = 100.0  # the drive limits the speed to P0134 = 4000h
+DATA_WORDS: Final[Mapping[DataProfile, Callable[[ModelSpec], DataProfileWords]]] = {
+    DataProfile.MANUFACTURER: ManufacturerWords,
+    DataProfile.PROFIDRIVE: ProfidriveWords,
+}
+"""The words of each data profile (P0741), for a model's spec."""
 
-# P0680 bits the model has no field for, published as ``DriveState.values`` entries (0/1)
-# where the model's status word has the bit (docs/devices.md): CFW320 Table 4.2 bit 2 "Fire
-# mode", CFW-11 Table 3.2 bit 14 "PID automatic" (reserved on the CFW700).
-STATUS_VALUES: Final = (("fire_mode", "fire_mode"), ("pid_automatic", "automatic"))
-
-
-class DriveProgrammingMismatch(GatewayError):
-    """The drive's programming (P0741, P0922/P751, P0742..) differs from the drive's config."""
-
-
-class DataProfilePending(GatewayError):
-    """A ``startup_params`` write the drive takes only without cyclic data (P0741, P0922 /
-    P751: CFW-11 l.959-961, CFW700 l.922-924 and l.1172, CFW320 l.547 and l.581) was made.
-
-    The drive still speaks its old words until it leaves data exchange: the adapter takes
-    the slave out of data exchange and parameterises it again (``reparameterise``), and the
-    next connect finds the value in force (issue 32 item 2)."""
-
-    reparameterise = True
-
-
-class StartupParamRefused(ParameterError):
-    """The drive refused a ``startup_params`` write: it stays "not configured".
-
-    Reads as the reason an operator sees: "startup P0313 = 9: parameter value out of the
-    limits (error 0x0002)".
-    """
-
-    def __str__(self) -> str:
-        code = "" if self.code is None else f" (error 0x{self.code:04X})"
-        return f"{self.text}{code}"
-
-
-@dataclass(frozen=True)
-class SpeedBase:
-    """What the speed word's full scale means: ``rpm`` at ``full_scale`` (8192 or 4000h)."""
-
-    rpm: float
-    full_scale: int
-    max_pct: float
-    label: str
-
-    def to_raw(self, rpm: float | None, pct: float | None) -> int:
-        if rpm is not None:
-            return w.speed_to_raw(rpm, self.rpm, self.full_scale)
-        if pct is not None:
-            return w.speed_to_raw(pct, 100.0, self.full_scale)
-        return 0
-
-    def rpm_of(self, raw: int) -> float:
-        return w.raw_to_speed(raw, self.rpm, self.full_scale)
-
-    def pct_of(self, raw: int) -> float:
-        return w.raw_to_speed(raw, 100.0, self.full_scale)
-
-    def scale(self) -> SpeedScale:
-        return SpeedScale(base_rpm=self.rpm, max_pct=self.max_pct, label=self.label)
-
-
-@dataclass(frozen=True)
-class Ratings:
-    """Scale parameters read at connect (or fixed by the config)."""
-
-    rated_hz: float | None = None  # P0403
-    rated_rpm: float | None = None  # P0402
-    sync_rpm: float | None = None  # from the two above (13-bit base)
-    max_rpm: float | None = None  # P0134 (PROFIdrive base)
-    rated_current_a: float | None = None  # P0401 (frame 20 P0760)
-    rated_power_kw: float | None = None  # P0404 (frame 20 P0761)
-
-
-@dataclass
-class _Sent:
-    """What the last output telegram asked for (inputs are judged against it)."""
-
-    run: bool = False
-    forward: bool = True
-    reference: int = 0  # signed raw word as sent
-    remote: bool = True
-    jog: bool = False
-
-
-_OutMemory = tuple[bool, int | None, bool, _Sent]
+_OutMemory = tuple[bool, int | None, bool, Sent]
 """What ``outputs`` reads and writes of a profile's memory: stop held, the reset counter
 seen, the pulse sent, the last telegram's ``_sent``."""
 
@@ -209,6 +147,7 @@ class WegProfile(DpProfileBase):
         self.in_map = opts.mapped_in()
         self.out_map = opts.mapped_out()
         self.out_values = [w.to_word(opts.out_value_of(i)) for i in range(len(self.out_map))]
+        self.data_words: DataProfileWords = DATA_WORDS[opts.data_profile](self.spec)
         self.ratings = Ratings(
             rated_hz=opts.rated_hz,
             rated_rpm=opts.rated_rpm,
@@ -221,7 +160,7 @@ class WegProfile(DpProfileBase):
         self._reset_seen: int | None = None
         self._pulse_until: float | None = None
         self._pulse_sent = False
-        self._sent = _Sent()
+        self._sent = Sent()
         self._zsw: w.ProfidriveStatus | None = None
         self._faulted = False
         self._alarm = False
@@ -232,17 +171,13 @@ class WegProfile(DpProfileBase):
         self._event: EventSink | None = None
         self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
         self._p0741_seen: int | None = None  # P0741 read in this data exchange (not yet: None)
-        self._status_values: dict[str, int] = {}  # STATUS_VALUES of the last P0680
+        self._status_values: dict[str, int] = {}  # P0680 bits of the last status word
         # inputs' fast path: (key, the memory the call left, its readings)
         self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
         # outputs' fast path: (key, the memory before the call, the memory after, telegram)
         self._outputs_memo: tuple[tuple[object, ...], _OutMemory, _OutMemory, bytes] | None = None
 
     # ------------------------------------------------------------------ setup
-
-    @property
-    def profidrive(self) -> bool:
-        return self.options.data_profile is DataProfile.PROFIDRIVE
 
     def setup(self) -> SlaveSetup:
         """Ident number, one consistent word identifier for the I/O words, no user data.
@@ -296,7 +231,7 @@ class WegProfile(DpProfileBase):
         offline_taken = {741, self.spec.telegram_param}
         written: list[int] = []
         for number, value in self.options.startup_params:
-            if await self._startup_param(channel, event, number, value):
+            if await write_startup_param(self.params, channel, event, self.spec, (number, value)):
                 written += [number] if number in offline_taken else []
         if written:
             names = ", ".join(self.spec.pname(n) for n in written)
@@ -305,9 +240,10 @@ class WegProfile(DpProfileBase):
                 "the slave is parameterised again"
             )
         if p0741 is not None:
-            self._check_data_profile(p0741)
+            check_data_profile(self.spec, self.options.data_profile, p0741)
         if self.options.verify_mapping:
-            await self._verify_programming(channel)
+            expected = expected_programming(self.spec, self.options, self.in_map, self.out_map)
+            await verify_programming(self.params, channel, self.spec, expected)
         await self._read_ratings(channel)
         self._event = event
         if self.spec.reads_control_type:
@@ -368,30 +304,6 @@ class WegProfile(DpProfileBase):
             "quick_stop_as_ramp": int(self.quick_stop_as_ramp),
         }
 
-    async def _startup_param(
-        self, channel: RecordChannel, event: EventSink, number: int, value: int
-    ) -> bool:
-        """Write one ``startup_params`` entry where the drive differs; True when written."""
-        name = self.spec.pname(number)
-        raw = w.to_word(value)
-        written = False
-        try:
-            if await self.params.read(channel, number) != raw:
-                written = True
-                await self.params.write(channel, number, raw)
-                event(
-                    f"startup {name} = {value} written",
-                    DiagKind.PARAMETER,
-                    number=number,
-                    value=value,
-                )
-            back = await self.params.read(channel, number)
-        except ParameterError as exc:
-            raise StartupParamRefused(f"startup {name} = {value}: {exc.text}", exc.code) from exc
-        if back != raw:
-            raise DriveProgrammingMismatch(f"startup {name} = {value}: read back {back}")
-        return written
-
     async def _read_data_profile(self, channel: RecordChannel) -> int:
         """P0741 as read at this connect. The first value read after the slave entered data
         exchange is the one in force; a later read of another value (changed at the HMI
@@ -408,45 +320,6 @@ class WegProfile(DpProfileBase):
             )
         return got
 
-    def _check_data_profile(self, got: int) -> None:
-        """P741 against the configured data profile (CFW320 Table 4.6 note: the control,
-        status, speed reference and motor speed words depend on it): a mismatch would be
-        misread, so the drive is not brought online."""
-        want = self.options.data_profile
-        if got == want.p0741:
-            return
-        names = {p.p0741: p.value for p in DataProfile}
-        raise DriveProgrammingMismatch(
-            f"{self.spec.pname(741)} = {got} ({names.get(got, 'unknown data profile')}), "
-            f"the config's data_profile is {want.value} ({self.spec.pname(741)} = {want.p0741}): "
-            "its words would be misread"
-        )
-
-    def _expected_programming(self) -> list[tuple[int, int]]:
-        """(parameter, expected raw value) that the config implies about the drive."""
-        spec, opts = self.spec, self.options
-        out = [(spec.telegram_param, spec.telegram_code(opts.words))]
-        if len(spec.profiles) > 1 and not spec.reads_data_profile:
-            out.append((741, opts.data_profile.p0741))
-        for i, param in enumerate(self.in_map):
-            out.append((spec.read_map_param(i + 3), param))
-        for i, param in enumerate(self.out_map):
-            out.append((spec.write_map_param(i + 3), param))
-        return out
-
-    async def _verify_programming(self, channel: RecordChannel) -> None:
-        expected = self._expected_programming()
-        values = await self.params.read_many(channel, [(n, 0) for n, _ in expected])
-        wrong = [
-            f"{self.spec.pname(n)} = {got} (config: {want})"
-            for (n, want), got in zip(expected, values, strict=True)
-            if got != want
-        ]
-        if wrong:
-            raise DriveProgrammingMismatch(
-                "the drive is programmed differently from its config: " + ", ".join(wrong)
-            )
-
     def _rating_params(self) -> dict[str, int]:
         """Ratings field -> parameter, for what the config leaves to the drive.
 
@@ -456,13 +329,7 @@ class WegProfile(DpProfileBase):
         r, need = self.ratings, {}
         if r.max_rpm is None:
             need["max_rpm"] = 134
-        if not self.profidrive and (
-            r.sync_rpm is None or (self.spec.device is Device.CFW320 and r.rated_hz is None)
-        ):
-            if r.rated_hz is None:
-                need["rated_hz"] = 403
-            if r.rated_rpm is None and r.sync_rpm is None:
-                need["rated_rpm"] = 402
+        need.update(self.data_words.rating_params(r))
         if self.options.frame == 20:
             if r.rated_current_a is None:
                 need["rated_current_a"] = 401
@@ -485,32 +352,10 @@ class WegProfile(DpProfileBase):
             self.ratings = replace(self.ratings, **read)
         self.base = self._speed_base(self.ratings)
 
-    def _base_configured(self) -> bool:
-        o = self.options
-        if self.profidrive:
-            return o.max_rpm is not None
-        return o.sync_rpm is not None or (o.rated_hz is not None and o.rated_rpm is not None)
-
     def _speed_base(self, r: Ratings) -> SpeedBase | None:
         """The speed word's base from the ratings known so far (None: not yet)."""
-        suffix = " (configured)" if self._base_configured() else ""
-        if self.profidrive:
-            if r.max_rpm is None:
-                return None
-            label = f"4000h = {self.spec.pname(134)} {r.max_rpm:g} rpm{suffix}"
-            return SpeedBase(r.max_rpm, w.PROFIDRIVE_SPEED_BASE, MAX_PROFIDRIVE_PCT, label)
-        sync = r.sync_rpm
-        if sync is None and r.rated_hz is not None and r.rated_rpm is not None:
-            sync = w.synchronous_rpm(r.rated_hz, r.rated_rpm)
-        if sync is None:
-            return None
-        if self.spec.device is Device.CFW320:
-            hz = "" if r.rated_hz is None else f" {r.rated_hz:g} Hz"
-            label = f"8192 = {self.spec.pname(403)}{hz} = {sync:g} rpm{suffix}"
-        else:
-            label = f"8192 = {sync:g} rpm synchronous{suffix}"
-        limit = MAX_13BIT_PCT if r.max_rpm is None else min(MAX_13BIT_PCT, 100 * r.max_rpm / sync)
-        return SpeedBase(sync, w.SPEED_13BIT_BASE, limit, label)
+        suffix = " (configured)" if self.data_words.base_configured(self.options) else ""
+        return self.data_words.speed_base(r, suffix)
 
     # ------------------------------------------------------------------ outputs
 
@@ -546,10 +391,17 @@ class WegProfile(DpProfileBase):
     def _encode_outputs(self, desired: DesiredCommand, now: float) -> bytes:
         """The general path of :meth:`outputs`."""
         reset = self._reset_pulse(desired.fault_reset_seq, now)
-        if self.profidrive:
-            control, reference = self._profidrive_out(desired, reset)
-        else:
-            control, reference = self._manufacturer_out(desired, reset)
+        run, jog = self._run_jog(desired)
+        order = Order(
+            desired,
+            run,
+            jog,
+            reset,
+            self._reference(desired),
+            self.quick_stop_as_ramp,
+            self._zsw,
+        )
+        control, reference, self._sent = self.data_words.control(order)
         words = [control, w.to_word(reference), *self.out_values]
         return struct.pack(f">{len(words)}H", *words)
 
@@ -579,33 +431,6 @@ class WegProfile(DpProfileBase):
             return 0
         return self.base.to_raw(desired.speed_rpm, desired.speed_pct)
 
-    def _manufacturer_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
-        """P0684 and P0685 (Table 3.3 / 4.3; P0685 bit 2 cases).
-
-        Run = run/stop + general enable + remote; coast stop drops general enable; quick
-        stop is bit 6 where the model has it. Bit 2 = 1 for forward and 0 for reverse, so
-        the sign of the speed (normally positive) keeps the manual's meaning.
-
-        Quick stop and coast stop clear run (bit 0) and JOG (bit 3): a drive that does not
-        execute bit 6 (CFW700 "not allowed" in V/f or VVW) still ramps down, and the
-        release of either stop never restarts the motor. With P0202 V/f or VVW bit 6 is
-        not sent: the quick stop is a ramp stop (docs/devices.md).
-        """
-        forward = d.direction is Direction.FORWARD
-        reference = self._reference(d)
-        run, jog = self._run_jog(d)
-        control = w.ManufacturerControl(
-            run=run,
-            general_enable=not d.coast_stop,
-            forward=forward,
-            jog=jog,
-            remote=d.remote,
-            quick_stop=d.quick_stop and self.spec.quick_stop and not self.quick_stop_as_ramp,
-            fault_reset=reset,
-        )
-        self._sent = _Sent(run or jog, forward, reference, d.remote, jog)
-        return control.encode(self.spec.control_bits), reference
-
     def _run_jog(self, d: DesiredCommand) -> tuple[bool, bool]:
         """Run and JOG as sent: off with a quick or coast stop, and after its release until
         the desired command has had run and JOG off (safety rule 1: the release of a stop
@@ -619,44 +444,6 @@ class WegProfile(DpProfileBase):
         if self._stop_held:
             return False, False
         return d.run, d.jog
-
-    def _profidrive_out(self, d: DesiredCommand, reset: bool) -> tuple[int, int]:
-        """STW1 (P0967, Table 3.8 / 4.7) walking the switching-on states, and NSOLL.
-
-        Switching on inhibited: ON = 0 (the drive goes to ready to switch on); then ON = 1
-        with enable operation, ramp and setpoint (switched on, then operation). A fault is
-        acknowledged with one bit-7 pulse and ON = 0. Reverse is a negative reference
-        (P0967 note). Reserved bits 5 and 9 are sent as 0.
-
-        Quick stop (bit 2 = 0, OFF3) and coast stop (bit 1 = 0, OFF2) go with ON = 0 and
-        JOG = 0, so their release never switches the drive back on. With P0202 V/f or VVW
-        (bit 2 note: not recommended) a quick stop is OFF1: ON = 0 with bit 2 = 1.
-        """
-        state = w.ProfidriveState.SWITCHING_ON_INHIBITED if self._zsw is None else self._zsw.state
-        run, jog = self._run_jog(d)
-        want = run or jog
-        walkable = state in (
-            w.ProfidriveState.READY_TO_SWITCH_ON,
-            w.ProfidriveState.SWITCHED_ON,
-            w.ProfidriveState.OPERATION,
-        )
-        on = want and walkable
-        magnitude = self._reference(d)
-        forward = d.direction is Direction.FORWARD
-        reference = w.saturate(magnitude if forward else -magnitude)
-        control = w.ProfidriveControl(
-            on=on,
-            no_coast_stop=not d.coast_stop,
-            no_quick_stop=not (d.quick_stop and not self.quick_stop_as_ramp),
-            enable_operation=True,
-            enable_ramp=True,
-            enable_setpoint=True,
-            fault_ack=reset,
-            jog=jog and on,
-            control_by_plc=d.remote,
-        )
-        self._sent = _Sent(on, True, reference, d.remote, jog and on)
-        return control.encode(w.STW1_BITS), reference
 
     # ------------------------------------------------------------------ inputs
 
@@ -704,14 +491,11 @@ class WegProfile(DpProfileBase):
         raw = struct.unpack(f">{n}H", data)
         changes: Readings = {}
         speed = w.signed(raw[1])
-        if self.profidrive:
-            self._profidrive_in(raw[0], speed, changes)
-        else:
-            self._manufacturer_in(raw[0], speed, changes)
-        mapped = _Mapped()
-        for param, word in zip(self.in_map, raw[2:], strict=True):
-            if param:
-                self._mapped_word(param, word, changes, mapped)
+        self._speed_fields(speed, changes)
+        heard = self.data_words.status(raw[0], speed, self._sent, self._near_reference, changes)
+        self._zsw, self._status_values = heard.zsw, heard.status_values
+        self._faulted, self._alarm = heard.faulted, heard.alarm
+        mapped = read_mapped(self.spec, self.ratings, self.in_map, raw[2:], changes)
         self._resolve_codes(changes, mapped)
         mapped.values.update(self._own_values())
         mapped.values.update(self._status_values)
@@ -738,148 +522,9 @@ class WegProfile(DpProfileBase):
         band = self.options.at_reference_band
         return abs(self.base.pct_of(speed) - self.base.pct_of(effective)) <= band
 
-    def _manufacturer_in(self, word: int, speed: int, changes: Readings) -> None:
-        """P0680 (Table 3.2 / 4.2) and P0681 (13 bits, 8192 = synchronous speed / P403).
+    # ------------------------------------------------------------------ fault, alarm codes
 
-        A drive jogging (bit 11 "JOG active", CFW-11 Table 3.2, CFW700 Table 4.2, CFW320
-        Table 4.2) runs at its own JOG speed: commanded and at that reference (issue 32
-        item 8). Local control is bit 12 LOC/REM = 0: the drive follows its local sources,
-        not the network (issue 32 item 6; docs/devices.md).
-        """
-        st = w.ManufacturerStatus.decode(word, self.spec.status_bits)
-        self._status_values = {
-            key: int(getattr(st, bit)) for key, bit in STATUS_VALUES if self._has_status_bit(bit)
-        }
-        self._speed_fields(speed, changes)
-        if self.spec.device is Device.CFW320:
-            commanded = st.run_command or st.jog  # CFW320 bit 1 "Run command" (JOG: no)
-        else:
-            commanded = self._sent.run if st.remote else True
-        jogging = st.running and st.jog
-        at_ref = jogging or (st.running and commanded and st.remote and self._near_reference(speed))
-        if st.fault:
-            status = DriveStatus.FAULTED
-        elif st.config_mode or st.undervoltage:
-            status = DriveStatus.NOT_READY
-        elif not st.running:
-            status = DriveStatus.READY
-        elif st.quick_stop_active or not commanded:
-            status = DriveStatus.STOPPING
-        elif at_ref or not st.remote:
-            status = DriveStatus.RUNNING
-        else:
-            status = DriveStatus.STARTING
-        self._faulted, self._alarm = st.fault, st.alarm
-        changes.update(
-            {
-                "status": status,
-                "running": st.running,
-                "direction": Direction.FORWARD if st.forward else Direction.REVERSE,
-                "at_reference": at_ref,
-                "remote": st.remote,
-                "local_control": not st.remote,
-                "alarm": st.alarm,
-            }
-        )
-
-    def _has_status_bit(self, bit: str) -> bool:
-        return any(name == bit for name, _ in self.spec.status_bits)
-
-    def _profidrive_in(self, word: int, speed: int, changes: Readings) -> None:
-        """P0968 ZSW1 (Table 3.9 / 4.8) and NIST (4000h = P0134)."""
-        zsw = w.ProfidriveStatus.decode(word, self.spec.zsw1_bits)
-        self._zsw = zsw
-        state = zsw.state
-        self._speed_fields(speed, changes)
-        operation = state is w.ProfidriveState.OPERATION
-        running = operation and (self._sent.run or speed != 0)
-        if self._sent.jog:  # JOG 1 (STW1 bit 8): the drive's own JOG speed is its reference
-            at_ref = operation and speed != 0
-        elif any(name == "frequency_reached" for name, _ in self.spec.zsw1_bits):
-            at_ref = operation and self._sent.run and zsw.frequency_reached  # CFW-11 bit 10
-        else:
-            at_ref = operation and self._sent.run and self._near_reference(speed)
-        status = _PROFIDRIVE_STATUS[state]
-        if operation:
-            if not self._sent.run or not zsw.quick_stop_not_active:
-                status = DriveStatus.STOPPING if speed else DriveStatus.READY
-            else:
-                status = DriveStatus.RUNNING if at_ref else DriveStatus.STARTING
-        elif state is w.ProfidriveState.SWITCHED_ON and self._sent.run:
-            status = DriveStatus.STARTING
-        if speed > 0:
-            direction = Direction.FORWARD
-        elif speed < 0:
-            direction = Direction.REVERSE
-        else:
-            direction = Direction.FORWARD if self._sent.reference >= 0 else Direction.REVERSE
-        self._faulted, self._alarm = zsw.fault, zsw.warning
-        changes.update(
-            {
-                "status": status,
-                "running": running,
-                "direction": direction,
-                "at_reference": at_ref,
-                "remote": zsw.control_requested,
-                "local_control": not zsw.control_requested,  # ZSW1 bit 9 (Table 3.9 / 4.8)
-                "alarm": zsw.warning,
-            }
-        )
-
-    # ------------------------------------------------------------------ mapped words
-
-    def _mapped_word(self, param: int, word: int, changes: Readings, m: _Mapped) -> None:
-        handler = _KNOWN.get(param)
-        if handler is None:
-            m.values[self.spec.pname(param)] = scaled(param, word)
-        else:
-            handler(self, word, changes, m)
-
-    def _current(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0003 motor current, one decimal (P0742 description: 4.7 A is sent as 47)."""
-        amps = word / 10.0
-        changes["current_a"] = amps
-        if self.ratings.rated_current_a:
-            changes["current_pct_flc"] = round(100.0 * amps / self.ratings.rated_current_a, 2)
-
-    def _alarm_word(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0048 present alarm (Table 3.2 bit 7 note)."""
-        m.alarm = word
-
-    def _fault_word(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0049 present fault (Table 3.2 bit 15 note) / P0947 fault number."""
-        if word:
-            m.fault = word
-
-    def _power(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0010 output power, kW with one decimal (P0761 description)."""
-        changes["power_kw"] = word / 10.0
-
-    def _pd_current(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0760: 4000h = 100 % of the motor rated current P0401."""
-        pct = 100.0 * word / w.PROFIDRIVE_PERCENT_BASE
-        changes["current_pct_flc"] = round(pct, 2)
-        if self.ratings.rated_current_a:
-            changes["current_a"] = round(pct * self.ratings.rated_current_a / 100.0, 2)
-
-    def _pd_power(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0761 = (P0010 / P0404) x 4000h."""
-        if self.ratings.rated_power_kw:
-            frac = word / w.PROFIDRIVE_PERCENT_BASE
-            changes["power_kw"] = round(frac * self.ratings.rated_power_kw, 3)
-        else:
-            m.values["power_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
-
-    def _pd_torque(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0762: 4000h = 100 % of the output torque."""
-        m.values["torque_pct"] = round(100.0 * word / w.PROFIDRIVE_PERCENT_BASE, 2)
-
-    def _namur(self, word: int, changes: Readings, m: _Mapped) -> None:
-        """P0763 VIK-NAMUR status (Table 3.7): fault categories."""
-        m.namur = word
-        m.values[self.spec.pname(763)] = word
-
-    def _resolve_codes(self, changes: Readings, m: _Mapped) -> None:
+    def _resolve_codes(self, changes: Readings, m: Mapped) -> None:
         """Fault and alarm codes with their texts from the drive's own tables."""
         if self._faulted:
             code = m.fault if m.fault is not None else self._polled_fault
@@ -961,7 +606,7 @@ class WegProfile(DpProfileBase):
         self._pulse_until = None
         self._pulse_sent = False
         self._zsw = None
-        self._sent = _Sent()
+        self._sent = Sent()
         self._polled_fault = self._polled_alarm = None
 
     # ------------------------------------------------------------------ parameters
@@ -1008,40 +653,6 @@ _SCALE_FIELDS: Final[Mapping[int, str]] = {
     402: "rated_rpm",
     401: "rated_current_a",
     404: "rated_power_kw",
-}
-
-_PROFIDRIVE_STATUS: Final[Mapping[w.ProfidriveState, DriveStatus]] = {
-    w.ProfidriveState.NOT_READY: DriveStatus.NOT_READY,
-    w.ProfidriveState.SWITCHING_ON_INHIBITED: DriveStatus.NOT_READY,
-    w.ProfidriveState.READY_TO_SWITCH_ON: DriveStatus.READY,
-    w.ProfidriveState.SWITCHED_ON: DriveStatus.READY,
-    w.ProfidriveState.OPERATION: DriveStatus.RUNNING,
-    w.ProfidriveState.FAULT: DriveStatus.FAULTED,
-}
-
-
-@dataclass
-class _Mapped:
-    """What the mapped words of one input telegram said."""
-
-    fault: int | None = None
-    alarm: int | None = None
-    namur: int = 0
-    values: dict[str, float | int] = field(default_factory=dict)
-
-
-_Handler = Callable[[WegProfile, int, Readings, _Mapped], None]
-
-_KNOWN: Final[Mapping[int, _Handler]] = {
-    3: WegProfile._current,
-    10: WegProfile._power,
-    48: WegProfile._alarm_word,
-    49: WegProfile._fault_word,
-    947: WegProfile._fault_word,
-    760: WegProfile._pd_current,
-    761: WegProfile._pd_power,
-    762: WegProfile._pd_torque,
-    763: WegProfile._namur,
 }
 
 

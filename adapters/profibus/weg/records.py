@@ -27,10 +27,10 @@ from enum import Enum, auto
 from functools import partial
 from typing import Final
 
-from adapters.profibus import profidrive as pd
-from adapters.profibus import wegrecord
-from adapters.profibus.dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS
-from adapters.profibus.profile import RecordAccessError, RecordChannel
+from adapters.profibus.codec import profidrive as pd
+from adapters.profibus.codec import wegrecord
+from adapters.profibus.codec.dpv1 import MAX_DATA, WEG_ERROR_CODE_1_TEXTS
+from adapters.profibus.contract import RecordAccessError, RecordChannel
 from gateway.errors import GatewayError, GatewayTimeout, ParameterError
 
 RESPONSE_NOT_AVAILABLE: Final = 0xC3  # 4.2.3 Error Code 1: "resposta não disponível"

@@ -17,9 +17,9 @@ from adapters.canopen.sim.runner import SimRunner
 from adapters.canopen.sim.simulated import sim_configs
 from gateway.adapter import Event
 from gateway.config import parse, shipped_file
-from gateway.daemon import build_hub
 from gateway.hub import EventSubscription, Hub
 from gateway.model import DriveState
+from gateway.runtime.daemon import build_hub
 from tests.support.timing import scaled
 
 EDS = str(shipped_file("eds/cia402-drive.eds"))

@@ -9,8 +9,8 @@ from pathlib import Path
 import can
 import pytest
 
-from adapters.canopen import frames as f
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec import frames as f
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.sim.node import SimNodeConfig, _maps
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, LineHeld

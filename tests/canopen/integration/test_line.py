@@ -9,8 +9,8 @@ from typing import Any
 import can
 import pytest
 
-from adapters.canopen.cia402 import State
-from adapters.canopen.frames import NmtState
+from adapters.canopen.codec.cia402 import State
+from adapters.canopen.codec.frames import NmtState
 from adapters.canopen.sim.node import SimNodeConfig
 from gateway.errors import CommandRejected, DriveOffline, ParameterError, ParameterNotWritable
 from gateway.model import CommState, Direction, DriveCommand, DriveState, DriveStatus, Source
@@ -183,7 +183,7 @@ async def _run_then_leave(r: Any, *, clean: bool) -> None:
         async def killed(*_: object) -> None:
             return None
 
-        r.adapter._leave = killed
+        r.adapter.leave = killed
     r.task.cancel()
     await asyncio.gather(r.task, return_exceptions=True)
 

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from adapters.canopen.adapter import CanOpenAdapter
-from adapters.canopen.cia402 import State
+from adapters.canopen.codec.cia402 import State
 from adapters.canopen.sim.simulated import SimulatedBus
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState, Direction, DriveCommand, DriveState, Source
+from gateway.runtime.daemon import build_hub
 from tests.support.timing import scaled
 
 Z = Source.ZENOH

@@ -10,7 +10,8 @@ import pytest
 
 from adapters.canopen.cli import node_configs
 from adapters.canopen.sim import BootState
-from gateway.cli import build_parser, main
+from gateway.cli import main
+from gateway.cli.parser import build_parser
 
 
 def test_arguments_become_node_configs() -> None:

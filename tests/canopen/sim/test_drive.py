@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from adapters.canopen.cia402 import (
+from adapters.canopen.codec.cia402 import (
     TRANSITIONS,
     DeviceCommand,
     State,

@@ -9,7 +9,7 @@ import struct
 import canopen
 import pytest
 
-from adapters.canopen.cia402 import State, decode_state
+from adapters.canopen.codec.cia402 import State, decode_state
 from adapters.canopen.sim import SimNode, SimNodeConfig
 
 NODE = 5

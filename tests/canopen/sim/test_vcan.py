@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from adapters.canopen.cia402 import State, decode_state
+from adapters.canopen.codec.cia402 import State, decode_state
 from gateway.model import CommState, DriveCommand
 from tests.canopen.integration.conftest import FAST_BUS, drive
 from tests.canopen.sim.conftest import Client

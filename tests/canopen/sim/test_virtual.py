@@ -12,7 +12,7 @@ import pytest
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from adapters.canopen.cia402 import DeviceCommand, State, controlword, decode_state
+from adapters.canopen.codec.cia402 import DeviceCommand, State, controlword, decode_state
 from adapters.canopen.sim import BootState, SimNodeConfig
 from tests.canopen.sim.conftest import EDS, Rig
 

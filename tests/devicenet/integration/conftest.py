@@ -25,9 +25,9 @@ from adapters.devicenet.sim import SimNodeConfig, SimPhase, SimRunner
 from adapters.devicenet.sim.simulated import sim_configs
 from gateway.adapter import Event
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.hub import EventSubscription, Hub
 from gateway.model import DriveState
+from gateway.runtime.daemon import build_hub
 from tests.support.timing import scaled
 
 VCAN = "vcan0"

@@ -37,7 +37,7 @@ async def test_no_replacement_without_adr(can_line: LinkConfig) -> None:
     # product code) is missing too, so MAC 63 is looked at
     drives = [drive(5), drive(7, product_code=99, adr=True)]
     async with rig(can_line, drives, sims=[REPLACEMENT]) as r:
-        await r.until(lambda: r.adapter._adr_next > 0, within=10.0)
+        await r.until(lambda: r.adapter.adr.next_look > 0, within=10.0)
         node = r.sim.nodes[63]
         assert node.mac == 63 and node.drive.params[701] == 63
         assert not [e for e in r.seen if e.text.startswith("ADR")]
@@ -46,7 +46,7 @@ async def test_no_replacement_without_adr(can_line: LinkConfig) -> None:
 async def test_identity_must_match(can_line: LinkConfig) -> None:
     drives = [drive(5, adr=True, product_code=42)]
     async with rig(can_line, drives, sims=[REPLACEMENT]) as r:
-        await r.until(lambda: r.adapter._adr_next > 0, within=10.0)
+        await r.until(lambda: r.adapter.adr.next_look > 0, within=10.0)
         assert r.sim.nodes[63].mac == 63
         assert r.hub.state("d5").comm is not CommState.ONLINE
 

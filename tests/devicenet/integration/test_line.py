@@ -14,15 +14,15 @@ import can
 import pytest
 
 from adapters.devicenet.cfw08 import Out21
-from adapters.devicenet.explicit import (
+from adapters.devicenet.codec.explicit import (
     ErrorResponse,
     GetAttributeSingle,
     SetAttributeSingle,
     SuccessResponse,
 )
-from adapters.devicenet.frame import CanFrame
+from adapters.devicenet.codec.frame import CanFrame
+from adapters.devicenet.codec.objects import AllocationChoice
 from adapters.devicenet.link import LinkConfig, LinkEvent
-from adapters.devicenet.objects import AllocationChoice
 from adapters.devicenet.scanner import Phase
 from adapters.devicenet.sim import Cfw08Node, SimNodeConfig, SimPhase, SimRunner
 from adapters.devicenet.sim import objects as sim_objects
@@ -77,7 +77,8 @@ SLOW_63 = {"poll_interval": 0.05, "expected_packet_rate": 0.2, "response_timeout
 async def test_63_drives_come_online(can_line: LinkConfig) -> None:
     macs = range(1, 64)
     # A poll cycle of 63 drives must fit well inside 4 x EPR: on a slow machine (the VM
-    # under TCG handled about 70 frames/s) a cycle took up to 3.5 s (docs/decisions.md).
+    # under TCG handled about 70 frames/s) a cycle took up to 3.5 s
+    # (docs/decisions/0029-devicenet-bring-up-windows.md).
     bus = {key: scaled(value) for key, value in SLOW_63.items()}
     async with rig(can_line, [drive(m) for m in macs], bus=bus) as r:
         for m in macs:

@@ -9,10 +9,10 @@ from typing import ClassVar
 import pytest
 
 from adapters.devicenet.adapter import DeviceNetAdapter
+from adapters.devicenet.cfw08.options import DriveOptions, parse_drive
 from adapters.devicenet.cfw08.profile import Cfw08Profile
+from adapters.devicenet.contract import PROFILES, DnProfile, DrivePort, load_profile
 from adapters.devicenet.link import LinkConfig
-from adapters.devicenet.options import DriveOptions, parse_drive
-from adapters.devicenet.profile import PROFILES, DnProfile, DrivePort, load_profile
 from gateway.adapter import Capabilities, EventKind, ParamValue
 from gateway.config import DriveConfig
 from gateway.errors import ParameterError

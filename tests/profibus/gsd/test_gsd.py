@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.profibus import gsd as g
+from adapters.profibus.codec import gsd as g
 from gateway.errors import GatewayError
 
 GSD_DIR = Path(__file__).resolve().parents[2] / "data" / "gsd"

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from adapters.profibus.adapter import ProfibusAdapter
-from adapters.profibus.events import SlaveParams
+from adapters.profibus.master.events import SlaveParams
 from gateway.cli import main
 from gateway.config import Config, parse
 from gateway.errors import ConfigError, ConfigErrors

@@ -10,16 +10,16 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
-from adapters.mcd600.sim import Mcd600Sim
+from adapters.mcd600.sim.starter import Mcd600Sim
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.cli import build_line
 from adapters.profibus.sim.gsdsim import GsdSim
 from adapters.profibus.sim.port import SimPort
 from gateway.adapter import EventKind
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState
+from gateway.runtime.daemon import build_hub
 from tests.support import simulated
 
 GSD_DIR = Path(__file__).resolve().parents[2] / "data" / "gsd"

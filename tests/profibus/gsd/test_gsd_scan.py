@@ -14,9 +14,9 @@ from typing import Any
 import pytest
 
 from adapters.profibus.cli import Progress, build_line
-from adapters.profibus.scan import Scanner
+from adapters.profibus.master.scan import Scanner
+from adapters.profibus.master.timing import BusParams
 from adapters.profibus.sim.port import SimPort
-from adapters.profibus.timing import BusParams
 from gateway.cli import main
 from gateway.config import parse
 from tests.profibus.gsd.test_gsd_line import CONFIG, DRIVES, GSD_DIR

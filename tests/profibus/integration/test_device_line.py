@@ -12,8 +12,8 @@ from typing import Any
 
 from adapters.profibus.adapter import ProfibusAdapter
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.model import CommState
+from gateway.runtime.daemon import build_hub
 from tests.support import simulated
 
 DRIVES: list[dict[str, Any]] = [

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.adapter import EventKind
 from gateway.model import CommState
 from tests.profibus.support import line_config, running_line

@@ -16,12 +16,12 @@ from typing import Any
 import pytest
 
 from adapters.profibus.adapter import ProfibusAdapter
-from adapters.profibus.weg.sim import WegSim
+from adapters.profibus.weg.sim.drive import WegSim
 from gateway.adapter import EventKind
 from gateway.config import parse
-from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState, DriveCommand, DriveState, Source
+from gateway.runtime.daemon import build_hub
 from tests.support import simulated
 
 NETWORK = {"P0220": 10, "P0222": 11, "P0226": 9, "P0227": 4, "P0228": 5, "P0105": 5}

@@ -18,14 +18,14 @@ from typing import Any
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.sim.devices import SIM_DEVICES
 from adapters.profibus.sim.simulated import SimulatedLine
-from adapters.profibus.weg import simparams as sp
-from adapters.profibus.weg.sim import Cfw700Sim, WegSim
+from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.drive import Cfw700Sim, WegSim
 from adapters.profibus.weg.spec import DataProfile
 from gateway.adapter import EventKind
 from gateway.config import DriveConfig, parse
-from gateway.daemon import build_hub
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveCommand, Source
+from gateway.runtime.daemon import build_hub
 from tests.support import simulated
 
 LIMIT = 20.0  # s: a bound on a busy machine, never a wait

@@ -6,13 +6,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from adapters.profibus.weg import simparams as sp
 from adapters.profibus.weg.cfw11 import Cfw11Profile
 from adapters.profibus.weg.cfw320 import Cfw320Profile
 from adapters.profibus.weg.cfw700 import Cfw700Profile
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.profile import WegProfile
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim, WegSim
+from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim, Cfw700Sim, WegSim
 from gateway.config import DriveConfig
 from gateway.model import DesiredCommand, Device
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from adapters.profibus.weg.options import WegOptions
-from adapters.profibus.weg.sim import PdState
+from adapters.profibus.weg.sim.dataprofile import PdState
 from adapters.profibus.weg.spec import DataProfile
 from gateway.model import Device, Direction, DriveStatus
 from tests.profibus.weg.helpers import Loop

@@ -7,10 +7,10 @@ import struct
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.profibus.profile import RecordAccessError
-from adapters.profibus.weg import simparams as sp
+from adapters.profibus.contract import RecordAccessError
 from adapters.profibus.weg import words as w
 from adapters.profibus.weg.options import WegOptions
+from adapters.profibus.weg.sim import params as sp
 from adapters.profibus.weg.spec import CFW11, CFW320, CFW700, DataProfile, ModelSpec
 from gateway.errors import FrameDecodeError
 from gateway.model import DesiredCommand, Device, Direction

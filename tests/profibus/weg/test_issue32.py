@@ -14,12 +14,12 @@ import struct
 import pytest
 
 from adapters.profibus.adapter import ProfibusAdapter, unconfigured_outputs
-from adapters.profibus.weg import simparams as sp
 from adapters.profibus.weg import words as w
 from adapters.profibus.weg.cfw320 import Cfw320Profile
 from adapters.profibus.weg.options import WegOptions
-from adapters.profibus.weg.profile import DataProfilePending, DriveProgrammingMismatch
-from adapters.profibus.weg.sim import Cfw700Sim
+from adapters.profibus.weg.programming import DataProfilePending, DriveProgrammingMismatch
+from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.drive import Cfw700Sim
 from adapters.profibus.weg.spec import CFW11, CFW320, DataProfile, failsafe_warning
 from gateway.config import parse
 from gateway.errors import CommandRejected

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from adapters.profibus.weg.options import WegOptions
-from adapters.profibus.weg.profile import DriveProgrammingMismatch
+from adapters.profibus.weg.programming import DriveProgrammingMismatch
 from adapters.profibus.weg.spec import DataProfile
 from gateway.errors import ParameterError
 from gateway.model import Device, DriveStatus

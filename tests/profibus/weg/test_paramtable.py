@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from adapters.profibus.weg.paramtable import NOT_IN_SEEDS, PARAM_TABLES
-from adapters.profibus.weg.simparams import PARAMETERS
+from adapters.profibus.weg.sim.params import PARAMETERS
 from adapters.profibus.weg.spec import SPECS
 from gateway.model import Device
 from tests.profibus.weg.helpers import profile

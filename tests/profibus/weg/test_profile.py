@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from adapters.profibus.profile import (
+from adapters.profibus.contract import (
     PROFILES,
     DpProfile,
     SimDevice,
@@ -18,7 +18,7 @@ from adapters.profibus.weg.cfw320 import Cfw320Profile
 from adapters.profibus.weg.cfw700 import Cfw700Profile
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.profile import WegProfile
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim, Cfw700Sim
 from adapters.profibus.weg.spec import DataProfile
 from gateway.errors import ConfigError, FrameDecodeError
 from gateway.model import DesiredCommand, Device, Direction, DriveStatus
@@ -41,7 +41,7 @@ def out(p: WegProfile, now: float = 0.0, **desired: Any) -> tuple[int, ...]:
 
 
 def test_classes_meet_the_contract() -> None:
-    # checked by mypy: the classes satisfy the protocols of adapters/profibus/profile.py
+    # checked by mypy: the classes satisfy the protocols of adapters/profibus/contract.py
     # (not ProfileFactory: mypy never matches its ClassVar against a class object)
     profiles: list[DpProfile] = [
         Cfw11Profile(drive(Device.CFW11)),

@@ -13,7 +13,7 @@ import asyncio
 
 import pytest
 
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.contract import RecordAccessError
 from adapters.profibus.weg.records import (
     ParamSequence,
     ReadRecord,

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import pytest
 
-from adapters.profibus import profidrive as pd
-from adapters.profibus.profile import RecordAccessError
+from adapters.profibus.codec import profidrive as pd
+from adapters.profibus.contract import RecordAccessError
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.records import RecordParams
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim, Cfw700Sim
 from gateway.errors import GatewayTimeout, ParameterError
 from gateway.model import Device
 from tests.profibus.weg.helpers import SimChannel, profile

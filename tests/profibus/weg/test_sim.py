@@ -6,8 +6,9 @@ import struct
 
 import pytest
 
-from adapters.profibus.weg import simparams as sp
-from adapters.profibus.weg.sim import Cfw11Sim, Cfw320Sim, Cfw700Sim, PdState, WegSim
+from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.dataprofile import PdState
+from adapters.profibus.weg.sim.drive import Cfw11Sim, Cfw320Sim, Cfw700Sim, WegSim
 from adapters.profibus.weg.spec import DataProfile
 
 NET = {**sp.NETWORK_SOURCES, 100: 20, 101: 20, 102: 5, 103: 5}
