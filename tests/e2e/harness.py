@@ -21,6 +21,7 @@ from gateway.config import load
 from gateway.model import DriveState
 from gateway.runtime.daemon import READY_BOUND, Daemon
 from gateway.runtime.systemd import Notifier
+from tests.support.heard import Heard
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.timing import scaled
 from tests.zenoh.client import Client
@@ -73,9 +74,9 @@ def simulated_profibus(bus: str, **extra: float) -> str:
 async def exchanges(counters: SlaveCounters, n: int) -> None:
     """Until a simulated slave has exchanged ``n`` more telegrams with the master."""
     target = counters.exchanges + n
-    async with asyncio.timeout(TIMEOUT):
-        while counters.exchanges < target:  # noqa: ASYNC110 (a simulator counter: no event)
-            await asyncio.sleep(0.005)
+    with Heard(counters) as heard:
+        async with asyncio.timeout(TIMEOUT):
+            await heard.until(lambda: counters.exchanges >= target)
 
 
 def parsed(sample: Any) -> DriveState:

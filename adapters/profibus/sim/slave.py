@@ -92,6 +92,12 @@ class SlaveCounters:
     clears: int = 0  # Global_Control Clear received in data exchange
     comm_lost: int = 0  # watchdog expiries and Clears passed to the device
     power_cycles: int = 0
+    watchers: list[Callable[[], None]] = field(default_factory=list, repr=False, compare=False)
+    """Called after each telegram the slave took (a test awaits a count with them)."""
+
+    def heard(self) -> None:
+        for watcher in tuple(self.watchers):
+            watcher()
 
 
 class DpSlave:
@@ -173,6 +179,12 @@ class DpSlave:
 
     def handle(self, request: DataTelegram, now: float) -> Reply | None:
         """The reply to one request telegram, or None (not for us, SDN, switched off)."""
+        reply = self._handle(request, now)
+        if self.counters.watchers:
+            self.counters.heard()
+        return reply
+
+    def _handle(self, request: DataTelegram, now: float) -> Reply | None:
         if now < self.off_until or self.faults.silent or not isinstance(request.fc, RequestFc):
             return None
         if request.da == BROADCAST or request.fc.function not in _SRD:

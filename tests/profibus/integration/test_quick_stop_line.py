@@ -23,6 +23,7 @@ from gateway.hub import Hub
 from gateway.model import CommState, DriveCommand, DriveState, Source
 from gateway.runtime.daemon import build_hub
 from tests.support import simulated
+from tests.support.heard import Heard
 
 NETWORK = {"P0220": 10, "P0222": 11, "P0226": 9, "P0227": 4, "P0228": 5, "P0105": 5}
 RAMPS = {"P0100": 10, "P0101": 10, "P0313": 1}  # 1.0 s from 0 to P0134 = 1800 rpm
@@ -102,8 +103,9 @@ async def test_quick_stop_stops_and_its_release_does_not_restart(
         slave = sims[address]
         hub.submit(drive_id, Source.ZENOH, DriveCommand(quick_stop=False))
         after = slave.counters.exchanges + 20  # twenty data exchanges after the release
-        async with asyncio.timeout(LIMIT):
-            while slave.counters.exchanges < after:  # polled: no event on a counter
-                assert drive_sim.motor.speed == 0.0 and not drive_sim.net.run
-                await asyncio.sleep(0.005)
+        with Heard(slave.counters) as heard:
+            async with asyncio.timeout(LIMIT):
+                while slave.counters.exchanges < after:  # watched after every telegram
+                    assert drive_sim.motor.speed == 0.0 and not drive_sim.net.run
+                    await heard.next()
         assert not hub.state(drive_id).running

@@ -27,6 +27,7 @@ from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveCommand, Source
 from gateway.runtime.daemon import build_hub
 from tests.support import simulated
+from tests.support.heard import Heard
 
 LIMIT = 20.0  # s: a bound on a busy machine, never a wait
 PD = {"device": "CFW700", "data_profile": "profidrive"}
@@ -86,19 +87,20 @@ async def test_no_profidrive_word_moves_a_drive_still_in_the_manufacturer_profil
                 drives = sims(adapter)
                 sim_line = simulated.sim_line(adapter)
                 assert sim_line is not None
-                # polled: the motors are watched at every step until the written drive is
+                # the motors are watched after every telegram until the written drive is
                 # back online and the two mismatched ones had 40 more data exchanges
                 done_at: int | None = None
-                while True:
-                    for drive_id, sim in drives.items():
-                        assert sim.motor.speed == 0.0, f"{drive_id} moves: {sim.net}"
-                        assert not sim.net.jog, f"{drive_id} jogs"
-                    exchanges = min(sim_line[a].counters.exchanges for a in (3, 4))
-                    if done_at is None and hub.state("written").comm is CommState.ONLINE:
-                        done_at = exchanges + 40
-                    if done_at is not None and exchanges >= done_at:
-                        break
-                    await asyncio.sleep(0.005)
+                with Heard(*(s.counters for s in sim_line.slaves.values())) as heard:
+                    while True:
+                        for drive_id, sim in drives.items():
+                            assert sim.motor.speed == 0.0, f"{drive_id} moves: {sim.net}"
+                            assert not sim.net.jog, f"{drive_id} jogs"
+                        exchanges = min(sim_line[a].counters.exchanges for a in (3, 4))
+                        if done_at is None and hub.state("written").comm is CommState.ONLINE:
+                            done_at = exchanges + 40
+                        if done_at is not None and exchanges >= done_at:
+                            break
+                        await heard.next()
             said = [e for e in events.drain() if e.drive_id == "written"]
         diag = adapter.diagnostics()["drives"]
         assert not diag["verify"]["configured"] and not diag["noverify"]["configured"]
