@@ -36,6 +36,7 @@ from gateway.model import DesiredCommand, Device, Direction, DriveState, DriveSt
 from gateway.runtime.daemon import build_hub
 from gateway.schema import Table
 from tests.support import simulated
+from tests.support.heard import Heard
 
 ADAPTER = "echo-profibus"  # registered by tests/support/plugins.py
 
@@ -193,6 +194,13 @@ class Line:
         assert line is not None
         return line
 
+    async def heard_until(self, cond: Callable[[], bool], limit: float = 5.0) -> None:
+        """Wait for ``cond``, checked after each telegram a simulated slave takes (the master
+        polls every slave of the line all the time, so no condition waits on a timer)."""
+        with Heard(*(slave.counters for slave in self.sim.slaves.values())) as heard:
+            async with asyncio.timeout(limit):
+                await heard.until(cond)
+
     async def online(self, *ids: str, limit: float = 5.0) -> None:
         async with asyncio.timeout(limit):
             for drive_id in ids:
@@ -205,7 +213,8 @@ class Line:
 
 
 async def until(cond: Callable[[], bool], limit: float = 5.0) -> None:
-    """Wait for ``cond`` (simulator counters have no event to wait on): polled, bounded."""
+    """Wait for ``cond`` where no simulated slave takes telegrams (a port alone, a fake
+    engine): polled, bounded. On a running line, :meth:`Line.heard_until`."""
     async with asyncio.timeout(limit):
         while not cond():  # noqa: ASYNC110
             await asyncio.sleep(0.002)

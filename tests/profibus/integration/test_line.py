@@ -14,7 +14,7 @@ from adapters.profibus.sim.slave import SlaveMode
 from gateway.adapter import EventKind
 from gateway.errors import DriveOffline, ParameterError
 from gateway.model import CommState, DriveCommand, DriveState, Source
-from tests.profibus.support import line_config, running_line, until
+from tests.profibus.support import line_config, running_line
 
 pytestmark = pytest.mark.filterwarnings("error")
 
@@ -49,7 +49,7 @@ async def test_thirty_two_slaves_reach_data_exchange() -> None:
         # telegrams, every other one exchanges at least 3 (the cycle time itself is a
         # benchmark figure, `make bench`, not a test)
         before = {a: line.sim[a].counters.exchanges for a in addresses}
-        await until(lambda: line.sim[3].counters.exchanges >= before[3] + 5, limit=30.0)
+        await line.heard_until(lambda: line.sim[3].counters.exchanges >= before[3] + 5, limit=30.0)
         more = {a: line.sim[a].counters.exchanges - before[a] for a in addresses}
         assert min(more.values()) >= 3, more
         # outputs out and inputs back for every slave, each with its own values
@@ -67,12 +67,14 @@ async def test_sync_and_freeze_on_request() -> None:
         await line.online("d5", "d6")
         sim = line.sim
         line.adapter.global_control(freeze=True, sync=True)
-        await until(lambda: all(sim[a].freeze and sim[a].sync for a in addresses))
+        await line.heard_until(lambda: all(sim[a].freeze and sim[a].sync for a in addresses))
         line.adapter.global_control(unfreeze=True, unsync=True)
-        await until(lambda: not any(sim[a].freeze or sim[a].sync for a in addresses))
+        await line.heard_until(lambda: not any(sim[a].freeze or sim[a].sync for a in addresses))
         line.adapter.global_control(freeze=True, groups=(3,))  # no slave is in group 3
         count = sim[5].counters.exchanges
-        await until(lambda: sim[5].counters.exchanges > count + 5)  # it went out meanwhile
+        await line.heard_until(
+            lambda: sim[5].counters.exchanges > count + 5
+        )  # it went out meanwhile
         assert not any(sim[a].freeze for a in addresses)
         seen = [c for c in sim[5].counters.global_controls if c.freeze or c.sync]
         assert [(c.freeze, c.sync, c.group_select) for c in seen] == [(True, True, 0)]
@@ -93,7 +95,7 @@ async def test_fault_reset_goes_out_as_one_edge() -> None:
 
         device.exchange = spy  # type: ignore[method-assign]
         line.hub.submit("d5", Source.MODBUS, DriveCommand(fault_reset=True))
-        await until(lambda: len([b for b in seen if b]) >= 1 and len(seen) > 20)
+        await line.heard_until(lambda: len([b for b in seen if b]) >= 1 and len(seen) > 20)
         # one rising edge, never raised again; a loaded loop may hold the bit for a second
         # telegram (the outputs are cyclic), but never drops it unsent
         edges = [i for i, bit in enumerate(seen) if bit and (i == 0 or not seen[i - 1])]
@@ -147,8 +149,8 @@ async def test_exchange_continues_through_line_noise() -> None:
         line.sim.faults.bit_error_rate = 1e-3  # per byte, both directions, seeded
         with line.hub.subscribe_events() as events:
             before = {a: line.sim[a].counters.exchanges for a in addresses}
-            await until(lambda: line.adapter.master.figures.fcs_errors > 0, limit=10.0)
-            await until(
+            await line.heard_until(lambda: line.adapter.master.figures.fcs_errors > 0, limit=10.0)
+            await line.heard_until(
                 lambda: all(line.sim[a].counters.exchanges > before[a] + 200 for a in addresses),
                 limit=10.0,
             )
@@ -165,7 +167,9 @@ async def test_a_missing_slave_is_offline_while_the_others_run() -> None:
         with line.hub.subscribe_events() as events:
             line.sim[9].faults.silent = True  # nobody at address 9
             await line.online("d5", "d6")
-            await until(lambda: any(e.text == "no answer at address 9" for e in events.drain()))
+            await line.heard_until(
+                lambda: any(e.text == "no answer at address 9" for e in events.drain())
+            )
         assert line.hub.state("d9").comm is CommState.OFFLINE
         diag = line.adapter.diagnostics()
         assert diag["drives"]["d9"]["state"] == "absent"
@@ -197,11 +201,11 @@ async def test_clear_while_northbound_control_is_lost() -> None:
             line.hub.tick()  # the daemon's safety timer
             return line.hub.desired("d5").source is Source.GATEWAY
 
-        await until(timed_out)
-        await until(lambda: line.sim[5].clear and line.sim[6].clear)
+        await line.heard_until(timed_out)
+        await line.heard_until(lambda: line.sim[5].clear and line.sim[6].clear)
         assert line.adapter.diagnostics()["mode"] == "clear"
         line.hub.submit("d5", Source.ZENOH, DriveCommand(run=False))  # a client is back
-        await until(lambda: not line.sim[5].clear and not line.sim[6].clear)
+        await line.heard_until(lambda: not line.sim[5].clear and not line.sim[6].clear)
         assert line.adapter.diagnostics()["mode"] == "operate"
 
 
@@ -209,13 +213,13 @@ async def test_a_failing_on_connect_leaves_the_drive_not_configured() -> None:
     config = line_config([5], drive={"connect_fails": True})
     async with running_line(config) as line:
         with line.hub.subscribe_events() as events:
-            await until(lambda: line.sim[5].mode is SlaveMode.DATA_EXCH)
+            await line.heard_until(lambda: line.sim[5].mode is SlaveMode.DATA_EXCH)
             event = await asyncio.wait_for(events.get(), 2.0)
             while event.kind is not EventKind.CONFIG:
                 event = await asyncio.wait_for(events.get(), 2.0)
         assert event.text == "not configured: the test profile refuses to connect"
         assert line.hub.state("d5").comm is CommState.CONNECTING
-        await until(lambda: line.sim[5].counters.exchanges > 5)
+        await line.heard_until(lambda: line.sim[5].counters.exchanges > 5)
         assert line.sim[5].last_outputs == bytes(4)  # a safe value: no run
         diag = line.adapter.diagnostics()["drives"]["d5"]
         assert diag["configured"] is False
