@@ -48,8 +48,10 @@ def test_cfw11_keys_a_master_needs() -> None:
     assert (f.get("Max_Input_Len"), f.get("Max_Output_Len"), f.get("Max_Data_Len")) == (20, 20, 40)
     assert f.dpv1 and f.get("C1_Read_Write_supp") == 1
     assert (f.get("C1_Max_Data_Len"), f.get("C1_Response_Timeout")) == (240, 100)
-    assert f.user_prm_data == bytes([0x80, 0, 0, 0, 0])  # a "\" continuation joined it
-    assert f.get("User_Prm_Data_Len") == 5
+    assert f.ext_prm and f.user_prm_data == b"" and f.get("User_Prm_Data_Len") is None
+    assert f.get("Max_User_Prm_Data_Len") == 5
+    # a "\" continuation joined the constant bytes
+    assert f.placements[0] == g.PrmPlacement(0, const=bytes([0x80, 0, 0, 0, 0]))
     four = f.module("4 WORDS I/O (p0922 = 3)")  # names are found whatever their case
     assert four is not None and four.config == bytes([0xC0, 0xC3, 0xC3])
     assert (four.input_bytes, four.output_bytes, four.reference) == (8, 8, 3)
@@ -135,7 +137,7 @@ def test_file_format_rules() -> None:
 @pytest.mark.parametrize(
     ("text", "line", "key", "reason"),
     [
-        ("Ident_Number = 0x12G4\n", 1, "Ident_Number", "'0x12G4' is not a number"),
+        ("#Profibus_DP\nIdent_Number = 0x12G4\n", 2, "Ident_Number", "'0x12G4' is not a number"),
         (MINIMAL + 'Module = "n" 0xF1\n', 5, "Module", "has no EndModule"),
         (MINIMAL + "EndModule\n", 5, "EndModule", "closes a block that was never opened"),
         (MINIMAL.replace("0xF1", "0x1F0"), 3, "Module", "496 is not a byte (0-255)"),
@@ -172,12 +174,18 @@ def test_file_format_rules() -> None:
             "no PrmText 4",
         ),
         (
-            MINIMAL + "User_Prm_Data_Len = 1\nExt_User_Prm_Data_Const(1) = 0x01\n",
+            MINIMAL + "Max_User_Prm_Data_Len = 1\nExt_User_Prm_Data_Const(1) = 0x01\n",
             6,
             "Ext_User_Prm_Data_Const",
-            "offset 1 + 1 bytes is beyond User_Prm_Data_Len = 1",
+            "offset 1 + 1 bytes is beyond Max_User_Prm_Data_Len = 1",
         ),
-        ('Module = "m" 0xF1\nEndModule\n', 0, "Ident_Number", "is missing"),
+        ('#Profibus_DP\nModule = "m" 0xF1\nEndModule\n', 0, "Ident_Number", "is missing"),
+        (
+            'Module = "m" 0xF1\nEndModule\n',
+            0,
+            "#Profibus_DP",
+            "the file has no #Profibus_DP line: not a DP slave's GSD",
+        ),
         (MINIMAL + 'Module = "M" 0xF2\nEndModule\n', 5, "Module", "module 'M' is defined twice"),
         (
             MINIMAL + 'Module = "x" 0x40\nEndModule\n',
@@ -271,19 +279,24 @@ def gsd_models(draw: st.DrawFn) -> g.Gsd:
             ),
             *exts[1:],
         )
-    length = 4 * n_ext + draw(st.integers(0, 4))
+    dpv1 = draw(st.booleans())
+    length = 4 * n_ext + draw(st.integers(3 if dpv1 else 0, 4))
     placements = tuple(g.PrmPlacement(4 * i, ref=e.ref) for i, e in enumerate(exts))
     if draw(st.booleans()) and length:
         placements += (g.PrmPlacement(length - 1, const=bytes([draw(st.integers(0, 255))])),)
+    if dpv1 and (exts or placements):  # DPV1_Status_1..3 first (the references overwrite)
+        placements = (g.PrmPlacement(0, const=b"\x80\x00\x00"), *placements)
     module_names = draw(st.lists(names, min_size=1, max_size=4, unique_by=str.casefold))
     configs = st.sampled_from([b"\xf1", b"\xc0\xc1\xc1", b"\xf0\xa0\x93", b"\x13", b"\x00"])
     modules = tuple(
         g.GsdModule(n, draw(configs), draw(st.none() | st.integers(0, 99))) for n in module_names
     )
     ints = {"ident_number": draw(st.integers(0, 0xFFFF)), "user_prm_data_len": length}
-    for key in ("station_type", "modular_station", "max_module", "dpv1_slave", "c1_max_data_len"):
+    for key in ("station_type", "modular_station", "max_module", "c1_max_data_len"):
         if draw(st.booleans()):
             ints[key] = draw(st.integers(1 if key == "max_module" else 0, 240))  # a GSD's 1+
+    if dpv1:
+        ints["dpv1_slave"] = 1
     bauds = draw(st.lists(st.sampled_from(list(g.BAUD_KEYS)), unique=True))
     return g.Gsd(
         ints=tuple(sorted(ints.items())),
