@@ -5,7 +5,7 @@ Layout (see config/site.example.toml for every key)::
     [gateway]            name, log_level, shutdown_timeout, tick
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
-                         idle_timeout
+                         max_connections_per_peer, idle_timeout
     [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
@@ -121,6 +121,7 @@ class ModbusSection:
     gateway_unit: int = 0
     frame_timeout: float = 5.0  # s for the rest of a begun frame to arrive
     max_connections: int = 100  # clients connected at once
+    max_connections_per_peer: int = 0  # from one client address; 0: only max_connections
     idle_timeout: float = 60.0  # s with no complete request before a connection is closed; 0: never
 
 
@@ -305,7 +306,24 @@ def _modbus_section(t: Table) -> ModbusSection:
         max_connections=t.integer("max_connections", d.max_connections, minimum=1, maximum=1000),
         idle_timeout=t.number("idle_timeout", d.idle_timeout, minimum=0.0, maximum=86400.0),
     )
-    return section
+    return replace(section, max_connections_per_peer=_per_peer(t, section.max_connections))
+
+
+def _per_peer(t: Table, max_connections: int) -> int:
+    """``modbus.max_connections_per_peer``: 0 (no limit of its own) up to max_connections."""
+    value: int = t.integer(
+        "max_connections_per_peer", ModbusSection().max_connections_per_peer, minimum=0
+    )
+    if value > max_connections:
+        t.errors.append(
+            t.error(
+                "max_connections_per_peer",
+                f"{value} is above modbus.max_connections ({max_connections}): it would limit"
+                " nothing; 0 means no limit per address",
+            )
+        )
+        return 0
+    return value
 
 
 def _frame_timeout(t: Table, default: float) -> float:

@@ -15,7 +15,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from gateway.adapter import DriveAdapter
 from gateway.config import Config
 from gateway.hub import Hub
 
@@ -56,6 +55,16 @@ class FrontEnd(Protocol):
         ...
 
 
+class BusView(Protocol):
+    """What a front end may see of a running line: its name and its figures."""
+
+    name: str
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Bus figures: line-level keys, and per drive under ``"drives"``."""
+        ...
+
+
 class RuntimeView(Protocol):
     """What a front end may see of the running gateway."""
 
@@ -74,8 +83,8 @@ class RuntimeView(Protocol):
         ...
 
     @property
-    def adapters(self) -> Mapping[str, DriveAdapter]:
-        """The running adapter of each bus, by bus name."""
+    def adapters(self) -> Mapping[str, BusView]:
+        """The running line of each bus, by bus name."""
         ...
 
     @property

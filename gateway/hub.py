@@ -231,7 +231,7 @@ class Hub:
         self._event_subs: set[EventSubscription] = set()
         self._seq = 0
         self._listeners: list[Callable[[str], None]] = []
-        self._event_log = EventLog(log, clock)
+        self._event_log = EventLog(log, clock, self._deliver_event)
         self.started = clock()
         self.shutting_down = False
 
@@ -370,10 +370,23 @@ class Hub:
     # ------------------------------------------------------------ events
 
     def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None:
+        """An event of a drive: logged and delivered to every subscription. A burst of
+        identical events (the kind and text of the drive's event before it) is the first
+        one at once, then one with ``repeats``, the count of those held back, once per
+        window (:meth:`tick`) or just before the drive's next different event
+        (gateway/eventlog.py); a different event is never held back."""
         ev = Event(drive_id=drive_id, kind=kind, text=text, ts=self._wallclock(), data=data)
-        self._event_log.write(ev)
+        self._event_log.offer(ev)
+
+    def _deliver_event(self, ev: Event) -> None:
         for sub in tuple(self._event_subs):
             sub._offer(ev)
+
+    @property
+    def events_folded(self) -> int:
+        """Events held back as repeats of the one before them, in all (each is counted in
+        the ``repeats`` of a later event)."""
+        return self._event_log.folded
 
     def subscribe_events(self) -> EventSubscription:
         sub = EventSubscription(self)

@@ -10,13 +10,17 @@ the build (docs/operations.md, "Web status page and metrics").
 - ``commands``: false (default) serves a read-only page and refuses every command request.
 - ``token_sha256``: the hex SHA-256 of the token a user gives to command (required when
   ``commands = true``). The config file holds the digest, never the token itself.
+- the admission limits (:class:`WebLimits`, docs/operations.md, "Web status page and
+  metrics"): connections in all and per client address, the time a client has to send a
+  request's head and body, pages in all and per address with what each may have unsent,
+  wrong tokens per address, and how often ``/metrics`` is rendered.
 """
 
 from __future__ import annotations
 
 import ipaddress
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from gateway.errors import ConfigError
 from gateway.schema import Table
@@ -30,6 +34,29 @@ _SHA256_HEX = re.compile(r"[0-9a-f]{64}")
 
 
 @dataclass(frozen=True, slots=True)
+class WebLimits:
+    """What the web front end admits, so that no client can slow the gateway."""
+
+    max_connections: int = 128  # connections open at once; more are closed at accept
+    max_connections_per_peer: int = 64  # from one client address
+    header_timeout: float = 10.0  # s to send a request's head, from opening or the last answer
+    body_timeout: float = 10.0  # s to send a request's body once its head arrived
+    max_pages: int = 48  # live pages (WebSocket feeds) open at once
+    max_pages_per_peer: int = 24  # from one client address
+    page_send_budget_kib: int = 512  # KiB a page may leave unsent before it is dropped
+    token_failures: int = 5  # wrong tokens one address may give within token_window
+    token_window: float = 60.0  # s; beyond token_failures the address gets 429 unchecked
+    metrics_max_age: float = 0.5  # s one /metrics render serves every scrape
+    request_rate: float = 50.0  # requests per second one address may send; beyond, unread
+    request_burst: int = 100  # requests one address may send at once before request_rate
+
+    @property
+    def page_send_budget(self) -> int:
+        """Bytes a page may leave unsent."""
+        return self.page_send_budget_kib * 1024
+
+
+@dataclass(frozen=True, slots=True)
 class WebSection:
     enabled: bool = False
     host: str = "127.0.0.1"
@@ -37,6 +64,7 @@ class WebSection:
     allow: tuple[IpNetwork, ...] = LOOPBACK
     commands: bool = False
     token_sha256: str | None = None
+    limits: WebLimits = field(default_factory=WebLimits)
 
     @property
     def url(self) -> str:
@@ -100,6 +128,72 @@ def _token(t: Table, commands: bool) -> str | None:
     return digest
 
 
+def _positive(t: Table, key: str, default: float, maximum: float) -> float:
+    value: float = t.number(key, default, maximum=maximum)
+    if value <= 0:
+        t.errors.append(t.error(key, f"must be above 0 s, not {value:g}"))
+        return default
+    return value
+
+
+def _at_most(t: Table, key: str, value: int, limit: tuple[str, int], why: str) -> int:
+    """``value`` of ``key`` within ``limit`` (a key and its value): a default above it is
+    lowered to it, a value given above it is an error."""
+    limit_key, most = limit
+    if value <= most:
+        return value
+    if t.has(key):
+        t.errors.append(t.error(key, f"{value} is above {limit_key} ({most}): {why}"))
+    return most
+
+
+def _limits(t: Table) -> WebLimits:
+    d = WebLimits()
+    connections: int = t.integer("max_connections", d.max_connections, minimum=1, maximum=1000)
+    per_peer: int = t.integer(
+        "max_connections_per_peer", d.max_connections_per_peer, minimum=1, maximum=1000
+    )
+    pages: int = t.integer("max_pages", d.max_pages, minimum=1, maximum=1000)
+    pages_per_peer: int = t.integer(
+        "max_pages_per_peer", d.max_pages_per_peer, minimum=1, maximum=1000
+    )
+    each_page = "every page holds a connection"
+    per_peer = _at_most(
+        t,
+        "max_connections_per_peer",
+        per_peer,
+        ("max_connections", connections),
+        "one address never holds more than all",
+    )
+    pages = _at_most(t, "max_pages", pages, ("max_connections", connections), each_page)
+    pages_per_peer = _at_most(
+        t,
+        "max_pages_per_peer",
+        pages_per_peer,
+        ("max_pages", pages),
+        "one address never holds more pages than all",
+    )
+    pages_per_peer = _at_most(
+        t, "max_pages_per_peer", pages_per_peer, ("max_connections_per_peer", per_peer), each_page
+    )
+    return WebLimits(
+        max_connections=connections,
+        max_connections_per_peer=per_peer,
+        header_timeout=_positive(t, "header_timeout", d.header_timeout, 3600.0),
+        body_timeout=_positive(t, "body_timeout", d.body_timeout, 3600.0),
+        max_pages=pages,
+        max_pages_per_peer=pages_per_peer,
+        page_send_budget_kib=t.integer(
+            "page_send_budget_kib", d.page_send_budget_kib, minimum=16, maximum=65536
+        ),
+        token_failures=t.integer("token_failures", d.token_failures, minimum=1, maximum=1000),
+        token_window=t.number("token_window", d.token_window, minimum=1.0, maximum=86400.0),
+        metrics_max_age=t.number("metrics_max_age", d.metrics_max_age, minimum=0.5, maximum=3600.0),
+        request_rate=t.number("request_rate", d.request_rate, minimum=1.0, maximum=100000.0),
+        request_burst=t.integer("request_burst", d.request_burst, minimum=1, maximum=100000),
+    )
+
+
 def read_web_section(t: Table) -> WebSection:
     """The ``[web]`` table (every problem recorded in ``t.errors``, as the loader reads)."""
     d = WebSection()
@@ -113,6 +207,7 @@ def read_web_section(t: Table) -> WebSection:
         allow=_allow(t),
         commands=commands,
         token_sha256=_token(t, commands),
+        limits=_limits(t),
     )
 
 

@@ -14,7 +14,8 @@ from typing import Any
 from gateway.config import ModbusSection
 from gateway.modbus.command import COMMAND_BITS, DEFINED_MASK
 from gateway.modbus.health import GATEWAY_INPUTS
-from gateway.modbus.limits import EVICT_MIN_IDLE
+from gateway.modbus.limits import EVICT_MIN_IDLE, OVER_LIMIT_LOG_INTERVAL
+from gateway.modbus.listener import ACCEPT_RETRY_DELAY
 from gateway.modbus.map import (
     COMM_CODES,
     CONTROL_CODES,
@@ -261,6 +262,17 @@ _CONNECTIONS = [
     "  every connection is busier than that, the new one is disconnected at accept, before",
     "  it can send anything, and counted in `connections_over_limit`. A client that polls",
     "  is never locked out by connections that send nothing.",
+    f"- `modbus.max_connections_per_peer` (default {_MODBUS.max_connections_per_peer},"
+    " 0 = no limit of its own,",
+    "  at most `modbus.max_connections`): connections open at once from one client address.",
+    "  One more makes room by closing that address's connection idle longest (as above);",
+    "  else it is disconnected at accept, counted in `connections_over_limit` and",
+    "  `connections_over_peer_limit`. Set, it keeps one address (a client reconnecting",
+    "  in a loop, a scanner) from taking every place.",
+    "- An accept that fails for lack of file descriptors (or memory) is counted in",
+    f"  `accept_failures` and retried every {ACCEPT_RETRY_DELAY:g} s; the connections open",
+    f"  are served meanwhile, and the log says it at most once per"
+    f" {OVER_LIMIT_LOG_INTERVAL:g} s, with the count.",
     f"- `modbus.idle_timeout` (s, default {_MODBUS.idle_timeout:g}, 0 = never): a connection",
     "  with no complete request for this long is closed.",
     f"  Every connection has TCP keepalive ({KEEPALIVE_IDLE} s idle, then {KEEPALIVE_COUNT}"

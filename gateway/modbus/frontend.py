@@ -297,6 +297,8 @@ class ModbusFrontEnd:
             adapter_restarts=restarts,
             frame_timeouts=c.frame_timeouts,
             connections_over_limit=c.connections_over_limit,
+            connections_over_peer_limit=c.connections_over_peer_limit,
+            accept_failures=c.accept_failures,
         )
 
     def counted(self) -> FrontEndCounters:
@@ -327,6 +329,7 @@ class ModbusFrontEnd:
                 frame_timeout=self.section.frame_timeout,
                 max_connections=self.section.max_connections,
                 idle_timeout=self.section.idle_timeout,
+                max_per_peer=self.section.max_connections_per_peer,
             ),
             on_peer=self.shared.memory.peer,
             fast_reads=FastReads({u.unit: u for u in self.drives.values()}, MIRROR_OFFSET),

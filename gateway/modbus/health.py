@@ -32,6 +32,8 @@ class GatewayView:
     adapter_restarts: int
     frame_timeouts: int
     connections_over_limit: int
+    connections_over_peer_limit: int
+    accept_failures: int
 
 
 def parse_version(text: str) -> tuple[int, int, int]:
@@ -148,8 +150,27 @@ GATEWAY_INPUTS: tuple[Field[GatewayView], ...] = (
         "connections_over_limit",
         COUNTER32,
         "count",
-        "connections closed at accept because `modbus.max_connections` were open",
+        "connections closed at accept because a connection limit was reached"
+        " (`modbus.max_connections` or `modbus.max_connections_per_peer`)",
         lambda g: g.connections_over_limit,
+    ),
+    Field(
+        29,
+        "connections_over_peer_limit",
+        COUNTER32,
+        "count",
+        "of `connections_over_limit`: the client's address had"
+        " `modbus.max_connections_per_peer` open",
+        lambda g: g.connections_over_peer_limit,
+    ),
+    Field(
+        31,
+        "accept_failures",
+        COUNTER32,
+        "count",
+        "accepts that failed: no file descriptor (or memory) left; open connections are"
+        " still served",
+        lambda g: g.accept_failures,
     ),
 )
 """Input registers of the gateway unit, mirrored at holding ``MIRROR_OFFSET + n``."""

@@ -7,10 +7,14 @@ connection or per request, outside any ``SimDevice``, so they live in a
 subclass of pymodbus's per-connection ``ServerRequestHandler``, returned by the
 documented ``callback_new_connection`` of the server:
 
-- the allow-list and ``modbus.max_connections``, at accept
-  (``connection_made``): other peers, and a connection beyond the limit, are
-  aborted before a byte is read; an admitted one gets TCP keepalive, so that a
-  client gone without closing (power cut) frees its place;
+- admission, at accept, on the bare accepted socket (the server's own accept loop,
+  :mod:`gateway.modbus.listener`): a peer outside ``modbus.allow``, a connection beyond
+  ``modbus.max_connections_per_peer`` of its address or beyond ``modbus.max_connections``
+  is closed before a byte is read and before a handler or transport is made for it (at
+  a limit, the connection idle longest of the peer, or of all, makes room first if it
+  has been idle long enough); an admitted one gets TCP keepalive, so that a client gone
+  without closing (power cut) frees its place. An accept that fails (no descriptor
+  left) is counted and logged once per interval, never per attempt;
 - framing (``callback_data``, which replaces pymodbus's): a bad MBAP header
   closes the connection; an unknown unit gets exception 0x0B and an unserved
   function exception 1 before pymodbus decodes anything (pymodbus would answer
@@ -66,7 +70,15 @@ from pymodbus.simulator import SimDevice
 from pymodbus.transaction import TransactionManager
 
 from gateway.errors import StartupError
-from gateway.modbus.limits import OVER_LIMIT_LOG_INTERVAL, ConnectionLimits, WarningRateLimit
+from gateway.modbus.limits import (
+    OVER_LIMIT_LOG_INTERVAL,
+    Admission,
+    ConnectionLimits,
+    PeerCounts,
+    WarningRateLimit,
+    admission,
+)
+from gateway.modbus.listener import ACCEPT_RETRY_DELAY, Listener, open_listening_sockets
 from gateway.modbus.mbap import HEADER_SIZE, MbapError, parse_header
 from gateway.modbus.regs import ExceptionCode
 
@@ -164,7 +176,9 @@ class Counters:
     commands_refused: int = 0
     bad_frames: int = 0  # a bad MBAP header, or a frame not finished in time
     frame_timeouts: int = 0  # frames not finished within modbus.frame_timeout
-    connections_over_limit: int = 0  # closed at accept: modbus.max_connections were open
+    connections_over_limit: int = 0  # closed at accept: a connection limit was reached
+    connections_over_peer_limit: int = 0  # of those: modbus.max_connections_per_peer
+    accept_failures: int = 0  # accepts that failed (no descriptor or memory left)
     idle_closed: int = 0  # closed: no complete request for modbus.idle_timeout
     idle_evicted: int = 0  # the idlest closed at the limit, to make room for a new client
 
@@ -281,21 +295,32 @@ class GatewayRequestHandler(ServerRequestHandler):
         self._out = bytearray()  # short-path replies not written yet
         self._frame_timer: asyncio.TimerHandle | None = None
         self._idle_timer: asyncio.TimerHandle | None = None
-        self.last_request = 0.0  # loop time of the last complete request (or the accept)
+        self.last_request = self.loop.time()  # of the last complete request (or the accept)
+        self._counted = False  # holds a place in the owner's per-peer count
+
+    def admitted(self, host: str) -> None:
+        """Made for an admitted connection from ``host``: it counts for the address from
+        now until it is closed or lost."""
+        self.client = host
+        self._counted = True
+        self.gateway.peers.add(host)
+
+    def _leave(self) -> None:
+        if self._counted:
+            self._counted = False
+            self.gateway.peers.remove(self.client)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        peer = transport.get_extra_info("peername")
-        host = str(peer[0]) if peer else ""
-        self.last_request = self.loop.time()
-        if not self.gateway.admit(host, self):
-            self.close()  # forget this handler (the transport is not ours yet)
+        if self.is_closing:  # closed (server stopping) before it was connected
             transport.abort()  # type: ignore[attr-defined]
             return
-        self.client = host
+        if not self.client:
+            peer = transport.get_extra_info("peername")
+            self.client = str(peer[0]) if peer else ""
+        self.last_request = self.loop.time()
         self._peer_open = True
-        self.gateway.peer_changed(host, True)
+        self.gateway.peer_changed(self.client, True)
         self.gateway.counters.connections_accepted += 1
-        keep_alive(transport.get_extra_info("socket"))
         super().connection_made(transport)
         self._arm_idle(self.gateway.limits.idle_timeout)
 
@@ -309,6 +334,7 @@ class GatewayRequestHandler(ServerRequestHandler):
         self._time_frame(restart=used > 0)
 
     def connection_lost(self, exc: Exception | None) -> None:
+        self._leave()
         if self._peer_open:
             self._peer_open = False
             self.gateway.peer_changed(self.client, False)
@@ -350,6 +376,7 @@ class GatewayRequestHandler(ServerRequestHandler):
             self._idle_timer = None
         self._stop_frame_timer()
         self._rx = b""
+        self._leave()
         super().close(reconnect)
 
     def _time_frame(self, *, restart: bool) -> None:
@@ -542,8 +569,24 @@ class GatewayRequestHandler(ServerRequestHandler):
         super().server_send(pdu, addr)  # type: ignore[no-untyped-call]
 
 
+_RESOURCE_REASONS = {
+    errno.EMFILE: "the process has no file descriptor left (its limit: LimitNOFILE in the unit)",
+    errno.ENFILE: "the system's file table is full",
+    errno.ENOBUFS: "no buffer space",
+    errno.ENOMEM: "no memory",
+}
+
+
+def accept_failure_reason(exc: OSError) -> str:
+    """Why an accept failed, for the log."""
+    reason = _RESOURCE_REASONS.get(exc.errno or 0)
+    if reason is not None:
+        return f"{reason} ({errno.errorcode[exc.errno or 0]})"
+    return (exc.strerror or str(exc)).lower()
+
+
 class GatewayServer(ModbusTcpServer):
-    """pymodbus's TCP server with the gateway's connection handler."""
+    """pymodbus's TCP server with the gateway's accept loop and connection handler."""
 
     def __init__(
         self,
@@ -563,8 +606,13 @@ class GatewayServer(ModbusTcpServer):
         self.policy = policy
         self.counters = counters
         self.limits = limits
+        self.peers = PeerCounts()  # admitted connections open, per address
+        self._attaching: dict[asyncio.Task[None], socket.socket] = {}  # admitted, connecting
         self._refused_logged: set[str] = set()
         self._over_limit_log = WarningRateLimit(OVER_LIMIT_LOG_INTERVAL)
+        self._over_peer_limit_log = WarningRateLimit(OVER_LIMIT_LOG_INTERVAL)
+        self._accept_failure_log = WarningRateLimit(OVER_LIMIT_LOG_INTERVAL)
+        self._failing = 0  # accepts failed since the last one that succeeded
 
     def callback_new_connection(self) -> GatewayRequestHandler:
         return GatewayRequestHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
@@ -578,25 +626,79 @@ class GatewayServer(ModbusTcpServer):
     def connections_open(self) -> int:
         return len(self.active_connections)
 
-    def admit(self, host: str, new: Any = None) -> bool:
-        """Whether a new connection from ``host`` may stay (it is already among
-        ``active_connections``); a refusal is counted and logged. At the limit, the
-        connection idle longest makes room, if it has been idle ``evict_after``."""
+    # ------------------------------------------------------------ accept
+
+    def accepted(self, conn: socket.socket, host: str) -> None:
+        """The listener's callback: admit the connection or close it at once."""
+        if self._failing:
+            log.info(
+                "Modbus server accepts connections again (%d accept(s) failed before)",
+                self._failing,
+            )
+            self._failing = 0
+        if not self.admit(host):
+            conn.close()
+            return
+        handler = self.handle_new_connection()  # among active_connections from now
+        assert isinstance(handler, GatewayRequestHandler)
+        handler.admitted(host)
+        keep_alive(conn)
+        task = self.loop.create_task(self._attach(handler, conn), name="modbus-accept")
+        self._attaching[task] = conn
+        task.add_done_callback(self._attached)
+
+    def _attached(self, task: asyncio.Task[None]) -> None:
+        self._attaching.pop(task, None)
+
+    async def _attach(self, handler: GatewayRequestHandler, conn: socket.socket) -> None:
+        """Give an admitted socket its transport (``connection_made`` follows)."""
+        try:
+            await self.loop.connect_accepted_socket(lambda: handler, conn)
+        except (OSError, RuntimeError, ValueError) as exc:
+            log.debug("Modbus client %s: connection lost while set up (%s)", handler.client, exc)
+            handler.close()
+            conn.close()
+
+    def accept_failed(self, exc: OSError) -> None:
+        """The listener's callback: an accept failed; counted, one WARNING per interval."""
+        self.counters.accept_failures += 1
+        self._failing += 1
+        held = self._accept_failure_log.admit(self.loop.time())
+        if held is None:
+            return
+        log.warning(
+            "Modbus server cannot accept connections: %s; %d connection(s) open are still"
+            " served, accepting again every %g s%s",
+            accept_failure_reason(exc),
+            self.connections_open,
+            ACCEPT_RETRY_DELAY,
+            f"; {held} more failed since the last warning" if held else "",
+        )
+
+    def admit(self, host: str) -> bool:
+        """Whether a new connection from ``host`` may be served; a refusal is counted and
+        logged. At a limit, the connection idle longest (of the peer at its own limit,
+        else of all) makes room, if it has been idle ``evict_after``."""
         if not self.policy.admits(host):
             self.refused(host)
             return False
-        if len(self.active_connections) > self.limits.max_connections:
-            if self._evict_idlest(host, new):
-                return True
+        verdict = admission(self.limits, len(self.active_connections), self.peers.of(host))
+        if verdict is Admission.PEER_FULL and not self._evict_idlest(host, of_peer=True):
+            self.over_peer_limit(host)
+            return False
+        verdict = admission(self.limits, len(self.active_connections), self.peers.of(host))
+        if verdict is Admission.FULL and not self._evict_idlest(host, of_peer=False):
             self.over_limit(host)
             return False
         return True
 
-    def _evict_idlest(self, host: str, new: Any) -> bool:
+    def _evict_idlest(self, host: str, *, of_peer: bool) -> bool:
         others = [
             c
             for c in self.active_connections.values()
-            if c is not new and isinstance(c, GatewayRequestHandler) and c.transport is not None
+            if isinstance(c, GatewayRequestHandler)
+            and c.transport is not None
+            and (not of_peer or c.client == host)
         ]
         if not others:
             return False
@@ -605,13 +707,17 @@ class GatewayServer(ModbusTcpServer):
         if idle < self.limits.evict_after:
             return False
         self.counters.idle_evicted += 1
+        limit = (
+            f"modbus.max_connections_per_peer {self.limits.max_per_peer}"
+            if of_peer
+            else f"modbus.max_connections {self.limits.max_connections}"
+        )
         log.info(
-            "Modbus client %s: connection idle for %.0f s closed to make room for %s"
-            " (modbus.max_connections %d open)",
+            "Modbus client %s: connection idle for %.0f s closed to make room for %s (%s open)",
             idlest.client,
             idle,
             host,
-            self.limits.max_connections,
+            limit,
         )
         idlest.close()
         return True
@@ -638,26 +744,51 @@ class GatewayServer(ModbusTcpServer):
             f"; {held} more refused since the last warning" if held else "",
         )
 
+    def over_peer_limit(self, host: str) -> None:
+        self.counters.connections_over_limit += 1
+        self.counters.connections_over_peer_limit += 1
+        limit = self.limits.max_per_peer
+        held = self._over_peer_limit_log.admit(self.loop.time())
+        if held is None:
+            log.debug(
+                "refused Modbus client %s (modbus.max_connections_per_peer %d open)", host, limit
+            )
+            return
+        log.warning(
+            "refused Modbus client %s: modbus.max_connections_per_peer (%d) connections of"
+            " its address are open%s",
+            host,
+            limit,
+            f"; {held} more refused since the last warning" if held else "",
+        )
+
+    # ------------------------------------------------------------ life cycle
+
+    async def _open_listener(self) -> Listener:
+        host, port = self.comm_params.source_address or ("", 0)
+        sockets = await open_listening_sockets(host, port)
+        listener = Listener(self.loop, sockets, self.accepted, self.accept_failed)
+        listener.start()
+        return listener
+
     async def start(self) -> tuple[str, int]:
         """Listen; returns the bound address. Raises :class:`ModbusBindError`."""
         host, port = self.comm_params.source_address or ("", 0)
-        create = self.call_create  # pymodbus logs the OSError and drops it: keep it
         failure: list[OSError] = []
 
-        async def create_and_keep_the_error() -> Any:
+        async def open_and_keep_the_error() -> Listener:
             try:
-                return await create()
-            except OSError as exc:
+                return await self._open_listener()
+            except OSError as exc:  # pymodbus logs it and drops it: keep it
                 failure.append(exc)
                 raise
 
-        self.call_create = create_and_keep_the_error
+        self.call_create = open_and_keep_the_error
         pymodbus_log = logging.getLogger("pymodbus.logging")
         pymodbus_log.addFilter(_drop_bind_failure)  # ModbusBindError says it, with the fix
         try:
             listening = await self.listen()
         finally:
-            self.call_create = create
             pymodbus_log.removeFilter(_drop_bind_failure)
         if not listening:
             raise bind_error(host, port, failure[0] if failure else None)
@@ -670,3 +801,10 @@ class GatewayServer(ModbusTcpServer):
     async def stop(self) -> None:
         """Stop listening and close every connection."""
         await self.shutdown()  # type: ignore[no-untyped-call]
+        connecting = list(self._attaching.items())
+        for task, _ in connecting:
+            task.cancel()
+        for task, conn in connecting:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+            conn.close()  # a task cancelled before it ran never gave it to a transport

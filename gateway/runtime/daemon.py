@@ -27,13 +27,14 @@ import asyncio
 import contextlib
 import logging
 import signal
+import sys
 import time
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from gateway import __version__
-from gateway.adapter import DriveAdapter, EventKind
+from gateway.adapter import EventKind
 from gateway.config import BusConfig, Config, load, load_adapter
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.frontend import FrontEnd, RuntimeView
@@ -41,6 +42,8 @@ from gateway.hub import DrivePolicy, Hub
 from gateway.loader import load as load_target
 from gateway.loader import load_optional
 from gateway.model import CommState, DriveState
+from gateway.runtime.limits import descriptor_problems
+from gateway.runtime.linethread import LineThread
 from gateway.runtime.preflight import front_end_problems
 from gateway.runtime.systemd import Notifier
 
@@ -64,6 +67,9 @@ themselves never import a simulator."""
 
 RESTART_BACKOFF = (0.5, 30.0)  # first and longest pause before restarting a crashed adapter
 DIAG_REUSE = 0.05  # s a bus's diagnostics serve all its drives' diag (one heartbeat pass)
+SWITCH_INTERVAL = 0.0005
+"""s a thread may hold the interpreter while another waits (``sys.setswitchinterval``): a
+line's thread woken by its port waits at most this for a busy daemon loop (0071)."""
 READY_BOUND = 10.0  # s the daemon waits for its front ends to serve before it reports READY
 EXIT_LINE_HELD = 75  # EX_TEMPFAIL (sysexits.h): another master holds a line; it may be freed
 EXIT_STARTUP = 2
@@ -97,13 +103,13 @@ class Runtime:
 
     config: Config
     hub: Hub
-    adapters: dict[str, DriveAdapter] = field(default_factory=dict)
+    adapters: dict[str, LineThread] = field(default_factory=dict)
     started: float = field(default_factory=time.monotonic)
     version: str = __version__
     restarts: dict[str, int] = field(default_factory=dict)
     front_ends: dict[str, FrontEnd] = field(default_factory=dict)
     """The running instance of each front end (the web front end's metrics read the others)."""
-    _diag: dict[str, tuple[float, DriveAdapter, dict[str, Any]]] = field(
+    _diag: dict[str, tuple[float, LineThread, dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False
     )
 
@@ -241,12 +247,14 @@ class Daemon:
 
     # ------------------------------------------------------------ adapters
 
-    def _make_adapter(self, bus: BusConfig) -> DriveAdapter:
+    def _make_line(self, bus: BusConfig) -> LineThread:
+        """The bus's adapter on a thread and event loop of its own (0071)."""
         cls = load_adapter(bus.adapter)
         adapter = cls(bus, links=simulated_line(bus)) if bus.simulate else cls(bus)
-        self.runtime.adapters[bus.name] = adapter
-        self.hub.attach_params([d.id for d in bus.drives], adapter)
-        return adapter
+        line = LineThread(adapter, self.hub)
+        self.runtime.adapters[bus.name] = line
+        self.hub.attach_params([d.id for d in bus.drives], line)
+        return line
 
     def _offline(self, bus: BusConfig) -> None:
         for d in bus.drives:
@@ -310,7 +318,7 @@ class Daemon:
 
     def _supervise_bus(self, bus: BusConfig) -> Awaitable[None]:
         async def start() -> None:
-            await self._make_adapter(bus).run(self.hub)
+            await self._make_line(bus).run()
 
         return self._supervise(f"bus {bus.name}", start, lambda: self._offline(bus))
 
@@ -371,9 +379,12 @@ class Daemon:
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.request_stop)
         loop.add_signal_handler(signal.SIGHUP, self.check_reload)
+        switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL)
         try:
             return await self._run()
         finally:
+            sys.setswitchinterval(switch_interval)
             for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                 loop.remove_signal_handler(sig)
             self.notifier.close()
@@ -384,6 +395,8 @@ class Daemon:
             log.warning(
                 "no drives are configured in %s; serving the gateway only", self.config.file
             )
+        for problem in descriptor_problems(self.config):
+            log.warning("%s", problem)
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:

@@ -11,10 +11,13 @@ queue append and a socket write.
 
 Each client has a :class:`ClientQueue` of at most :data:`CLIENT_QUEUE` messages. A client
 that falls that far behind loses what waits (counted) and gets one fresh snapshot when it
-next reads, built at that moment: the latest state wins, nothing piles up. Its writer
-gives a message at most :data:`SEND_TIMEOUT` seconds; a client still stuck then is
-disconnected. Nothing here ever waits for a client: the hub's subscriptions are drained
-by the step, on the loop, at the step's own pace.
+next reads: the latest state wins, nothing piles up. A snapshot is built once per step,
+when the first client asks for it, and shared by every client that asks before the next
+step (each one gets what changed after it in the next step's message), so many pages
+connecting at once cost one snapshot. Its writer gives a message at most
+:data:`SEND_TIMEOUT` seconds; a client still stuck then is disconnected. Nothing here ever
+waits for a client: the hub's subscriptions are drained by the step, on the loop, at the
+step's own pace.
 """
 
 from __future__ import annotations
@@ -115,6 +118,7 @@ class Feed:
         self._events: EventSubscription | None = None
         self._buses: list[dict[str, Any]] = []
         self._health: dict[str, Any] = {}
+        self._snapshot: str | None = None  # built since the last step
 
     # ------------------------------------------------------------ life cycle
 
@@ -152,6 +156,7 @@ class Feed:
     def step(self) -> str | None:
         """One push: the message made for every client (None when there is none to send)."""
         self._steps += 1
+        self._snapshot = None
         now = self.clock()
         changed = self._states.drain() if self._states is not None else []
         events = self._take_events()
@@ -177,7 +182,14 @@ class Feed:
         return text
 
     def snapshot(self) -> str:
-        """Everything a page shows, now (its trend comes from ``/api/history``)."""
+        """Everything a page shows, as of the last step or later (its trend comes from
+        ``/api/history``): built once per step, shared until the next."""
+        if self._snapshot is None:
+            self._snapshot = self._build_snapshot()
+        self.counters.snapshots += 1
+        return self._snapshot
+
+    def _build_snapshot(self) -> str:
         runtime = self.runtime
         self._refresh_diag()
         message = {
@@ -194,5 +206,4 @@ class Feed:
             "buses": self._buses,
             "health": self._health,
         }
-        self.counters.snapshots += 1
         return _dumps(message)

@@ -7,10 +7,16 @@ An aiohttp server on the daemon's own event loop serves, on ``web.bind``:
 - ``/api/health``, ``/api/drives``, ``/api/drives/<id>``, ``/api/buses``, ``/api/events``,
   ``/api/history`` and ``/api/history/<id>`` (JSON, docs/operations.md);
 - ``POST /api/drives/<id>/command`` only with ``web.commands = true`` and the token;
-- ``/metrics`` (gateway/web/metrics.py).
+- ``/metrics`` (gateway/web/metrics.py), from a render shared by the scrapes within
+  ``web.metrics_max_age``.
 
-Every request from an address outside ``web.allow`` is refused (403) before anything
-else runs. A command goes through ``hub.submit`` as source ``web`` and client
+What it admits (gateway/web/admission.py): a connection from an address outside
+``web.allow``, or beyond ``web.max_connections`` (in all, or per address), is closed at
+accept before a byte is read; a request's head and body have ``web.header_timeout`` and
+``web.body_timeout``; at most ``web.max_pages`` pages, each dropped once it leaves more
+than ``web.page_send_budget_kib`` unsent; an address that gave ``web.token_failures``
+wrong tokens within ``web.token_window`` gets 429 unchecked (gateway/web/tokens.py).
+A command goes through ``hub.submit`` as source ``web`` and client
 ``<peer address> <page id>``, under the same safety rules as Zenoh and Modbus.
 """
 
@@ -21,26 +27,29 @@ import contextlib
 import errno
 import hashlib
 import hmac
-import ipaddress
 import logging
+import math
 import re
+import time
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
 import orjson
 from aiohttp import WSCloseCode, WSMsgType, web
-from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.model import DriveCommand, Source, client_label
+from gateway.web.admission import AdmissionSite, Gate, RefusalLog, connection_of, peer_of
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
-from gateway.web.metrics import WebCounters, make_registry
+from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
+from gateway.web.tokens import TokenFailures
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
-from gateway.webconfig import IpNetwork
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +79,7 @@ SHUTDOWN_TIMEOUT = 2.0  # s open requests and pages get when the gateway stops
 WS_HEARTBEAT = 20.0  # s between pings: a page that went away is noticed
 WS_MAX_MESSAGE = 1024  # bytes a page may send on the feed (it sends nothing we read)
 PAGE_ID = re.compile(r"[A-Za-z0-9-]{1,40}")
+PAGES_RETRY_AFTER = 10  # s a refused page is told to wait (it retries by itself, up to 8 s)
 _BIND_FIXES = {
     errno.EADDRINUSE: ("the address is in use", "stop what uses it, or set [web] bind"),
     errno.EACCES: ("permission denied", "use a port above 1023, or set [web] bind"),
@@ -87,18 +97,6 @@ def load_static() -> dict[str, tuple[bytes, str]]:
     return out
 
 
-def allowed(peer: str | None, networks: tuple[IpNetwork, ...]) -> bool:
-    if not peer:
-        return False
-    try:
-        address = ipaddress.ip_address(peer.partition("%")[0])
-    except ValueError:
-        return False
-    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
-        address = address.ipv4_mapped
-    return any(address in net for net in networks)
-
-
 def same_origin(request: web.Request) -> bool:
     """No Origin (not a browser), or the origin of this very host and port."""
     origin = request.headers.get("Origin")
@@ -108,8 +106,25 @@ def same_origin(request: web.Request) -> bool:
     return bool(sep) and scheme in ("http", "https") and rest.lower() == request.host.lower()
 
 
-def _json(body: Any, status: int = 200) -> web.Response:
-    return web.Response(body=orjson.dumps(body), status=status, content_type="application/json")
+def _json(body: Any, status: int = 200, headers: dict[str, str] | None = None) -> web.Response:
+    return web.Response(
+        body=orjson.dumps(body), status=status, content_type="application/json", headers=headers
+    )
+
+
+def _peer(request: web.BaseRequest) -> str:
+    """The client's address, as the admission counts it."""
+    transport = request.transport
+    return peer_of(transport) if transport is not None else str(request.remote or "")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Page:
+    """An open page: its feed, its connection and its client's address."""
+
+    ws: web.WebSocketResponse
+    transport: asyncio.Transport
+    peer: str
 
 
 class WebFrontEnd:
@@ -118,15 +133,20 @@ class WebFrontEnd:
     def __init__(self, runtime: RuntimeView) -> None:
         self.runtime = runtime
         self.section = runtime.config.web
+        self.limits = self.section.limits
         self.hub = runtime.hub
         self.feed = Feed(runtime, commands=self.section.commands)
         self.counters = WebCounters()
         self.registry = make_registry(runtime, self.feed.counters, self.counters)
+        self.metrics = MetricsSnapshot(self.registry, self.limits.metrics_max_age, self.counters)
+        self.refusals = RefusalLog()
+        self.gate = Gate(self.section, self.counters, self.refusals)
+        self.tokens = TokenFailures(self.limits.token_failures, self.limits.token_window)
         self.static = load_static()
         self.address: tuple[str, int] | None = None
         self.ready = asyncio.Event()  # set while the server listens
         self._writers: set[asyncio.Task[None]] = set()
-        self._sockets: set[web.WebSocketResponse] = set()
+        self._pages: set[Page] = set()
 
     def counted(self) -> FrontEndCounters:
         c = self.counters
@@ -134,6 +154,9 @@ class WebFrontEnd:
             refused=dict(c.refused),
             commands_accepted=c.commands["accepted"],
             commands_refused=c.commands["refused"],
+            connections_accepted=c.connections["accepted"],
+            connections_refused=c.connections["refused"],
+            connections_over_limit=c.connections["over_limit"] + c.connections["over_peer_limit"],
             connections_open=c.clients_open,
         )
 
@@ -158,17 +181,24 @@ class WebFrontEnd:
 
     async def run(self) -> None:
         runner = web.AppRunner(
-            self.app(), access_log=None, handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT
+            self.app(),
+            access_log=None,
+            handle_signals=False,
+            shutdown_timeout=SHUTDOWN_TIMEOUT,
+            # aiohttp's own idle close, behind the header deadline of gateway/web/admission.py
+            keepalive_timeout=2 * self.limits.header_timeout,
+            # a body left unread (a refused request) is not waited for: the connection closes
+            lingering_time=0,
         )
         await runner.setup()
         self.feed.open()
         try:
-            site = web.TCPSite(runner, self.section.host, self.section.port, reuse_address=True)
+            site = AdmissionSite(runner, self.section.host, self.section.port, self.gate)
             try:
                 await site.start()
             except OSError as exc:
                 raise self._bind_error(exc) from None
-            self.address = self._bound(site)
+            self.address = site.bound
             self._log_serving()
             self.ready.set()
             await self._push()
@@ -189,7 +219,7 @@ class WebFrontEnd:
                 async with asyncio.timeout(SHUTDOWN_TIMEOUT):
                     await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway stopping")
 
-        await asyncio.gather(*(close(ws) for ws in list(self._sockets)))
+        await asyncio.gather(*(close(page.ws) for page in list(self._pages)))
 
     def _bind_error(self, exc: OSError) -> StartupError:
         where = f"{self.section.host}:{self.section.port}"
@@ -197,15 +227,6 @@ class WebFrontEnd:
             exc.errno or 0, ((exc.strerror or str(exc)).lower(), "check [web] bind")
         )
         return StartupError("web", f"cannot listen on {where}: {cause}", fix)
-
-    @staticmethod
-    def _bound(site: web.TCPSite) -> tuple[str, int] | None:
-        server: Any = site._server  # aiohttp keeps the asyncio server there
-        sockets = getattr(server, "sockets", None) or ()
-        if not sockets:
-            return None
-        host, port = sockets[0].getsockname()[:2]
-        return str(host), int(port)
 
     @property
     def url(self) -> str:
@@ -222,6 +243,17 @@ class WebFrontEnd:
         )
         networks = ", ".join(str(n) for n in self.section.allow)
         log.info("web clients allowed from %s", networks)
+        limits = self.limits
+        log.info(
+            "web limits: %d connections (%d per address), %d pages (%d per address), "
+            "%g s for a request head, %g s for a body",
+            limits.max_connections,
+            limits.max_connections_per_peer,
+            limits.max_pages,
+            limits.max_pages_per_peer,
+            limits.header_timeout,
+            limits.body_timeout,
+        )
 
     async def _push(self) -> None:
         loop = asyncio.get_running_loop()
@@ -235,6 +267,8 @@ class WebFrontEnd:
                 if not failing:
                     log.exception("web feed: a push failed (logged once until one succeeds)")
                 failing = True
+            self._drop_over_budget()
+            self.refusals.flush()
             next_at += PUSH_PERIOD
             delay = next_at - loop.time()
             if delay < 0:  # the loop was held up: no burst of steps to catch up
@@ -246,10 +280,13 @@ class WebFrontEnd:
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
-        if not allowed(request.remote, self.section.allow):
-            self.counters.refused["allow"] += 1
-            log.debug("web request from %s refused: not in web.allow", request.remote)
-            return web.Response(status=403, text="forbidden: this address is not in web.allow\n")
+        """Every request: the connection's header deadline is off while the request runs
+        (it is due again once the answer is written), and the security headers."""
+        connection = connection_of(request)
+        task = asyncio.current_task()
+        if connection is not None and task is not None:
+            connection.request_started()
+            task.add_done_callback(lambda _: connection.expect_request())
         response = await handler(request)
         if not response.prepared:
             response.headers.update(SECURITY_HEADERS)
@@ -270,12 +307,39 @@ class WebFrontEnd:
             # in the operator's browser could otherwise read the feed
             self.counters.refused["origin"] += 1
             return web.Response(status=403, text="forbidden: the feed serves this page only\n")
-        ws = web.WebSocketResponse(heartbeat=WS_HEARTBEAT, max_msg_size=WS_MAX_MESSAGE)
+        peer = _peer(request)
+        if self.gate.page_refusal(peer) is not None:
+            return web.Response(
+                status=503,
+                text="too many pages are open: try again later\n",
+                headers={"Retry-After": str(PAGES_RETRY_AFTER)},
+            )
+        self.gate.page_opened(peer)  # from the handshake on: handshakes in flight count
+        try:
+            return await self._page(request, peer)
+        finally:
+            self.gate.page_closed(peer)
+
+    async def _page(self, request: web.Request, peer: str) -> web.StreamResponse:
+        """One page's feed, from the handshake until it closes."""
+        # no compression: every page gets the same text, each would compress it again
+        ws = web.WebSocketResponse(
+            heartbeat=WS_HEARTBEAT, max_msg_size=WS_MAX_MESSAGE, compress=False
+        )
         ws.headers.update(SECURITY_HEADERS)
         await ws.prepare(request)
-        self._sockets.add(ws)
+        transport = request.transport
+        if transport is None:  # gone during the handshake
+            return ws
+        connection = connection_of(request)
+        if connection is not None:
+            connection.page_opened()
+        # the writer waits for the socket only beyond the budget: a page that reads keeps
+        # up, one that does not is dropped by the next push (_drop_over_budget)
+        transport.set_write_buffer_limits(high=self.limits.page_send_budget)
+        page = Page(ws, transport, peer)
+        self._pages.add(page)
         client = self.feed.add()
-        self.counters.clients_open += 1
         writer = asyncio.create_task(self._write(ws, client, request), name="web-ws-writer")
         self._writers.add(writer)
         try:
@@ -283,13 +347,16 @@ class WebFrontEnd:
                 if msg.type is WSMsgType.ERROR:
                     break  # the page sends nothing the gateway reads
         finally:
-            self._sockets.discard(ws)
-            self.counters.clients_open -= 1
+            self._pages.discard(page)
             self.feed.remove(client)
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await writer
             self._writers.discard(writer)
+            if transport.get_write_buffer_size():
+                # closed with data unsent (its ping unanswered, say): a close would wait for
+                # a page that does not read, holding its connection
+                transport.abort()
         return ws
 
     async def _write(
@@ -313,10 +380,21 @@ class WebFrontEnd:
             except ConnectionError:
                 return
 
+    def _drop_over_budget(self) -> None:
+        """Drop every page that left more than its budget unsent (it does not read)."""
+        budget = self.limits.page_send_budget
+        for page in list(self._pages):
+            transport = page.transport
+            if transport.is_closing() or transport.get_write_buffer_size() <= budget:
+                continue
+            self.counters.clients_over_budget += 1
+            self.refusals.note("over_budget", page.peer, self.limits.page_send_budget_kib)
+            transport.abort()
+
     # ------------------------------------------------------------ API
 
     async def _metrics(self, request: web.Request) -> web.Response:
-        body = generate_latest(self.registry)
+        body = self.metrics.body()
         return web.Response(body=body, headers={"Content-Type": CONTENT_TYPE_LATEST})
 
     async def _health(self, request: web.Request) -> web.Response:
@@ -362,18 +440,56 @@ class WebFrontEnd:
         digest = hashlib.sha256(token.strip().encode()).hexdigest()
         return hmac.compare_digest(digest, expected)
 
-    def _refuse(self, reason: str, status: int, text: str) -> web.Response:
+    def _refuse(
+        self, reason: str, status: int, text: str, headers: dict[str, str] | None = None
+    ) -> web.Response:
         self.counters.refused[reason] += 1
-        return _json({"accepted": False, "error": text}, status)
+        return _json({"accepted": False, "error": text}, status, headers)
 
-    async def _command(self, request: web.Request) -> web.Response:
+    def _admit_command(self, request: web.Request) -> web.Response | None:
+        """The refusal of a command before its body is read, or None: commands off, an
+        address that gave too many wrong tokens (unchecked), a wrong token."""
         if not self.section.commands:
             return self._refuse(
                 "commands_off", 403, "commands from the web page are off (web.commands)"
             )
+        peer = _peer(request)
+        now = time.monotonic()
+        wait = self.tokens.wait(peer, now)
+        if wait > 0:
+            self.refusals.note("token_limit", peer, math.ceil(wait))
+            return self._refuse(
+                "token_limit",
+                429,
+                "too many wrong tokens from this address: try again later",
+                {"Retry-After": str(math.ceil(wait))},
+            )
         if not self._token_ok(request):
-            log.info("web command from %s refused: no valid token", request.remote)
+            self.tokens.failed(peer, now)
+            self.refusals.note("token", peer, self.tokens.count(peer))
             return self._refuse("token", 401, "a valid token is needed (Authorization: Bearer)")
+        self.tokens.succeeded(peer)
+        return None
+
+    async def _body(self, request: web.Request) -> bytes:
+        """The command's body, within ``web.body_timeout`` (408 and closed beyond it)."""
+        try:
+            async with asyncio.timeout(self.limits.body_timeout):
+                return await request.read()
+        except TimeoutError:
+            self.counters.timeouts["body"] += 1
+            self.refusals.note("body", _peer(request), f"{self.limits.body_timeout:g}")
+            raise web.HTTPRequestTimeout(
+                text="the request's body came too slowly (web.body_timeout)\n",
+                headers={"Connection": "close"},
+            ) from None
+        except web.HTTPRequestEntityTooLarge:
+            raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
+
+    async def _command(self, request: web.Request) -> web.Response:
+        refused = self._admit_command(request)
+        if refused is not None:
+            return refused
         state = self._state(request)
         page = request.headers.get("X-Page-Id", "")
         # the page id is the page's own choice: only its label is published (docs/safety.md)
@@ -383,13 +499,7 @@ class WebFrontEnd:
             else str(request.remote)
         )
         try:
-            try:
-                data = jsontext.loads(await request.read())
-            except jsontext.DuplicateKey as exc:
-                raise CommandRejected(f"the body is refused: {exc}") from None
-            except (ValueError, RecursionError, web.HTTPRequestEntityTooLarge):
-                raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
-            cmd = DriveCommand.from_json(data)
+            cmd = _parse_command(await self._body(request))
         except CommandRejected as exc:
             self.hub.event(
                 state.id,
@@ -407,3 +517,14 @@ class WebFrontEnd:
             return _json({"accepted": False, "error": exc.reason}, 409)
         self.counters.commands["accepted"] += 1
         return _json({"accepted": True, "client": client})
+
+
+def _parse_command(body: bytes) -> DriveCommand:
+    """The command in a request's body; CommandRejected naming what is wrong with it."""
+    try:
+        data = jsontext.loads(body)
+    except jsontext.DuplicateKey as exc:
+        raise CommandRejected(f"the body is refused: {exc}") from None
+    except (ValueError, RecursionError):
+        raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
+    return DriveCommand.from_json(data)

@@ -8,15 +8,19 @@ sample on a fieldbus path. The process figures come from the library's
 ``ProcessCollector`` on the same registry. Every metric is listed, with its labels, in
 docs/operations.md ("Web status page and metrics"); :data:`METRICS` is that list, checked
 by the tests.
+
+A scrape is served from :class:`MetricsSnapshot`: one render serves every scrape within
+``web.metrics_max_age`` seconds of it, so scrapers, however many and however often, cost
+at most one render per that time.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING
 
-from prometheus_client import CollectorRegistry, ProcessCollector
+from prometheus_client import CollectorRegistry, ProcessCollector, generate_latest
 from prometheus_client.core import (
     CounterMetricFamily,
     GaugeMetricFamily,
@@ -77,8 +81,18 @@ METRICS: dict[str, str] = {
     f"{NS}_web_clients": "Web pages connected now (WebSocket).",
     f"{NS}_web_messages_dropped": "Push messages slow pages lost (each replaced by a snapshot).",
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
-    f"{NS}_web_requests_refused": "Refused requests (allow, origin, token, commands_off).",
+    f"{NS}_web_clients_over_budget": "Pages dropped: more unsent than web.page_send_budget_kib.",
+    f"{NS}_web_requests_refused": (
+        "Refused requests (origin, token, token_limit, commands_off, pages, pages_per_peer)."
+    ),
     f"{NS}_web_commands": "Commands from the page, by result (accepted, refused).",
+    f"{NS}_web_connections": (
+        "Web connections by result (accepted, refused, over_limit, over_peer_limit)."
+    ),
+    f"{NS}_web_connections_open": "Web connections open now.",
+    f"{NS}_web_timeouts": "Web requests cut: a head or body came, or an answer went, too slowly.",
+    f"{NS}_web_metrics_renders": "/metrics renders (the scrapes in between share one).",
+    f"{NS}_web_requests_throttled": "Requests held back: their address was over web.request_rate.",
 }
 """Every metric the collector exposes (the process figures come from prometheus_client)."""
 
@@ -101,9 +115,48 @@ class WebCounters:
     """What the web front end counts itself (besides the feed's counters)."""
 
     def __init__(self) -> None:
-        self.refused: dict[str, int] = {"allow": 0, "origin": 0, "token": 0, "commands_off": 0}
+        self.refused: dict[str, int] = dict.fromkeys(
+            ("origin", "token", "token_limit", "commands_off", "pages", "pages_per_peer"), 0
+        )
+        """Requests refused, by reason."""
         self.commands: dict[str, int] = {"accepted": 0, "refused": 0}
-        self.clients_open = 0
+        self.connections: dict[str, int] = dict.fromkeys(
+            ("accepted", "refused", "over_limit", "over_peer_limit"), 0
+        )
+        """Connections by what became of them at accept (refused: not in web.allow)."""
+        self.connections_open = 0
+        self.timeouts: dict[str, int] = {"header": 0, "body": 0, "answer": 0}
+        self.clients_open = 0  # pages
+        self.clients_over_budget = 0
+        self.metrics_renders = 0
+        self.throttled = 0  # requests held back: their address was over web.request_rate
+
+
+class MetricsSnapshot:
+    """The exposition text of ``registry``, rendered at most once per ``max_age`` seconds:
+    every scrape in between gets the same bytes."""
+
+    def __init__(
+        self,
+        registry: CollectorRegistry,
+        max_age: float,
+        counters: WebCounters,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.registry = registry
+        self.max_age = max_age
+        self.counters = counters
+        self.clock = clock
+        self._body = b""
+        self._rendered_at: float | None = None
+
+    def body(self) -> bytes:
+        now = self.clock()
+        if self._rendered_at is None or now - self._rendered_at >= self.max_age:
+            self.counters.metrics_renders += 1
+            self._body = generate_latest(self.registry)
+            self._rendered_at = now
+        return self._body
 
 
 class GatewayCollector(Collector):
@@ -264,6 +317,25 @@ class GatewayCollector(Collector):
         for result, count in self.web.commands.items():
             commands.add_metric([result], count)
         yield from (clients, dropped, stuck, refused, commands)
+        yield from self._web_admission()
+
+    def _web_admission(self) -> Iterator[Metric]:
+        web = self.web
+        over_budget = _counter(f"{NS}_web_clients_over_budget")
+        over_budget.add_metric([], web.clients_over_budget)
+        connections = _counter(f"{NS}_web_connections", ["result"])
+        for result, count in web.connections.items():
+            connections.add_metric([result], count)
+        open_now = _gauge(f"{NS}_web_connections_open")
+        open_now.add_metric([], web.connections_open)
+        timeouts = _counter(f"{NS}_web_timeouts", ["phase"])
+        for phase, count in web.timeouts.items():
+            timeouts.add_metric([phase], count)
+        renders = _counter(f"{NS}_web_metrics_renders")
+        renders.add_metric([], web.metrics_renders)
+        throttled = _counter(f"{NS}_web_requests_throttled")
+        throttled.add_metric([], web.throttled)
+        yield from (over_budget, connections, open_now, timeouts, renders, throttled)
 
 
 def _maybe(

@@ -24,7 +24,7 @@ from adapters.canopen.master import (
     Send,
     Want,
 )
-from adapters.canopen.master.engine import tpdo_loss_cycles
+from adapters.canopen.master.engine import TPDO_STEADY_CYCLES, tpdo_loss_cycles
 from tests.canopen.test_master import CYCLE, HB_MS, FakeNode, Line, config, node_config, up
 
 CONSUMER = SdoStep(0x1016, 1, ((127 << 16) | 300).to_bytes(4, "little"), "consumer 0x1016:1")
@@ -209,6 +209,34 @@ def test_one_late_tpdo1_carried_into_the_next_cycle_is_no_conflict() -> None:
         line.inject(node.tpdo())
     assert not line.of(Conflict)
     assert master.online(5)
+
+
+def test_a_drive_two_cycles_late_catching_up_one_at_a_time_is_no_conflict() -> None:
+    """A loaded line: the TPDO1s of two SYNCs come late, then catch up over two cycles."""
+    line, node = up()
+    node.tpdo_on_sync = False
+    master = line.master
+
+    def next_sync() -> None:
+        line.now = master.next_cycle or line.now
+        line._deliver(list(master.step(line.now)))
+
+    for _ in range(2):  # one TPDO1 each cycle
+        next_sync()
+        line.inject(node.tpdo())
+    next_sync()  # n: late
+    next_sync()  # n + 1: late too
+    line.inject(node.tpdo())  # n
+    next_sync()  # n + 2
+    line.inject(node.tpdo())  # n + 1
+    line.inject(node.tpdo())  # n + 2: caught up
+    for _ in range(TPDO_STEADY_CYCLES + 1):
+        next_sync()
+        line.inject(node.tpdo())
+    assert not line.of(Conflict)
+    assert master.online(5)
+    line.inject(node.tpdo())  # steady again: a second producer is heard at once
+    assert line.of(Conflict) == [Conflict(5, "a second TPDO1 in one SYNC cycle")]
 
 
 def test_a_forged_sdo_answer_then_the_real_one_is_a_conflict() -> None:

@@ -20,6 +20,7 @@ from adapters.profibus.sim.slave import SlaveCounters
 from gateway.config import load
 from gateway.model import DriveState
 from gateway.runtime.daemon import READY_BOUND, Daemon
+from gateway.runtime.linethread import LineThread
 from gateway.runtime.systemd import Notifier
 from tests.support.heard import Heard
 from tests.support.net import free_port, zenoh_endpoint
@@ -89,8 +90,26 @@ class Gateway:
     client: Client
     modbus: AsyncModbusTcpClient
 
-    def adapter(self, bus: str) -> Any:
+    def line(self, bus: str) -> LineThread:
+        """The bus's line as the daemon runs it (its figures, ``call`` onto its loop)."""
         return self.daemon.runtime.adapters[bus]
+
+    def adapter(self, bus: str) -> Any:
+        """The bus's adapter (it runs on its line's own loop: read it, poke it through
+        ``line(bus).call``)."""
+        return self.line(bus).adapter
+
+    async def on_line(self, bus: str, fn: Callable[[], T]) -> T:
+        """``fn()`` run on the bus's line (its own thread and loop), its result: how a test
+        changes a simulated device or the adapter without racing the line."""
+        return await self.line(bus).call(fn)
+
+    async def diagnostics(self, bus: str) -> dict[str, Any]:
+        """The bus adapter's figures as they are now, made on its line (the line's own
+        ``diagnostics()`` is a snapshot up to 0.25 s old)."""
+        adapter = self.adapter(bus)
+        figures: dict[str, Any] = await self.on_line(bus, adapter.diagnostics)
+        return figures
 
     def state_key(self, drive: str) -> str:
         return f"{PREFIX}/drives/{drive}/state"

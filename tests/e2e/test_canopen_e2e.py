@@ -115,7 +115,8 @@ async def test_run_reverse_quick_stop_and_reset_by_modbus(gateway: Gateway) -> N
     await gateway.write(VL, 0, QUICK_STOP)
     await gateway.wait_for("n5", lambda s: s.speed_rpm == 0.0 and not s.running)
     await gateway.write(VL, 0, 0)
-    sim(gateway).node(VL).inject_fault(0x3210)
+    node = sim(gateway).node(VL)
+    await gateway.on_line("co", lambda: node.inject_fault(0x3210))
     s = await gateway.wait_for("n5", lambda s: s.faulted and s.fault_code == 0x3210)
     assert s.fault_text == "DC link over-voltage"
     assert (await gateway.inputs(VL))[0] & 0b100000  # faulted bit
@@ -129,7 +130,8 @@ async def test_fault_event_and_reset_edge_by_zenoh(gateway: Gateway) -> None:
         await gateway.client.settled(PREFIX)
         await gateway.command("n5", {"run": True, "speed_rpm": 300})
         await gateway.wait_for("n5", lambda s: s.running)
-        sim(gateway).node(VL).inject_fault(0x2310)
+        node = sim(gateway).node(VL)
+        await gateway.on_line("co", lambda: node.inject_fault(0x2310))
         ev = await events.auntil(lambda e: e.json()["text"].startswith("EMCY 0x2310"), TIMEOUT)
         assert ev.json()["code"] == 0x2310
         assert "continuous over current" in ev.json()["text"]
@@ -147,9 +149,10 @@ async def test_heartbeat_loss_and_return_stopped(gateway: Gateway) -> None:
         await gateway.client.settled(PREFIX)
         await gateway.command("n5", {"run": True, "speed_rpm": 300})
         await states.auntil(lambda g: parsed(g).running, TIMEOUT)
-        sim(gateway).node(VL).silence(True)
+        node = sim(gateway).node(VL)
+        await gateway.on_line("co", lambda: node.silence(True))
         await states.auntil(lambda g: parsed(g).comm is CommState.OFFLINE, TIMEOUT)
-        sim(gateway).node(VL).silence(False)
+        await gateway.on_line("co", lambda: node.silence(False))
         await states.auntil(lambda g: parsed(g).online, TIMEOUT)
         # a drive that kept turning while it was not heard is shown turning when it is heard
         # again (never stopped while it turns, docs/safety.md); the gateway then stops it
@@ -217,7 +220,7 @@ async def test_the_demo_line_comes_online(tmp_path: Path) -> None:
             assert s.online and s.device is Device.CIA402
             regs = await gw.inputs(unit)
             assert regs[19] == 6
-        diag = gw.adapter("canopen").diagnostics()
+        diag = await gw.diagnostics("canopen")
         assert diag["syncs_tx"] > 0
         assert diag["drives"]["cia402b"]["phase"] == "online"
 

@@ -3,6 +3,7 @@ DeviceNet line (``simulate = true``), commanded and read through Zenoh and Modbu
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 import uuid
@@ -87,7 +88,8 @@ async def test_run_speed_reverse_stop_and_fault_reset_by_zenoh(gateway: Gateway)
         assert s.status.label == "ready"
         with gateway.client.subscribe(f"{PREFIX}/drives/cfw08/events") as events:
             await gateway.client.settled(PREFIX)
-            sim(gateway).node(MAC).inject_fault(6)
+            node = sim(gateway).node(MAC)
+            await gateway.on_line("dn", lambda: node.inject_fault(6))
             await states.auntil(lambda g: parsed(g).status.label == "faulted", TIMEOUT)
             await gateway.command("cfw08", {"fault_reset": True})
             await events.auntil(lambda e: "fault reset sent" in e.json()["text"], TIMEOUT)
@@ -113,7 +115,8 @@ async def test_run_speed_reverse_stop_and_fault_reset_by_modbus(gateway: Gateway
     assert regs[0] & 0b1000 and regs[2] == (-600) & 0xFFFF
     await gateway.write(UNIT, 0, 0)
     await gateway.wait_for("cfw08", lambda s: s.speed_rpm == 0.0)
-    sim(gateway).node(MAC).inject_fault(6)
+    node = sim(gateway).node(MAC)
+    await gateway.on_line("dn", lambda: node.inject_fault(6))
     await gateway.wait_for("cfw08", lambda s: s.faulted)
     assert (await gateway.inputs(UNIT))[0] & 0b100000  # faulted bit
     await gateway.write(UNIT, 0, RESET)
@@ -146,12 +149,13 @@ async def test_a_stopped_node_goes_offline_and_comes_back_stopped(gateway: Gatew
         await gateway.command("cfw08", {"run": True, "speed_rpm": 300})
         await states.auntil(lambda g: parsed(g).running, TIMEOUT)
         stopped_at = time.monotonic()
-        sim(gateway).power_off(MAC)
+        runner = sim(gateway)
+        await gateway.on_line("dn", lambda: runner.power_off(MAC))
         offline = await states.auntil(lambda g: parsed(g).comm is CommState.OFFLINE, TIMEOUT)
         # not before 4 x EPR without data (the last poll may have been answered just
         # before the power went); how late is a benchmark matter, bounded by the wait
         assert offline.at - stopped_at >= 4 * EPR - 2 * POLL
-        sim(gateway).power_on(MAC)
+        await gateway.on_line("dn", lambda: runner.power_on(MAC))
         back = parsed(await states.auntil(lambda g: parsed(g).online, TIMEOUT))
         assert not back.running and back.status.label == "ready"
         assert not gateway.daemon.hub.desired("cfw08").run  # a new run command is needed
@@ -187,7 +191,7 @@ async def test_the_demo_line_comes_online(tmp_path: Path) -> None:
             assert s.online and s.device is Device.CFW08
         regs = await gw.inputs(5)
         assert (regs[19], regs[20]) == (4, 5)  # CFW-08 at MAC 5
-        diag = gw.adapter("devicenet").diagnostics()["drives"]["cfw08"]
+        diag = (await gw.diagnostics("devicenet"))["drives"]["cfw08"]
         assert diag["assembly"] == "21/71" and diag["state"] == "online"
 
 
@@ -211,7 +215,8 @@ async def test_20_70_refuses_a_reverse_by_zenoh_and_modbus(tmp_path: Path) -> No
             refused = await gw.modbus.write_register(1, -900 & 0xFFFF, device_id=UNIT)
             assert refused.isError() and refused.exception_code == 4
             polls = sim(gw).node(MAC).figures.polls
-            await sim(gw).until(lambda: sim(gw).node(MAC).figures.polls > polls + 5)
+            async with asyncio.timeout(TIMEOUT):  # the node's own polls, from its line
+                await sim(gw).until(lambda: sim(gw).node(MAC).figures.polls > polls + 5)
             assert sim(gw).node(MAC).drive.run_fwd
             s = parsed(await states.auntil(lambda g: parsed(g).at_reference, TIMEOUT))
             assert (s.speed_rpm, s.speed_ref_rpm, s.status.label) == (900.0, 900.0, "running")
@@ -252,7 +257,8 @@ async def test_the_assembly_in_force_keeps_the_drive_offline_until_a_reset(
             assert "connecting" in await gw.refused("cfw08", {"run": True, "speed_rpm": 900})
             assert not (await gw.inputs(UNIT))[0] & 0b1  # not online on Modbus
             assert sim(gw).node(MAC).drive.idle  # idle I/O only: nothing commands it
-            sim(gw).call(MAC, Cfw08Node.reset)  # the reset applies P710 = 1: 21/71
+            runner = sim(gw)  # the reset applies P710 = 1: 21/71
+            await gw.on_line("dn", lambda: runner.call(MAC, Cfw08Node.reset))
             await states.auntil(lambda g: parsed(g).online, TIMEOUT)
             await gw.command("cfw08", {"run": True, "speed_rpm": -900})
             s = parsed(await states.auntil(lambda g: parsed(g).speed_rpm == -900.0, TIMEOUT))

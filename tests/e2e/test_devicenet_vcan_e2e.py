@@ -65,5 +65,5 @@ async def test_cfw08_in_another_process_run_by_zenoh_read_by_modbus(gateway: Gat
     await gateway.command("cfw08", {"run": False})
     s = await gateway.wait_for("cfw08", lambda s: not s.running and s.speed_rpm == 0.0)
     assert s.online and s.status.label == "ready"
-    diag = gateway.adapter("dn").diagnostics()
+    diag = await gateway.diagnostics("dn")
     assert (diag["interface"], diag["channel"], diag["simulated"]) == ("socketcan", VCAN, False)

@@ -244,7 +244,7 @@ async def test_injected_trip_shows_its_text_needs_a_reset_and_does_not_restart(
         await gateway.client.settled(PREFIX)
         await gateway.command(ID, {"run": True})
         await gateway.wait_for(ID, lambda s: s.status is DriveStatus.RUNNING)
-        sim.trip(MOTOR_OVERLOAD)
+        await gateway.on_line(BUS, lambda: sim.trip(MOTOR_OVERLOAD))
         tripped = parsed(
             await states.auntil(lambda g: parsed(g).fault_code == MOTOR_OVERLOAD, TIMEOUT)
         )
@@ -272,7 +272,7 @@ async def test_injected_trip_shows_its_text_needs_a_reset_and_does_not_restart(
         assert sim.reset_edges == 1
 
         # the same trip again, while stopped, reset by Modbus: reported again with its text
-        sim.trip(MOTOR_OVERLOAD)
+        await gateway.on_line(BUS, lambda: sim.trip(MOTOR_OVERLOAD))
         await gateway.wait_for(ID, lambda s: s.fault_code == MOTOR_OVERLOAD)
         await diagnosis_event(events, "Motor overload")
         await gateway.write(UNIT, 0, 0)

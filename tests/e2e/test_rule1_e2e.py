@@ -179,51 +179,52 @@ def dn_sim(gw: Gateway) -> SimRunner:
 
 
 class Sim:
-    """One drive's simulator, whatever its bus: fault, clear, progress, motor."""
+    """One drive's simulator, whatever its bus: fault, clear, progress, motor. A change to
+    the simulator is made on its line's own loop (``Gateway.on_line``)."""
 
     def __init__(self, gw: Gateway, drive: Drive) -> None:
         self.gw, self.drive = gw, drive
 
-    def inject_fault(self) -> None:
+    async def inject_fault(self) -> None:
         code = self.drive.fault
         if self.drive.id == "cfw08":
-            dn_sim(self.gw).call(CFW08_MAC, lambda node, t: node.inject_fault(code, t))
+            runner = dn_sim(self.gw)
+            await self.gw.on_line(
+                DN, lambda: runner.call(CFW08_MAC, lambda node, t: node.inject_fault(code, t))
+            )
             return
         device = slave(self.gw, self.drive).device
         if isinstance(device, Mcd600Sim):
-            device.trip(code, now())
+            starter = device
+            await self.gw.on_line(PB, lambda: starter.trip(code, now()))
         else:
             assert isinstance(device, WegSim)
-            device.inject_fault(code, now())
+            weg = device
+            await self.gw.on_line(PB, lambda: weg.inject_fault(code, now()))
 
-    def clear(self, how: Clear) -> None:
+    async def clear(self, how: Clear) -> None:
         """End the fault at the drive: the gateway sends nothing for it."""
         if self.drive.id == "cfw08":
-            runner = dn_sim(self.gw)
-            if how is Clear.KEYPAD:
-                runner.call(CFW08_MAC, lambda node, t: node.keypad_reset(t))
-            elif how is Clear.AUTO:  # P206: due AUTO_RESET_S after the fault began
-                runner.call(CFW08_MAC, lambda node, _: _set_p206(node.drive.params))
-            else:
-                runner.power_off(CFW08_MAC)
-                runner.power_on(CFW08_MAC)
+            await self.gw.on_line(DN, lambda: _clear_cfw08(dn_sim(self.gw), how))
             return
         pb = slave(self.gw, self.drive)
-        device = pb.device
         if how is Clear.POWER:
-            pb.power_cycle(now(), off_time=0.2)
-        elif isinstance(device, Mcd600Sim):
+            await self.gw.on_line(PB, lambda: pb.power_cycle(now(), off_time=0.2))
+            return
+        device = pb.device
+        if isinstance(device, Mcd600Sim):
+            starter = device
             if how is Clear.KEYPAD:
-                assert device.keypad_reset(now())
+                assert await self.gw.on_line(PB, lambda: starter.keypad_reset(now()))
             else:
-                device.params.set(AUTO_RESET_DELAY, AUTO_RESET_S)
-                device.params.set(AUTO_RESET_ACTION, AutoResetAction.RESET_TRIP)
+                await self.gw.on_line(PB, lambda: _set_auto_reset(starter))
         else:
             assert isinstance(device, WegSim)
+            weg = device
             if how is Clear.KEYPAD:
-                device.keypad_reset(now())
+                await self.gw.on_line(PB, lambda: weg.keypad_reset(now()))
             else:
-                device.values[206] = AUTO_RESET_S  # P0206, set at the HMI
+                await self.gw.on_line(PB, lambda: _set_p0206(weg))
 
     async def progress(self, n: int) -> None:
         """Until the drive has seen ``n`` more cycles of the master (its own clock)."""
@@ -248,7 +249,28 @@ class Sim:
 
 
 def _set_p206(params: dict[int, int]) -> None:
-    params[206] = AUTO_RESET_S
+    params[206] = AUTO_RESET_S  # P206, set at the HMI
+
+
+def _set_p0206(device: WegSim) -> None:
+    device.values[206] = AUTO_RESET_S  # P0206, set at the HMI
+
+
+def _clear_cfw08(runner: SimRunner, how: Clear) -> None:
+    """The CFW-08's fault ended at the drive (on its line's loop)."""
+    if how is Clear.KEYPAD:
+        runner.call(CFW08_MAC, lambda node, t: node.keypad_reset(t))
+    elif how is Clear.AUTO:  # P206: due AUTO_RESET_S after the fault began
+        runner.call(CFW08_MAC, lambda node, _: _set_p206(node.drive.params))
+    else:
+        runner.power_off(CFW08_MAC)
+        runner.power_on(CFW08_MAC)
+
+
+def _set_auto_reset(starter: Mcd600Sim) -> None:
+    """The starter's auto-reset set at its keypad (on its line's loop)."""
+    starter.params.set(AUTO_RESET_DELAY, AUTO_RESET_S)
+    starter.params.set(AUTO_RESET_ACTION, AutoResetAction.RESET_TRIP)
 
 
 # ----------------------------------------------------------------------- commands
@@ -316,11 +338,11 @@ async def never_restarts(gw: Gateway, drive: Drive, how: Clear) -> None:
         await gw.write(drive.unit, 0, 0)  # the client's first word: the edge starts from 0
     await gw.wait_for(drive.id, stopped)
 
-    sim.inject_fault()
+    await sim.inject_fault()
     await run_refused(gw, drive)  # refused with the reason, never held for later
     assert not gw.daemon.hub.desired(drive.id).run
 
-    sim.clear(how)
+    await sim.clear(how)
     await gw.wait_for(drive.id, lambda s: s.online and not s.faulted)
     await sim.progress(STAYS_STOPPED)  # the drive's own cycles, not a fixed sleep
     # on a loaded machine the link may blip meanwhile (a reconnect): the drive stays still
@@ -365,7 +387,7 @@ async def test_the_cli_cmd_prints_the_refusal_reason(
     on stderr and exits 1; once the fault is cleared at the drive, a run is accepted (exit 0)."""
     cfw320 = next(d for d in DRIVES if d.id == "cfw320")
     sim = Sim(gateway, cfw320)
-    sim.inject_fault()
+    await sim.inject_fault()
     await gateway.wait_for(cfw320.id, faulted)
     (endpoint,) = gateway.daemon.config.zenoh.listen
     argv = ["cmd", "--connect", endpoint, "--prefix", PREFIX, cfw320.id, "run"]
@@ -375,7 +397,7 @@ async def test_the_cli_cmd_prints_the_refusal_reason(
     assert any(r in out.err for r in REASONS), out.err  # the hub's own reason, as answered
     assert not gateway.daemon.hub.desired(cfw320.id).run
 
-    sim.clear(Clear.KEYPAD)
+    await sim.clear(Clear.KEYPAD)
     await gateway.wait_for(cfw320.id, lambda s: s.online and not s.faulted)
     assert await cli([*argv, "--speed-pct", "50"]) == 0
     assert capsys.readouterr().out.startswith(f"{cfw320.id}: accepted")

@@ -303,18 +303,19 @@ async def test_injected_fault_needs_a_reset_and_does_not_restart(gw: Gateway, mo
     events_key = f"{PREFIX}/drives/{model.id}/events"
     with c.subscribe(gw.state_key(model.id)) as states, c.subscribe(events_key) as events:
         await c.settled(PREFIX)
-        drive(gw, model).inject_alarm(138)  # an alarm: its code and the manual's text
+        sim = drive(gw, model)
+        await gw.on_line(BUS, lambda: sim.inject_alarm(138))  # its code and the manual's text
         s = parsed(await states.auntil(lambda g: parsed(g).alarm_code == 138, TIMEOUT))
         assert s.alarm and not s.faulted
         # P0048 is in no telegram word: the status word's alarm bit, then the code by DP-V1
         event = await events.auntil(lambda e: e.json().get("code") == 138, TIMEOUT)
         assert event.json()["text"] == "alarm 138: Profibus DP interface in clear mode"
-        drive(gw, model).clear_alarm()
+        await gw.on_line(BUS, sim.clear_alarm)
         await states.auntil(lambda g: not parsed(g).alarm, TIMEOUT)
 
         await run_command(gw, model)()
         await states.auntil(lambda g: parsed(g).at_reference, TIMEOUT)
-        drive(gw, model).inject_fault(code, now())
+        await gw.on_line(BUS, lambda: sim.inject_fault(code, now()))
         s = parsed(await states.auntil(lambda g: parsed(g).fault_code == code, TIMEOUT))
         assert (s.status, s.fault_text, s.running) == (DriveStatus.FAULTED, text, False)
         event = await events.auntil(lambda e: e.json().get("code") == code, TIMEOUT)
@@ -333,7 +334,6 @@ async def test_injected_fault_needs_a_reset_and_does_not_restart(gw: Gateway, mo
         # the motor still coasts down from the trip (output off) and never speeds up again
         assert cleared.speed_rpm is not None and s.speed_rpm is not None
         assert 0.0 <= s.speed_rpm < cleared.speed_rpm < 900.0
-        sim = drive(gw, model)
         assert not sim.motor.enabled and not sim.fault and sim.motor.reference == 0.0
 
 
@@ -346,7 +346,8 @@ async def test_power_cycle_comes_back_stopped(gw: Gateway, model: Model) -> None
         await gw.client.settled(PREFIX)
         await run_command(gw, model)()
         await states.auntil(lambda g: parsed(g).at_reference, TIMEOUT)
-        slave(gw, model).power_cycle(now(), off_time=0.2)
+        pb = slave(gw, model)
+        await gw.on_line(BUS, lambda: pb.power_cycle(now(), off_time=0.2))
         await states.auntil(lambda g: parsed(g).comm is CommState.OFFLINE, TIMEOUT)
         back = parsed(await states.auntil(lambda g: parsed(g).online, TIMEOUT))
         assert (back.status, back.running, back.fault_code) == (DriveStatus.READY, False, None)
@@ -372,11 +373,22 @@ async def test_cfw320_set_to_profidrive_is_refused_and_its_status_bits_are_publi
     events_key = f"{PREFIX}/drives/{cfw320.id}/events"
     with c.subscribe(gw.state_key(cfw320.id)) as states, c.subscribe(events_key) as events:
         await c.settled(PREFIX)
-        drive(gw, cfw320).fire_mode = True
+        sim, pb = drive(gw, cfw320), slave(gw, cfw320)
+
+        def fire_mode() -> None:  # at the drive, on its line's loop
+            sim.fire_mode = True
+
+        def p741_at_the_hmi_and_a_power_cycle() -> None:
+            sim.fire_mode = False
+            sim.values[741] = 0
+            pb.power_cycle(now(), off_time=0.2)
+
+        def p741_set_back() -> None:
+            sim.values[741] = 1
+
+        await gw.on_line(BUS, fire_mode)
         await states.auntil(lambda g: parsed(g).values.get("fire_mode") == 1, TIMEOUT)
-        drive(gw, cfw320).fire_mode = False
-        drive(gw, cfw320).values[741] = 0
-        slave(gw, cfw320).power_cycle(now(), off_time=0.2)
+        await gw.on_line(BUS, p741_at_the_hmi_and_a_power_cycle)
         event = await events.auntil(lambda e: "P741 = 0" in e.json()["text"], TIMEOUT)
         assert event.json()["kind"] == "config"
         assert event.json()["text"] == (
@@ -387,7 +399,7 @@ async def test_cfw320_set_to_profidrive_is_refused_and_its_status_bits_are_publi
         assert gw.daemon.hub.state(cfw320.id).comm is CommState.CONNECTING
         reason = await gw.refused(cfw320.id, {"run": True, **cfw320.speed})
         assert reason == f"drive {cfw320.id} is connecting"
-        drive(gw, cfw320).values[741] = 1  # set back at the HMI: the next attempt connects
+        await gw.on_line(BUS, p741_set_back)  # set back at the HMI: the next attempt connects
         await states.auntil(lambda g: parsed(g).online, TIMEOUT)
 
 
@@ -417,7 +429,7 @@ async def test_the_demo_line_comes_online_and_runs(tmp_path: Path) -> None:
                 assert (s.at_reference, s.remote, s.online) == (True, True, True)
             regs = await gw.inputs(unit)
             assert (regs[0] & 0b111, regs[19], regs[20]) == (0b111, device_code, address)
-            diag = gw.adapter("profibus").diagnostics()["drives"][drive_id]
+            diag = (await gw.diagnostics("profibus"))["drives"][drive_id]
             assert diag["configured"] and diag["not_configured_reason"] is None
 
         await for_each(weg, str, check)
@@ -435,15 +447,17 @@ async def test_a_refused_startup_parameter_leaves_the_drive_not_configured(
 
     refused = lambda: buses({"cfw700": ", P0313 = 9"})  # noqa: E731
     async with running_gateway(tmp_path, refused, ["cfw11", "cfw320"]) as gw:
-        adapter = gw.adapter(BUS)
+        line = gw.line(BUS)
 
         def reason() -> str | None:
-            got: str | None = adapter.diagnostics()["drives"]["cfw700"]["not_configured_reason"]
+            got: str | None = (
+                line.diagnostics().get("drives", {}).get("cfw700", {}).get("not_configured_reason")
+            )
             return got
 
         async with asyncio.timeout(TIMEOUT):
-            while reason() is None:  # noqa: ASYNC110 (the adapter's diagnostics: no event)
-                await asyncio.sleep(0.01)
+            while reason() is None:  # noqa: ASYNC110 (the line's figures: no event)
+                await asyncio.sleep(0.05)
         assert reason() == (
             "not configured: startup P0313 = 9: parameter value out of the limits (error 0x0002)"
         )

@@ -201,5 +201,31 @@ def test_a_flood_of_refusals_is_logged_once_per_period_with_a_count(
         hub.tick()
     refused = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
     assert len(refused) == 2
-    assert refused[1].endswith("999 more like it in the last 10 s")
-    assert len(rec.texts(EventKind.COMMAND_REFUSED)) == 1000  # every refusal is an event
+    assert refused[1].endswith("(999 more like it since the last line)")
+    # the burst is one event, then one with the count (every refusal is counted)
+    events = [e for e in rec.all() if e.kind is EventKind.COMMAND_REFUSED]
+    assert len(events) == 2 and "repeats" not in events[0].data
+    assert events[1].data["repeats"] == 999 and events[1].text == events[0].text
+    assert hub.events_folded == 999
+
+
+def test_refusals_that_go_on_are_logged_once_per_period_with_a_count(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A flood that lasts: its events come once per fold window, its log lines once per
+    refusal period, and every refusal is in a count."""
+    hub, clock = make_hub()
+    hub.update("d", status=DriveStatus.FAULTED)
+    with caplog.at_level(logging.INFO, logger="gateway.hub"):
+        for _ in range(25):  # 25 s of 10 refusals a second, the hub ticking
+            for _ in range(10):
+                with pytest.raises(CommandRejected):
+                    hub.submit("d", Source.ZENOH, DriveCommand(run=True), "zid-a")
+                clock.t += 0.1
+                hub.tick()
+        clock.t += 11.0
+        hub.tick()
+    lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert 3 <= len(lines) <= 5  # the first, then one per 10 s
+    counted = [int(line.rsplit("(", 1)[1].split()[0]) for line in lines[1:]]
+    assert sum(counted) + 1 == 250

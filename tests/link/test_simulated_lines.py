@@ -71,7 +71,7 @@ def test_the_daemon_gives_a_simulated_line_only_where_the_config_says_so() -> No
         (canopen(), CanOpenBus),
     ]
     for config, links in cases:
-        adapter: Any = Daemon(config)._make_adapter(config.buses[0])
+        adapter: Any = Daemon(config)._make_line(config.buses[0]).adapter
         assert isinstance(adapter.links, links)
     assert set(SIMULATORS) == {"profibus", "devicenet", "canopen"}
 

@@ -40,6 +40,7 @@ def config_text(
     frame_timeout: float | None = None,
     max_connections: int | None = None,
     idle_timeout: float | None = None,
+    max_connections_per_peer: int | None = None,
 ) -> str:
     allow_list = ", ".join(f'"{a}"' for a in allow)
     limits = "".join(
@@ -48,6 +49,7 @@ def config_text(
             ("frame_timeout", frame_timeout),
             ("max_connections", max_connections),
             ("idle_timeout", idle_timeout),
+            ("max_connections_per_peer", max_connections_per_peer),
         )
         if value is not None
     )

@@ -21,7 +21,8 @@ async def test_fault_reset_is_an_edge_and_a_held_run_bit_does_not_restart(
         assert not (await client.write_register(address, value, device_id=D1)).isError()
     await gw.inputs_until(client, D1, lambda r: r[0] & RUNNING != 0)
 
-    gw.adapter("line1").inject_fault("d1", 42)
+    adapter = gw.adapter("line1")  # on its line's own thread and loop: poked there
+    await gw.daemon.runtime.adapters["line1"].call(lambda: adapter.inject_fault("d1", 42))
     regs = await gw.inputs_until(client, D1, lambda r: r[0] & FAULTED != 0)
     assert regs[11] == 42  # fault code
     assert not gw.hub.desired("d1").run  # the hub cleared run on the fault

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from gateway.modbus.health import GATEWAY_INPUTS
 from gateway.modbus.map import MIRROR_OFFSET
+from gateway.modbus.regs import block_size
 from tests.modbus.conftest import D1, D2, D4, INPUTS, StartGateway, mbap, raw_exchange
 
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE, DEVICE_FAILURE, TARGET_FAILED = 1, 2, 3, 4, 0x0B
@@ -34,7 +36,8 @@ async def test_reads_of_unmapped_addresses(start_gateway: StartGateway) -> None:
     assert code_of(await c.read_coils(0, count=1, device_id=D1)) == ILLEGAL_ADDRESS
     assert code_of(await c.read_discrete_inputs(0, count=1, device_id=D1)) == ILLEGAL_ADDRESS
     assert code_of(await c.write_coil(0, True, device_id=D1)) == ILLEGAL_ADDRESS
-    assert code_of(await c.read_input_registers(30, count=1, device_id=0)) == ILLEGAL_ADDRESS
+    beyond = block_size(GATEWAY_INPUTS)  # the gateway unit's first unmapped input register
+    assert code_of(await c.read_input_registers(beyond, count=1, device_id=0)) == ILLEGAL_ADDRESS
 
 
 async def test_writes_to_registers_that_are_not_writable(start_gateway: StartGateway) -> None:

@@ -15,7 +15,7 @@ import tomllib
 import uuid
 from collections.abc import AsyncIterator, Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from adapters.canopen.adapter import CanOpenAdapter
 from adapters.canopen.sim.runner import SimRunner as CanOpenRunner
@@ -29,6 +29,8 @@ from gateway.model import DriveState
 from tests.e2e.harness import TIMEOUT, Gateway, running_gateway
 from tests.support import simulated
 from tests.zenoh.client import Got, Inbox
+
+T = TypeVar("T")
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_FILE = ROOT / "config" / "demo.toml"
@@ -213,6 +215,23 @@ def can_sim(gw: Gateway) -> SimRunner:
     runner = simulated.sim_runner(devicenet_adapter(gw))
     assert runner is not None, "the DeviceNet line is not simulated"
     return runner
+
+
+# Each bus runs on a thread and an event loop of its own, its simulator too: a test reads
+# a simulated device or an adapter from here (a counter, a flag), and changes one only on
+# its line (``on_line``); the adapter's figures are its line's (``figures``).
+
+
+async def on_line(gw: Gateway, bus: str, fn: Callable[[], T]) -> T:
+    """``fn()`` run on the bus's line (its own thread and loop), its result: a change to a
+    simulated device or to the adapter, made without racing the line."""
+    return await gw.on_line(bus, fn)
+
+
+def figures(gw: Gateway, bus: str) -> dict[str, Any]:
+    """The bus adapter's figures as its line last made them (every 0.25 s): for a bounded
+    wait on a figure; ``await gw.diagnostics(bus)`` for one made now."""
+    return gw.line(bus).diagnostics()
 
 
 def now() -> float:

@@ -20,6 +20,7 @@ from tests.reliability.demo import (
     can_sim,
     demo_gateway,
     devicenet_adapter,
+    on_line,
     stopped,
     until,
 )
@@ -55,7 +56,8 @@ async def test_scanner_bus_off_and_restart(tmp_path, monkeypatch: pytest.MonkeyP
                     sends.append(msg)
                     raise can.CanOperationError("Network is down")
 
-                monkeypatch.setattr(link._bus, "send", network_down)
+                bus = link._bus  # its sends fail, on the line's loop, from now on
+                await on_line(gw, DEVICENET, lambda: monkeypatch.setattr(bus, "send", network_down))
                 kernel.send(error_frame(CAN_ERR_BUSOFF))
                 await events.text("cfw08", "line: bus-off (health bus-off)")
                 await events.text("cfw08", "cannot send (Network is down): backing off")
@@ -66,7 +68,7 @@ async def test_scanner_bus_off_and_restart(tmp_path, monkeypatch: pytest.MonkeyP
                 assert (line["health"], line["bus_conditions"]) == ("bus-off", {"bus-off": 1})
                 assert line["last_tx_failure"] == "Network is down" and line["live"] == []
                 await until(lambda: len(sends) >= 3)
-                monkeypatch.undo()  # the controller restarts (restart-ms)
+                await on_line(gw, DEVICENET, monkeypatch.undo)  # the controller restarts
                 kernel.send(error_frame(CAN_ERR_RESTARTED))
                 await events.text("cfw08", "line: restarted (health ok)")
                 await gw.wait_for("cfw08", lambda s: s.online)
@@ -77,7 +79,7 @@ async def test_scanner_bus_off_and_restart(tmp_path, monkeypatch: pytest.MonkeyP
                 await gw.wait_for("cfw08", stopped)
                 assert can_sim(gw).node(MAC).drive.motor.speed == 0.0
                 assert not hub.desired("cfw08").run
-                assert adapter.diagnostics()["health"] == "ok"
+                assert (await gw.diagnostics(DEVICENET))["health"] == "ok"
                 assert gw.daemon.runtime.restarts.get(f"bus {DEVICENET}", 0) == 0
                 await gw.command("cfw08", {"run": True})
                 await gw.wait_for("cfw08", at_speed(600.0))
@@ -89,12 +91,18 @@ async def test_drive_bus_off_e34_and_automatic_recovery(tmp_path) -> None:
     """The CFW-08's own controller goes bus-off (E34, P070 = 5) and recovers by itself
     (P703 = 1, seed 4.1.7): the drive drops out and comes back stopped."""
     async with demo_gateway(tmp_path, {"cfw08": {"sim_p313": 2}}) as gw:
-        node = can_sim(gw).node(MAC)
-        node.drive.params[703] = 1  # automatic bus-off reset
+        runner = can_sim(gw)
+        node = runner.node(MAC)
+
+        def p703_automatic_reset() -> None:
+            node.drive.params[703] = 1  # automatic bus-off reset
+
+        await on_line(gw, DEVICENET, p703_automatic_reset)
         with Events(gw) as events:
             await gw.command("cfw08", {"run": True, "speed_rpm": 600})
             await gw.wait_for("cfw08", at_speed(600.0))
-            can_sim(gw).call(MAC, lambda n, now: n.bus_off(now, recover_after=0.3))
+            bus_off = lambda n, t: n.bus_off(t, recover_after=0.3)  # noqa: E731
+            await on_line(gw, DEVICENET, lambda: runner.call(MAC, bus_off))
             await gw.wait_for("cfw08", lambda s: s.comm is CommState.OFFLINE)
             event = await events.text("cfw08", "drive offline: no data")
             assert "P313 = no action (2)" in event.text  # what the drive did meanwhile
@@ -102,5 +110,5 @@ async def test_drive_bus_off_e34_and_automatic_recovery(tmp_path) -> None:
             await events.text("cfw08", "run command cleared: drive left online")
             await gw.wait_for("cfw08", stopped)
             assert not gw.daemon.hub.desired("cfw08").run
-            diag = devicenet_adapter(gw).diagnostics()["drives"]["cfw08"]
+            diag = (await gw.diagnostics(DEVICENET))["drives"]["cfw08"]
             assert diag["offline_count"] == 1 and diag["state"] == "online"

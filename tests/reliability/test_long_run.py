@@ -17,23 +17,23 @@ from adapters.profibus.codec.dp import GlobalControl, build_request
 from adapters.profibus.codec.fdl import RequestFc, RequestFunction
 from tests.e2e.harness import PREFIX, TIMEOUT
 from tests.profibus.test_sim_slave import MASTER, Master, echo_slave
-from tests.reliability.demo import ADDRESSES, WEG, demo_gateway, profibus_adapter
+from tests.reliability.demo import ADDRESSES, PROFIBUS, WEG, demo_gateway
 
 PROFIBUS_DRIVES = (*WEG, "mcd600")
 
 
 async def test_one_pass_over_the_drives_makes_the_line_diagnostics_once(tmp_path: Path) -> None:
     async with demo_gateway(tmp_path) as gw:
-        adapter = profibus_adapter(gw)
+        line = gw.line(PROFIBUS)  # what the runtime asks for the bus's figures
         calls = 0
-        original = adapter.diagnostics
+        original = line.diagnostics
 
         def counted() -> dict[str, Any]:
             nonlocal calls
             calls += 1
             return original()
 
-        adapter.diagnostics = counted  # type: ignore[method-assign]
+        line.diagnostics = counted  # type: ignore[method-assign]
         gw.daemon.runtime._diag.clear()  # nothing kept from the last heartbeat (no await below)
         figures = {d: gw.daemon.runtime.drive_diagnostics(d) for d in PROFIBUS_DRIVES}
         assert calls == 1

@@ -179,7 +179,7 @@ async def test_a_port_taken_while_ours_was_gone_is_waited_for(tmp_path: Path) ->
                 os.symlink(path, port)
                 ev = await events.text("cfw11", f"serial port {port} is held by pid {os.getpid()}")
                 assert "another master is on this line" in ev.text
-                diag = gw.adapter(PROFIBUS).diagnostics()
+                diag = await gw.diagnostics(PROFIBUS)
                 assert diag["port_state"] == "reopening" and "held by" in diag["port_error"]
                 assert not gw.daemon.hub.state("cfw11").online
             finally:

@@ -33,14 +33,16 @@ from tests.reliability.demo import (
     demo_buses,
     demo_gateway,
     drain,
+    figures,
     new_channel,
     now,
-    profibus_adapter,
+    on_line,
     sim_line,
     slave,
     stopped,
     until,
 )
+from tests.support.timing import scaled
 from tests.zenoh.client import Got
 
 
@@ -67,13 +69,18 @@ async def test_line_noise_is_counted_and_never_starts_or_stops_a_drive(tmp_path:
             await gw.command("cfw700", {"run": True, "speed_rpm": 600})
             await gw.wait_for("cfw11", at_speed(900.0))
             await gw.wait_for("cfw700", at_speed(600.0))
-            adapter = profibus_adapter(gw)
-            before = line_errors(adapter.diagnostics())
-            line = sim_line(gw)
-            line.faults.bit_error_rate = 2e-3  # per byte, both directions (seeded)
-            await until(lambda: line_errors(adapter.diagnostics()) >= before + 10, within=20.0)
-            line.faults.bit_error_rate = 0.0
-            diag = adapter.diagnostics()
+            before = line_errors(await gw.diagnostics(PROFIBUS))
+            faults = sim_line(gw).faults
+
+            def noise(rate: float) -> None:
+                faults.bit_error_rate = rate  # per byte, both directions (seeded)
+
+            await on_line(gw, PROFIBUS, lambda: noise(2e-3))
+            await until(
+                lambda: line_errors(figures(gw, PROFIBUS)) >= before + 10, within=scaled(20.0)
+            )
+            await on_line(gw, PROFIBUS, lambda: noise(0.0))
+            diag = await gw.diagnostics(PROFIBUS)
             assert diag["retries"] > 0
             assert diag["fcs_errors"] + diag["framing_errors"] > 0
             # the same figures reach SCADA on the health query and each drive's diag key
@@ -114,7 +121,8 @@ async def test_a_slave_power_cycle_brings_the_drive_back_stopped(tmp_path: Path)
             await states.auntil(lambda g: parsed(g).speed_rpm == 900.0, TIMEOUT)
             await gw.wait_for("cfw700", at_speed(600.0))
             await token.auntil(lambda g: g.put, TIMEOUT)
-            slave(gw, "cfw11").power_cycle(now(), off_time=0.3)
+            cfw11 = slave(gw, "cfw11")
+            await on_line(gw, PROFIBUS, lambda: cfw11.power_cycle(now(), off_time=0.3))
             await states.auntil(lambda g: parsed(g).comm is CommState.OFFLINE, TIMEOUT)
             await token.auntil(lambda g: not g.put, TIMEOUT)  # the live list says so too
             back = parsed(await states.auntil(lambda g: parsed(g).online, TIMEOUT))
@@ -125,7 +133,7 @@ async def test_a_slave_power_cycle_brings_the_drive_back_stopped(tmp_path: Path)
             await events.text("cfw11", "run command cleared: drive left online")
             assert not hub.desired("cfw11").run
             assert not weg(slave(gw, "cfw11").device).running
-            diag = profibus_adapter(gw).diagnostics()["drives"]["cfw11"]
+            diag = (await gw.diagnostics(PROFIBUS))["drives"]["cfw11"]
             assert diag["restarts"] == 1 and diag["configured"]
             # the drive next to it never noticed
             assert "left data exchange" not in " ".join(events.texts("cfw700"))
@@ -178,7 +186,7 @@ async def test_the_serial_port_vanishing_is_reopened_with_back_off(
                     await events.text("cfw11", f"cannot open {port}")
                     first = len(attempts)
                     await until(lambda: len(attempts) >= first + 3)
-                    diag = profibus_adapter(gw).diagnostics()
+                    diag = await gw.diagnostics(PROFIBUS)
                     assert diag["port_state"] == "reopening"
                     assert "No such file" in diag["port_error"]
                     gaps = [b - a for a, b in itertools.pairwise(attempts[first - 1 :])]
@@ -188,7 +196,7 @@ async def test_the_serial_port_vanishing_is_reopened_with_back_off(
                     os.symlink(path, port)
                     for drive in ("cfw11", "cfw700", "cfw320", "mcd600"):
                         await gw.wait_for(drive, lambda s: s.online)
-                    assert profibus_adapter(gw).diagnostics()["reopens"] == 1
+                    assert (await gw.diagnostics(PROFIBUS))["reopens"] == 1
                     # the drive had kept turning on its own (P0313 = 0, no action); the
                     # gateway stops it, and nothing starts again without a new command
                     await events.text("cfw11", "run command cleared: drive left online")

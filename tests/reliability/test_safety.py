@@ -22,7 +22,9 @@ from tests.e2e.harness import COAST_STOP, PREFIX, RESET, RUN, TIMEOUT, Gateway
 from tests.reliability.demo import (
     ADDRESSES,
     CIA402,
+    DEVICENET,
     DRIVES,
+    PROFIBUS,
     UNITS,
     WEG,
     Events,
@@ -31,7 +33,9 @@ from tests.reliability.demo import (
     canopen_sim,
     demo_gateway,
     devicenet_adapter,
+    figures,
     now,
+    on_line,
     sim_line,
     slave,
     stopped,
@@ -80,9 +84,9 @@ async def plc_run(gw: Gateway, drive: str, rpm: int) -> None:
     await gw.write(unit, 0, RUN)
 
 
-def spy_outputs(gw: Gateway, drive: str) -> list[int]:
+async def spy_outputs(gw: Gateway, drive: str) -> list[int]:
     """Every control word the simulated WEG drive receives from now on (word 0 of the
-    outputs), recorded as the drive sees it."""
+    outputs), recorded as the drive sees it (on its line's loop)."""
     device = weg(gw, drive)
     words: list[int] = []
     original = device.exchange
@@ -91,7 +95,10 @@ def spy_outputs(gw: Gateway, drive: str) -> list[int]:
         words.append(struct.unpack_from(">H", outputs)[0])
         return original(outputs, now)
 
-    device.exchange = exchange  # type: ignore[method-assign]
+    def spy() -> None:
+        device.exchange = exchange  # type: ignore[method-assign]
+
+    await on_line(gw, PROFIBUS, spy)
     return words
 
 
@@ -134,8 +141,13 @@ async def test_rule1_no_restart_after_a_fault_reset(tmp_path: Path) -> None:
             await command(gw, "mcd600", {"run": True})
             await gw.wait_for("cfw700", at_speed(900.0))
             await gw.wait_for("mcd600", lambda s: s.running)
-            weg(gw, "cfw700").inject_fault(71, now())
-            mcd(gw).trip(1)  # a trip the starter's table names (MCD 600 manual)
+            cfw700, starter = weg(gw, "cfw700"), mcd(gw)
+
+            def fault_and_trip() -> None:
+                cfw700.inject_fault(71, now())
+                starter.trip(1)  # a trip the starter's table names (MCD 600 manual)
+
+            await on_line(gw, PROFIBUS, fault_and_trip)
             faulted = await gw.wait_for("cfw700", lambda s: s.faulted)
             assert (faulted.fault_code, faulted.fault_text) == (71, "F071")
             await gw.wait_for("mcd600", lambda s: s.faulted)
@@ -146,8 +158,12 @@ async def test_rule1_no_restart_after_a_fault_reset(tmp_path: Path) -> None:
                 "accepted": False,
                 "error": "send run after the fault reset, not in the same command",
             }
-            weg(gw, "cfw700").faults.clear()  # the cause is gone
-            mcd(gw).faults.clear()
+
+            def causes_gone() -> None:  # the cause is gone
+                cfw700.faults.clear()
+                starter.faults.clear()
+
+            await on_line(gw, PROFIBUS, causes_gone)
             for drive in ("cfw700", "mcd600"):
                 assert (await command(gw, drive, {"fault_reset": True}))["accepted"]
                 await gw.wait_for(drive, lambda s: s.online and not s.faulted)
@@ -193,10 +209,13 @@ async def test_rule2_a_fault_reset_is_one_edge_never_repeated(tmp_path: Path) ->
             reset()
             device._trip(71)  # e.g. the motor is still overloaded: F071 again at once
 
-        device._reset_fault = reset_but_the_cause_stays  # type: ignore[method-assign]
-        device.inject_fault(71, now())
+        def a_fault_that_stays() -> None:
+            device._reset_fault = reset_but_the_cause_stays  # type: ignore[method-assign]
+            device.inject_fault(71, now())
+
+        await on_line(gw, PROFIBUS, a_fault_that_stays)
         await gw.wait_for("cfw700", lambda s: s.faulted)
-        words = spy_outputs(gw, "cfw700")
+        words = await spy_outputs(gw, "cfw700")
         exchanges = sim_line(gw)[ADDRESSES["cfw700"]].counters
 
         async def cycles(n: int) -> None:
@@ -297,8 +316,14 @@ async def test_rule4_shutdown_stops_the_drives_then_leaves_the_buses(tmp_path: P
         for drive in (*WEG, "cfw08"):
             await gw.wait_for(drive, at_speed(900.0))
         await gw.wait_for("mcd600", lambda s: s.running)
-        weg(gw, "cfw11").values[101] = 15  # 1.5 s deceleration: time to try a command
+        cfw11 = weg(gw, "cfw11")
+
+        def slow_deceleration() -> None:
+            cfw11.values[101] = 15  # 1.5 s deceleration: time to try a command
+
+        await on_line(gw, PROFIBUS, slow_deceleration)
         at_clear: dict[str, tuple[float, bool]] = {}  # speed, output on
+        watched: list[tuple[WegSim, Callable[..., None]]] = []
         for drive in WEG:
             device = weg(gw, drive)
 
@@ -312,7 +337,13 @@ async def test_rule4_shutdown_stops_the_drives_then_leaves_the_buses(tmp_path: P
                     at_clear.setdefault(drive, (turning(gw, drive), weg(gw, drive).running))
                 original(now, active)
 
-            device.clear_mode = clear_mode  # type: ignore[method-assign]
+            watched.append((device, clear_mode))
+
+        def watch_clear_modes() -> None:
+            for device, clear_mode in watched:
+                device.clear_mode = clear_mode  # type: ignore[method-assign]
+
+        await on_line(gw, PROFIBUS, watch_clear_modes)
         node = can_sim(gw).node(ADDRESSES["cfw08"])
         with Events(gw) as events:
             gw.daemon.request_stop()
@@ -391,14 +422,14 @@ async def test_rule6_bad_input_is_answered_never_obeyed_never_fatal(tmp_path: Pa
         assert rr.isError() and rr.exception_code == 3
         # frames DeviceNet cannot carry, on the line: counted, dropped
         adapter = devicenet_adapter(gw)
-        before = adapter.diagnostics()["link_bad_frames"]
+        before = (await gw.diagnostics(DEVICENET))["link_bad_frames"]
         intruder = can.Bus(interface="virtual", channel=adapter.options.channel)
         try:
             intruder.send(can.Message(arbitration_id=0x1234567, is_extended_id=True, data=b"x"))
             intruder.send(
                 can.Message(arbitration_id=0x3C5, is_extended_id=False, is_remote_frame=True)
             )
-            await until(lambda: adapter.diagnostics()["link_bad_frames"] == before + 2)
+            await until(lambda: figures(gw, DEVICENET).get("link_bad_frames") == before + 2)
         finally:
             intruder.shutdown()
         # nothing of it was obeyed, and everything still runs

@@ -56,6 +56,7 @@ from tests.reliability.demo import (
     demo_buses,
     devicenet_adapter,
     new_channel,
+    on_line,
     sim_line,
     toml_buses,
 )
@@ -513,6 +514,23 @@ def device_view(gw: Gateway, state: DriveState) -> str:
     return repr(vars(can_sim(gw).node(state.address).drive))[:1500]
 
 
+async def noise(gw: Gateway, profibus: float, devicenet: float) -> None:
+    """Line noise on both buses, set on each line's own loop: Profibus bit flips per byte,
+    DeviceNet replies lost per node."""
+    faults = sim_line(gw).faults
+    nodes = list(can_sim(gw).nodes.values())
+
+    def on_profibus() -> None:
+        faults.bit_error_rate = profibus
+
+    def on_devicenet() -> None:
+        for node in nodes:
+            node.faults.drop_rate = devicenet
+
+    await on_line(gw, PROFIBUS, on_profibus)
+    await on_line(gw, DEVICENET, on_devicenet)
+
+
 def check_newest(gw: Gateway, zenoh: SeqWatch, tally: Tally, heartbeat: float) -> None:
     """Every drive that has not changed for two heartbeats: the subscriber holds its state."""
     wall = time.time()
@@ -579,9 +597,7 @@ async def test_soak(
                 plcs = [await traffic.modbus_client() for _ in range(4)]
                 hmis = [await traffic.modbus_client() for _ in range(3)]
                 # noise on both lines for the whole run
-                sim_line(gw).faults.bit_error_rate = PROFIBUS_NOISE
-                for node in can_sim(gw).nodes.values():
-                    node.faults.drop_rate = CAN_DROP
+                await noise(gw, PROFIBUS_NOISE, CAN_DROP)
 
                 async def can_errors() -> None:
                     # a bus of its own for a moment: a virtual bus left open would queue
@@ -633,9 +649,7 @@ async def test_soak(
                 objects_growth = object_growth(objects_start)
                 at_rest_end = await pause(traffic)
                 # the noise ends; the drives follow their last command, then all stop
-                sim_line(gw).faults.bit_error_rate = 0.0
-                for node in can_sim(gw).nodes.values():
-                    node.faults.drop_rate = 0.0
+                await noise(gw, 0.0, 0.0)
                 progress("noise off; the drives settle")
                 await asyncio.sleep(SETTLE)
                 # a drive that left data exchange in the last seconds of noise is still

@@ -12,10 +12,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hashlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import aiohttp
 
@@ -23,12 +23,15 @@ from gateway.config import DEFAULT_CONFIG, Config, load
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState, DriveStatus
 from gateway.runtime.daemon import READY_BOUND, Daemon, Runtime
+from gateway.runtime.linethread import LineThread
 from gateway.runtime.systemd import Notifier
 from gateway.web.frontend import WebFrontEnd
 from gateway.webconfig import WebSection
 from tests.support.net import free_port, zenoh_endpoint
 from tests.support.timing import scaled
 from tests.zenoh.client import Client
+
+T = TypeVar("T")
 
 TIMEOUT = scaled(30.0)
 PREFIX = "demo"
@@ -67,6 +70,20 @@ class Demo:
 
     async def wait_for(self, drive: str, predicate: Any) -> DriveState:
         return await asyncio.wait_for(self.daemon.hub.wait_for(drive, predicate), TIMEOUT)
+
+    def line(self, bus: str) -> LineThread:
+        """The bus's line as the daemon runs it (its figures, ``call`` onto its loop)."""
+        return self.daemon.runtime.adapters[bus]
+
+    def adapter(self, bus: str) -> Any:
+        """The bus's adapter (it runs on its line's own loop: read it, poke it through
+        :meth:`on_line`)."""
+        return self.line(bus).adapter
+
+    async def on_line(self, bus: str, fn: Callable[[], T]) -> T:
+        """``fn()`` run on the bus's line (its own thread and loop), its result: how a test
+        changes a simulated device without racing the line."""
+        return await self.line(bus).call(fn)
 
 
 def demo_config(client_endpoint: str, web: WebSection | None = None) -> Config:

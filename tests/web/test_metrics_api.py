@@ -4,6 +4,7 @@ daemon (config/demo.toml) with its real buses, a real Modbus client and a Zenoh 
 from __future__ import annotations
 
 import asyncio
+import itertools
 from pathlib import Path
 
 from prometheus_client.parser import text_string_to_metric_families
@@ -11,12 +12,20 @@ from prometheus_client.samples import Sample
 from pymodbus.client import AsyncModbusTcpClient
 
 from gateway.web.metrics import METRICS
+from gateway.web.views import BUS_FIGURES, figures
+from tests.support.timing import scaled
 from tests.web.harness import DEMO_DRIVES, ROOT, TIMEOUT, Demo, demo_daemon
 
 PROCESS = ("process_cpu_seconds", "process_resident_memory_bytes", "process_open_fds")
 
 
+_TICKS = itertools.count()
+
+
 async def scrape(demo: Demo) -> dict[str, list[Sample]]:
+    # each scrape a second after the last as the snapshot sees it: a fresh render, for the
+    # test reads counters it has just moved (one render per web.metrics_max_age otherwise)
+    demo.web.metrics.clock = lambda: float(next(_TICKS))
     async with demo.http.get(f"{demo.url}metrics") as r:
         assert r.status == 200
         assert r.headers["Content-Type"].startswith("text/plain; version=")
@@ -38,8 +47,25 @@ def value(samples: dict[str, list[Sample]], name: str, **labels: str) -> float:
     return found[0]
 
 
+async def cycles_measured(demo: Demo, buses: tuple[str, ...]) -> None:
+    """Until each line's figures (built on its own loop every 0.25 s) have a cycle in them."""
+    async with asyncio.timeout(scaled(10.0)):
+        for bus in buses:
+            line = demo.line(bus)
+            while not figures(line.diagnostics(), BUS_FIGURES).get("cycle_last_ms"):
+                await line.next_diagnostics()
+
+
+async def new_figures(demo: Demo) -> None:
+    """Until every line has built its figures again."""
+    async with asyncio.timeout(scaled(10.0)):
+        for bus in ("profibus", "devicenet", "canopen"):
+            await demo.line(bus).next_diagnostics()
+
+
 async def test_every_documented_metric_is_there_and_the_counters_move() -> None:
     async with demo_daemon() as demo:
+        await cycles_measured(demo, ("profibus", "devicenet"))
         first = await scrape(demo)
         for name in METRICS:
             assert name in first or f"{name}_info" in first, name
@@ -76,6 +102,7 @@ async def test_every_documented_metric_is_there_and_the_counters_move() -> None:
             "cfw11",
             lambda s: s.running and s.speed_ref_rpm is not None and abs(s.speed_ref_rpm - 600) < 1,
         )
+        await new_figures(demo)
         second = await scrape(demo)
         moved = {
             "drive_gateway_modbus_requests": (),
@@ -101,6 +128,7 @@ async def test_every_documented_metric_is_there_and_the_counters_move() -> None:
 
 async def test_the_json_api_for_scripts() -> None:
     async with demo_daemon() as demo:
+        await cycles_measured(demo, ("profibus", "devicenet"))
         async with demo.http.get(f"{demo.url}api/health") as r:
             assert r.status == 200 and r.content_type == "application/json"
             health = await r.json()

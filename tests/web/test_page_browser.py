@@ -176,9 +176,9 @@ async def test_a_run_command_over_zenoh_shows_in_the_table_and_the_trend_within_
 async def test_a_drive_that_goes_offline_is_shown_offline(page: Page) -> None:
     async with demo_daemon() as demo:
         await open_page(page, demo.url, len(DEMO_DRIVES))
-        sim = sim_runner(demo.daemon.runtime.adapters["devicenet"])
+        sim = sim_runner(demo.adapter("devicenet"))
         assert sim is not None
-        sim.power_off(5)  # the demo's CFW-08, MAC 5
+        await demo.on_line("devicenet", lambda: sim.power_off(5))  # the demo's CFW-08, MAC 5
         await demo.wait_for("cfw08", lambda s: s.comm is CommState.OFFLINE)
         await page.wait_for_selector(
             '#drives-body tr[data-drive="cfw08"][data-comm="offline"]', timeout=WAIT_MS

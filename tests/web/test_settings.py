@@ -10,7 +10,7 @@ import pytest
 
 from gateway.config import DEFAULT_CONFIG, load
 from gateway.errors import ConfigError, ConfigErrors, StartupError
-from gateway.webconfig import LOOPBACK
+from gateway.webconfig import LOOPBACK, WebLimits
 from tests.web.harness import ROOT, TOKEN_SHA256, small_gateway, web_section
 
 
@@ -68,11 +68,58 @@ def test_a_full_web_table(tmp_path: Path) -> None:
         ('token_sha256 = "abc"', "web.token_sha256: must be 64 lower-case hex digits"),
         ("comands = true", "web.comands: unknown key (did you mean 'commands'?)"),
         ("commands = 1", "web.commands: must be true or false, not an integer"),
+        ("max_connections = 0", "web.max_connections: 0 is below the minimum 1"),
+        (
+            "max_connections = 10\nmax_connections_per_peer = 20",
+            "web.max_connections_per_peer: 20 is above max_connections (10): one address",
+        ),
+        (
+            "max_pages = 200",
+            "web.max_pages: 200 is above max_connections (128): every page holds a connection",
+        ),
+        (
+            "max_pages = 10\nmax_pages_per_peer = 11",
+            "web.max_pages_per_peer: 11 is above max_pages (10)",
+        ),
+        ("header_timeout = 0", "web.header_timeout: must be above 0 s, not 0"),
+        ("body_timeout = -1.5", "web.body_timeout: must be above 0 s, not -1.5"),
+        ("page_send_budget_kib = 8", "web.page_send_budget_kib: 8 is below the minimum 16"),
+        ("token_failures = 0", "web.token_failures: 0 is below the minimum 1"),
+        ("metrics_max_age = 0.1", "web.metrics_max_age: 0.1 is below the minimum 0.5"),
+        ('header_timeout = "10"', "web.header_timeout: must be a number, not a string"),
     ],
 )
 def test_every_mistake_is_named(tmp_path: Path, web: str, message: str) -> None:
     found = errors_of(tmp_path, web)
     assert len(found) == 1 and found[0].startswith(message), found
+
+
+def test_the_admission_limits_by_default_and_as_given(tmp_path: Path) -> None:
+    assert load(write(tmp_path, "")).web.limits == WebLimits()
+    limits = WebLimits()
+    assert (limits.max_connections, limits.max_connections_per_peer) == (128, 64)
+    assert (limits.max_pages, limits.max_pages_per_peer) == (48, 24)
+    assert (limits.header_timeout, limits.body_timeout, limits.metrics_max_age) == (10, 10, 0.5)
+    assert limits.page_send_budget == 512 * 1024
+    given = load(
+        write(
+            tmp_path,
+            "max_connections = 20\nmax_connections_per_peer = 4\nheader_timeout = 2.5\n"
+            "body_timeout = 3\nmax_pages = 6\nmax_pages_per_peer = 2\n"
+            "page_send_budget_kib = 64\ntoken_failures = 3\ntoken_window = 300\n"
+            "metrics_max_age = 5",
+        )
+    ).web.limits
+    assert given == WebLimits(20, 4, 2.5, 3.0, 6, 2, 64, 3, 300.0, 5.0)
+
+
+def test_a_lower_connection_limit_lowers_the_page_limits_left_out(tmp_path: Path) -> None:
+    limits = load(write(tmp_path, "max_connections = 10")).web.limits
+    assert (limits.max_connections_per_peer, limits.max_pages, limits.max_pages_per_peer) == (
+        10,
+        10,
+        10,
+    )
 
 
 def test_web_bind_on_the_command_line(tmp_path: Path) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +25,10 @@ class Running:
     task: asyncio.Task[int]
     client: Client
     adapter: FakeAdapter
+
+    async def on_line(self, fn: Callable[[], None]) -> None:
+        """``fn()`` run on the fake bus's line (the adapter's own thread and loop)."""
+        await self.daemon.runtime.adapters["line1"].call(fn)
 
     async def stop(self) -> int:
         self.daemon.request_stop()
@@ -48,7 +52,8 @@ async def running(tmp_path: Path) -> AsyncIterator[Running]:
         # the buses start once the front ends serve (a start-up failure touches no bus)
         await asyncio.wait_for(daemon.ready.wait(), READY_BOUND + 10)
         await asyncio.wait_for(daemon.hub.wait_for("d1", lambda s: s.online), 10)
-        adapter = next(a for a in reversed(FakeAdapter.instances) if a.bus.drives[0].id == "d1")
+        adapter = daemon.runtime.adapters["line1"].adapter
+        assert isinstance(adapter, FakeAdapter) and adapter.bus.drives[0].id == "d1"
         yield Running(daemon, task, client, adapter)
     finally:
         if not task.done():
@@ -71,7 +76,8 @@ async def test_a_fault_arrives_on_events_with_its_text_and_a_reset_clears_it(
         client.subscribe(f"{PREFIX}/drives/d1/state") as states,
     ):
         await client.settled(PREFIX)
-        running.adapter.inject_fault("d1", 42)
+        adapter = running.adapter
+        await running.on_line(lambda: adapter.inject_fault("d1", 42))
         fault = (await events.auntil(lambda e: e.json()["kind"] == "fault")).json()
         assert fault["text"] == "fault 42: test fault 42"
         assert fault["code"] == 42
@@ -103,14 +109,19 @@ async def test_drive_tokens_follow_the_bus_and_go_when_the_gateway_stops(running
             sample = await live.aget()
             assert sample.put
             present.add(sample.key)
-        running.adapter.online = False  # the bus goes quiet: every drive goes offline
+        adapter = running.adapter
+
+        def bus(online: bool) -> None:
+            adapter.online = online
+
+        await running.on_line(lambda: bus(False))  # the bus goes quiet: every drive offline
         gone: set[str] = set()
         while len(gone) < 3:
             sample = await live.aget()
             assert not sample.put
             gone.add(sample.key)
         assert gone == {f"{PREFIX}/drives/{d}" for d in ("d1", "d2", "soft")}
-        running.adapter.online = True
+        await running.on_line(lambda: bus(True))
         back: set[str] = set()
         while len(back) < 3:
             sample = await live.aget()

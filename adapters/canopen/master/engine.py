@@ -16,7 +16,8 @@ Per node (CiA 301 §7.3.2, CiA 402-2 §6.2):
    reported (Report) and the bring-up goes on.
 3. START: NMT start node; ONLINE on its first operational heartbeat.
 4. ONLINE: RPDO1 (controlword, target) every cycle, after the SYNC when the gateway
-   produces it; TPDO1 in (statusword and actual values); EMCY in; on entering FAULT
+   produces it; TPDO1 in (statusword and actual values); EMCY in, within the node's
+   budget (:mod:`~adapters.canopen.master.emcy`, the rest counted); on entering FAULT
    0x1001 and 0x603F read. A node is lost when no heartbeat came within
    ``heartbeat_factor`` times its producer time, on a boot-up, or on a heartbeat that
    is not operational; it is then brought up again from PROBE.
@@ -33,7 +34,7 @@ from __future__ import annotations
 import itertools
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 from adapters.can.events import (
     BadFrame,
@@ -56,6 +57,7 @@ from adapters.canopen.master.bringup import (
     read_fault,
 )
 from adapters.canopen.master.control import STOPPED, Want, controlword, target
+from adapters.canopen.master.emcy import EmcyBudget
 from adapters.canopen.master.events import (
     Action,
     Conflict,
@@ -93,9 +95,11 @@ def tpdo_loss_cycles(cycle: float) -> int:
     return max(TPDO_LOSS_CYCLES, math.ceil(TPDO_LOSS_MIN / cycle - 1e-9))
 
 
-# TPDO1s allowed ahead: one per SYNC, one of a late cycle carried over; one more is a
-# second producer of the node's TPDO1 (issue 32 item 12)
-TPDO_CREDIT_MAX = 2
+# TPDO1s allowed ahead: one per SYNC, those of late cycles carried over up to this; more is a
+# second producer of the node's TPDO1 (docs/safety.md, CiA 402 hazards)
+TPDO_CREDIT_MAX = 3
+# cycles of exactly one TPDO1 each after which nothing of a late cycle is carried any more
+TPDO_STEADY_CYCLES = 8
 # a late SYNC or heartbeat moves the next one: never sooner than this share of the period
 # after it (missed slots are skipped, never sent in a burst)
 SLOT_MIN_GAP = 0.9
@@ -117,7 +121,8 @@ class Master:
         for n in nodes:
             if n.node_id in self.nodes:
                 raise ValueError(f"node {n.node_id} configured twice")
-            self.nodes[n.node_id] = Node(n, tpdo_struct=_pdo_struct(n.tpdo))
+            emcy = EmcyBudget(config.emcy_rate, config.emcy_burst)
+            self.nodes[n.node_id] = Node(n, tpdo_struct=_pdo_struct(n.tpdo), emcy=emcy)
         self._tokens = itertools.count(1)
         self._next_cycle: float | None = 0.0
         self._next_heartbeat: float | None = 0.0 if config.own_heartbeat > 0 else None
@@ -128,6 +133,7 @@ class Master:
             "tx_failures": 0,
             "tx_dropped": 0,
             "foreign_master_frames": 0,
+            "emcy_dropped": 0,  # EMCY frames over their node's budget, not decoded
         }
         self._left = False
         self._releasing = False
@@ -139,6 +145,7 @@ class Master:
         self._refused = False  # another master heard while listening: silent for good
         self._listen_until: float | None = None
         self._bringup = BringUp(config, lambda: self._releasing)
+        self._emcy_unsaid = False  # EMCY frames dropped that no report counted yet
 
     # ------------------------------------------------------------ the adapter's side
 
@@ -410,6 +417,8 @@ class Master:
             if node.probe_at is not None and now >= node.probe_at and not self._releasing:
                 node.probe_at = None
                 node.jobs.appendleft(Job(Purpose.PROBE, 0x1000, 0))
+        if self._emcy_unsaid:
+            self._emcy_unsaid = _emcy_reports(self.nodes.values(), now, out)
         if self._next_cycle is not None and now >= self._next_cycle:
             self._cycle(now, out)
             # late (a loaded machine): the missed slots skipped, no burst to catch up
@@ -425,9 +434,7 @@ class Master:
             if node.phase is not Phase.ONLINE:
                 continue
             if sync:
-                # one TPDO1 per SYNC; one more only when the last cycle had none (late)
-                silent = node.tpdo_silent
-                node.tpdo_credit = 1 if silent == 0 else min(node.tpdo_credit + 1, TPDO_CREDIT_MAX)
+                _tpdo_allowance(node)
             node.tpdo_silent += 1
             if node.tpdo_silent > self._tpdo_loss_cycles:
                 # CiA 301 §7.2.2.2: a TPDO of transmission type 1 goes on every SYNC (the
@@ -630,6 +637,9 @@ class Master:
         elif kind is Kind.HEARTBEAT:
             self._on_heartbeat(node, now, frame.data, out)
         elif kind is Kind.EMCY:
+            if not node.emcy.take(now):
+                self._emcy_over(node, now, out)
+                return node
             try:
                 emcy = frames.decode_emcy(frame.data, cob_id=frame.arbitration_id)
             except CanOpenDecodeError as exc:
@@ -639,6 +649,18 @@ class Master:
             node.figures["emcy_rx"] += 1
             out.append(EmcyIn(node.id, emcy))
         return node
+
+    def _emcy_over(self, node: Node, now: float, out: list[Action]) -> None:
+        """An EMCY over its node's budget: counted, not decoded; reported at most once per
+        :data:`~adapters.canopen.master.emcy.EMCY_REPORT_EVERY` (the rest by
+        :func:`_emcy_reports` when that time has passed)."""
+        self.figures["emcy_dropped"] += 1
+        self._quiet = True  # it moves no deadline
+        budget = node.emcy
+        if budget.report_due(now):
+            out.append(Report(node.id, budget.report(node.id, now)))
+        else:
+            self._emcy_unsaid = True
 
     def _on_heartbeat(self, node: Node, now: float, data: bytes, out: list[Action]) -> None:
         try:
@@ -668,6 +690,7 @@ class Master:
         changes and no fault read starts), the same object again without decoding."""
         node.tpdo_silent = 0
         if self.config.sync_period > 0:
+            node.tpdo_in_cycle += 1
             node.tpdo_credit -= 1
             if node.tpdo_credit < 0:
                 node.tpdo_credit = 0
@@ -714,6 +737,7 @@ class Master:
             "problem": node.last_problem,
             "sdo_queue": len(node.jobs) + (node.current is not None),
             **node.figures,
+            "emcy_dropped": node.emcy.dropped,
         }
 
 
@@ -771,3 +795,29 @@ def _unpack(
         out.append(int.from_bytes(data[offset : offset + size], "little", signed=f.signed))
         offset += size
     return tuple(out)
+
+
+def _emcy_reports(nodes: Iterable[Node], now: float, out: list[Action]) -> bool:
+    """The reports of EMCY frames dropped whose time has come (a flood that stopped is
+    reported too); whether frames dropped are left for a later report."""
+    unsaid = False
+    for node in nodes:
+        budget = node.emcy
+        if budget.report_due(now):
+            out.append(Report(node.id, budget.report(node.id, now)))
+        unsaid = unsaid or budget.unsaid > 0
+    return unsaid
+
+
+def _tpdo_allowance(node: Node) -> None:
+    """A SYNC goes out: one TPDO1 more allowed. The TPDO1s of cycles the drive (or a loaded
+    line) answered late are carried over, up to :data:`TPDO_CREDIT_MAX`, so that a drive
+    catching up, two TPDO1s in one cycle, is no conflict; once it answered exactly one per
+    cycle for :data:`TPDO_STEADY_CYCLES`, nothing is carried (a skipped TPDO1 does not allow
+    a second producer one for ever)."""
+    node.tpdo_steady = node.tpdo_steady + 1 if node.tpdo_in_cycle == 1 else 0
+    node.tpdo_in_cycle = 0
+    if node.tpdo_steady >= TPDO_STEADY_CYCLES:
+        node.tpdo_credit = 1
+    else:
+        node.tpdo_credit = min(node.tpdo_credit + 1, TPDO_CREDIT_MAX)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, Send, TxFailed
 from adapters.canopen.codec.frames import CanFrame, Emcy, MappingEntry, SdoResult
+from adapters.canopen.master.emcy import EMCY_BURST, EMCY_RATE
 
 # ---------------------------------------------------------------- configuration
 
@@ -81,7 +82,8 @@ class MasterConfig:
     ``listen``: s the engine only listens before it sends its first frame (one master
     per line: a SYNC, an NMT command, a heartbeat with ``own_node_id`` or an RPDO to one
     of its nodes heard meanwhile is another master, :class:`MasterHeard` with
-    ``claimed`` False, and the engine never starts); 0: no listening.
+    ``claimed`` False, and the engine never starts); 0: no listening. ``emcy_rate`` and
+    ``emcy_burst``: each node's EMCY budget (:mod:`adapters.canopen.master.emcy`).
     """
 
     nmt_master: bool = True
@@ -95,6 +97,8 @@ class MasterConfig:
     own_node_id: int = 0
     own_heartbeat: float = 0.0
     listen: float = 0.0
+    emcy_rate: float = EMCY_RATE
+    emcy_burst: int = EMCY_BURST
 
     @property
     def cycle(self) -> float:

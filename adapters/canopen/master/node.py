@@ -12,6 +12,7 @@ from enum import Enum
 from adapters.canopen.codec.cia402 import State
 from adapters.canopen.codec.frames import CanFrame, NmtState, SdoClientTransfer
 from adapters.canopen.master.control import STOPPED, Want
+from adapters.canopen.master.emcy import EmcyBudget
 from adapters.canopen.master.events import Inputs, NodeConfig
 
 
@@ -86,6 +87,8 @@ class Node:
     tpdo_silent: int = 0
     # TPDO1s the SYNCs allow (one each, one carried over at most): below 0 is a conflict
     tpdo_credit: int = 1
+    tpdo_in_cycle: int = 0  # TPDO1s heard since the last SYNC
+    tpdo_steady: int = 0  # cycles in a row with exactly one TPDO1
     # transfers that ended without an answer (timed out, aborted): each may still get
     # its one late answer (ignored); any other answer no request asked for is a conflict
     sdo_late: int = 0
@@ -109,6 +112,7 @@ class Node:
         }
     )
     last_problem: str | None = None
+    emcy: EmcyBudget = field(default_factory=EmcyBudget)  # the EMCY frames taken from it
 
     @property
     def id(self) -> int:

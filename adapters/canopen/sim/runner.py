@@ -11,15 +11,16 @@ bus shut down on the way out.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import threading
-import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import can
 import canopen
 
+from adapters.canopen.sim.clock import StillClock
 from adapters.canopen.sim.node import SimNode, SimNodeConfig
 from adapters.link.can import REFUSED_INTERFACES, CanConfig, open_problem
 from gateway.errors import AdapterError
@@ -62,7 +63,8 @@ class _SimNetwork(canopen.Network):
 
 
 class SimRunner:
-    """Simulated CiA 402 nodes on ``interface``/``channel``; control them from the loop."""
+    """Simulated CiA 402 nodes on ``interface``/``channel``; control them from the loop
+    (another loop or thread reads them, waits with :meth:`until`, and pokes them on this one)."""
 
     def __init__(
         self,
@@ -71,7 +73,7 @@ class SimRunner:
         nodes: Iterable[SimNodeConfig],
         *,
         bitrate: int | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] | None = None,
         powered: bool = True,
         tick: float = TICK,
     ) -> None:
@@ -86,12 +88,17 @@ class SimRunner:
             if cfg.node_id in self.configs:
                 raise ValueError(f"two simulated CANopen nodes with node id {cfg.node_id}")
             self.configs[cfg.node_id] = cfg
-        self.clock = clock
+        self.clock: Callable[[], float] = clock or StillClock()
+        """The drives' clock (default: one that does not run while the process stands
+        still, :mod:`adapters.canopen.sim.clock`)."""
         self.powered = powered
         self.tick = tick
         self.nodes: dict[int, SimNode] = {}
         self.started = asyncio.Event()
-        self.stepped = asyncio.Event()
+        self.stepped = asyncio.Event()  # set after each pass of the loop (tests wait on it)
+        self.watchers: list[Callable[[], None]] = []
+        """Called after each pass of the loop, on its loop (:meth:`until` from another)."""
+        self._home: asyncio.AbstractEventLoop | None = None  # the loop it runs on
         self._stop = asyncio.Event()
         self.network: canopen.Network | None = None
 
@@ -109,6 +116,7 @@ class SimRunner:
         }
 
     async def run(self) -> None:
+        self._home = asyncio.get_running_loop()
         kwargs: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
         if self.bitrate is not None and self.interface not in ("virtual", "socketcan"):
             kwargs["bitrate"] = self.bitrate
@@ -147,6 +155,8 @@ class SimRunner:
                 if deadline is not None:
                     wake = min(wake, deadline)
             self.stepped.set()
+            for watcher in tuple(self.watchers):
+                watcher()
             delay = max(0.0, wake - self.clock())
             if delay > 0:
                 try:
@@ -158,7 +168,36 @@ class SimRunner:
                 await asyncio.sleep(0)
 
     async def until(self, predicate: Callable[[], bool]) -> None:
-        """Wait until ``predicate()`` holds, checking after each pass of the loop."""
-        while not predicate():
-            self.stepped.clear()
-            await self.stepped.wait()
+        """Wait until ``predicate()`` holds, checking after each pass of the loop; from the
+        runner's own loop or from any other (a test beside a daemon's line thread)."""
+        loop = asyncio.get_running_loop()
+        if self._home is None or self._home is loop:
+            while not predicate():
+                self.stepped.clear()
+                await self.stepped.wait()
+            return
+        await _until_watched(self.watchers, predicate, loop)
+
+
+async def _until_watched(
+    watchers: list[Callable[[], None]],
+    predicate: Callable[[], bool],
+    loop: asyncio.AbstractEventLoop,
+) -> None:
+    """Until ``predicate()`` holds, checked on ``loop`` (the caller's) each time a pass of
+    the simulator's loop, on another loop or thread, calls the ``watchers``."""
+    passed = asyncio.Event()  # of ``loop``: set there only
+
+    def wake() -> None:
+        with contextlib.suppress(RuntimeError):  # the caller's loop closed meanwhile
+            loop.call_soon_threadsafe(passed.set)
+
+    watchers.append(wake)
+    try:
+        while True:
+            passed.clear()  # before the check: a pass after it wakes the wait below
+            if predicate():
+                return
+            await passed.wait()
+    finally:
+        watchers.remove(wake)

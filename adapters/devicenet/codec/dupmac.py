@@ -27,6 +27,12 @@ _PORT_MASK = 0x7F  # byte 0 b6-0
 WEG_VENDOR_ID = 0x0355  # seed table 8: Identity Vendor ID default 355h
 
 
+def is_request(data: bytes) -> bool:
+    """Whether a check message's data bytes are a request of the right length, read without
+    decoding them (the scanner counts a flood of requests for its MAC at this cost)."""
+    return len(data) == DUPMAC_LENGTH and not data[0] & _RESPONSE_BIT
+
+
 class DupMacKind(IntEnum):
     """Byte 0 b7 of the check message (fact sheet 2.3)."""
 

@@ -31,7 +31,7 @@ from typing import Any
 
 from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, NodeUnavailable, TxFailed
 from adapters.can.health import LineHealth, health_after
-from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
+from adapters.devicenet.codec.dupmac import DUPMAC_LENGTH, DupMacCheck, DupMacKind, is_request
 from adapters.devicenet.codec.explicit import Request
 from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.codec.ids import PredefinedId, PredefinedMessage, match_predefined
@@ -50,6 +50,7 @@ from adapters.devicenet.scanner.events import (
 from adapters.devicenet.scanner.jobs import ExplicitJobs
 from adapters.devicenet.scanner.machine import NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
+from adapters.devicenet.scanner.ownmac import OwnMacDefence
 from adapters.devicenet.scanner.scheduler import Scheduler
 from adapters.devicenet.scanner.timers import SteadyTimers
 from adapters.link.canerror import LineCondition
@@ -86,6 +87,7 @@ class Scanner:
         self._no_ack_reported = False
         self._ids: dict[int, PredefinedId | None] = {}
         self._claims: dict[int, DupMacCheck] = {}
+        self._own_mac = OwnMacDefence(config.mac)  # requests for the scanner's MAC, online
         self.schedule = Scheduler(ctx)
         self.jobs = ExplicitJobs(ctx, self.schedule)
         self.machine = NodeMachine(ctx, self.schedule, self.jobs)
@@ -111,6 +113,8 @@ class Scanner:
         """
         ctx, schedule = self._ctx, self.schedule
         if event is None:
+            if self._own_mac.due_at is not None:
+                self._own_mac_due(now)
             if self._lazy_step(now):
                 self._tick_due(now)
                 self._recompute_due()
@@ -230,6 +234,8 @@ class Scanner:
             "cycle_time_max_ms": ms(f.cycle_max if f.cycles else None),
             "bus_conditions": dict(f.conditions),
             "duplicate_macs": {str(k): v for k, v in f.duplicate_macs.items()},
+            "own_mac_claims": self._own_mac.claims,
+            "own_mac_claims_unanswered": self._own_mac.unanswered,
             "online": len(self.online_macs()),
         }
 
@@ -296,6 +302,8 @@ class Scanner:
         steady = self._timers.soonest()
         if steady is not None:
             times.append(steady)
+        if self._own_mac.due_at is not None:
+            times.append(self._own_mac.due_at)
         self._ctx.soonest = min(times) if times else None
 
     def _all_deadlines(self) -> float | None:
@@ -306,6 +314,8 @@ class Scanner:
         if self.phase is not LinePhase.ONLINE:
             return min(times) if times else None
         times.extend(self.schedule.deadlines())
+        if self._own_mac.due_at is not None:
+            times.append(self._own_mac.due_at)
         soonest = self.machine.soonest
         for node in self.nodes.values():
             t = soonest(node)
@@ -374,6 +384,9 @@ class Scanner:
             self.line.foreign_frames += 1
             return
         if found.message is PredefinedMessage.DUPLICATE_MAC_CHECK:
+            if found.mac == self.config.mac and self.phase is LinePhase.ONLINE:
+                self._on_own_mac_request(now, frame.data)
+                return
             self._on_dupmac(now, frame)
             return
         handler = self._frame_handlers.get(found.message)
@@ -462,26 +475,55 @@ class Scanner:
             self._ctx.report(mac, ReportKind.DUPLICATE_MAC, text)
 
     def _on_own_mac_claimed(self, check: DupMacCheck) -> None:
+        """A check message for the scanner's MAC while it runs its own check."""
+        if self.phase in _CHECKING:
+            self.phase = LinePhase.MAC_TAKEN
+            text = (
+                f"scanner MAC ID {self.config.mac} is taken on the line "
+                f"({self._claimant(check)}): not going online"
+            )
+            self._ctx.report(None, ReportKind.DUPLICATE_MAC, text)
+            self._ctx.out.append(LineFault(text))
+
+    def _claimant(self, check: DupMacCheck) -> str:
         who = f"vendor 0x{check.vendor_id:04X} serial {check.serial_number}"
         if (check.vendor_id, check.serial_number) == (
             self.config.vendor_id,
             self.config.serial_number,
         ):
             who += ", this scanner's own identity: another instance of this gateway"
-        if self.phase in _CHECKING:
-            self.phase = LinePhase.MAC_TAKEN
-            text = (
-                f"scanner MAC ID {self.config.mac} is taken on the line ({who}): not going online"
-            )
-            self._ctx.report(None, ReportKind.DUPLICATE_MAC, text)
-            self._ctx.out.append(LineFault(text))
-        elif self.phase is LinePhase.ONLINE and check.kind is DupMacKind.REQUEST:
+        return who
+
+    def _on_own_mac_request(self, now: float, data: bytes) -> None:
+        """A check message for the scanner's MAC once it is online: a request is answered
+        at most once per ``ownmac.ANSWER_EVERY`` and reported at most once per
+        ``ownmac.REPORT_EVERY`` with the count (:class:`OwnMacDefence`); the others cost
+        a comparison and two counters. A response for it is nobody's to take notice of; a
+        frame of another length is a bad frame, as before the line went online."""
+        if not is_request(data):
+            if len(data) != DUPMAC_LENGTH:
+                self.line.bad_frames += 1
+            return
+        defence = self._own_mac
+        answer, report = defence.claim(now, data)
+        if answer:
             self._ctx.emit(self._dupmac_frame(DupMacKind.RESPONSE))
-            self._ctx.report(
-                None,
-                ReportKind.DUPLICATE_MAC,
-                f"a device ({who}) tried to claim the scanner's MAC ID {self.config.mac}",
-            )
+        if report:
+            self._own_mac_report(now)
+        elif defence.due_at is not None:
+            self._ctx.fold((defence.due_at,))
+
+    def _own_mac_report(self, now: float) -> None:
+        """The report of the requests for the scanner's MAC since the last one."""
+        check = DupMacCheck.decode_data(self.config.mac, self._own_mac.last)
+        report = self._own_mac.report(now, self._claimant(check))
+        self._ctx.report(None, ReportKind.DUPLICATE_MAC, report.text, **report.data)
+
+    def _own_mac_due(self, now: float) -> None:
+        """The requests for the scanner's MAC no report counted yet, once their time came."""
+        due = self._own_mac.due_at
+        if due is not None and now >= due:
+            self._own_mac_report(now)
 
     def _tick_line(self, now: float) -> None:
         ctx, timeout = self._ctx, self.config.dupmac_timeout

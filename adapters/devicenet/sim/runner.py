@@ -8,6 +8,7 @@ deadlines from a heap. Runs until cancelled; the link is always closed.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import heapq
 import logging
 import time
@@ -26,7 +27,8 @@ IDLE_WAIT = 1.0  # s: longest wait when no node has a deadline
 
 
 class SimRunner:
-    """Simulated nodes on a python-can bus; control them from the same event loop."""
+    """Simulated nodes on a python-can bus; control them from the same event loop (another
+    loop or thread reads them, waits with :meth:`until`, and pokes them on this one)."""
 
     def __init__(
         self,
@@ -46,6 +48,9 @@ class SimRunner:
         self.powered = powered
         self.started = asyncio.Event()
         self.stepped = asyncio.Event()  # set after each pass of the loop (tests wait on it)
+        self.watchers: list[Callable[[], None]] = []
+        """Called after each pass of the loop, on its loop (:meth:`until` from another)."""
+        self._home: asyncio.AbstractEventLoop | None = None  # the loop it runs on
         self.send_failures = 0
         self._link: CanLink | None = None
         self._heap: list[tuple[float, int]] = []
@@ -61,6 +66,7 @@ class SimRunner:
         return {} if self._link is None else self._link.diagnostics()
 
     async def run(self) -> None:
+        self._home = asyncio.get_running_loop()
         async with CanLink(self.link_config) as link:
             self._link = link
             try:
@@ -101,12 +107,19 @@ class SimRunner:
                     self._route(now, event.frame)
             self._run_due(now)
             self.stepped.set()
+            for watcher in tuple(self.watchers):
+                watcher()
 
     async def until(self, predicate: Callable[[], bool]) -> None:
-        """Wait until ``predicate()`` holds, checking after each pass of the loop."""
-        while not predicate():
-            self.stepped.clear()
-            await self.stepped.wait()
+        """Wait until ``predicate()`` holds, checking after each pass of the loop; from the
+        runner's own loop or from any other (a test beside a daemon's line thread)."""
+        loop = asyncio.get_running_loop()
+        if self._home is None or self._home is loop:
+            while not predicate():
+                self.stepped.clear()
+                await self.stepped.wait()
+            return
+        await _until_watched(self.watchers, predicate, loop)
 
     def _route(self, now: float, frame: CanFrame) -> None:
         mac = self._macs.get(frame.arbitration_id, -1)
@@ -162,6 +175,30 @@ class SimRunner:
         if result.error is not None:
             self.send_failures += 1
             log.debug("simulator send failed: %s", result.error)
+
+
+async def _until_watched(
+    watchers: list[Callable[[], None]],
+    predicate: Callable[[], bool],
+    loop: asyncio.AbstractEventLoop,
+) -> None:
+    """Until ``predicate()`` holds, checked on ``loop`` (the caller's) each time a pass of a
+    simulator's loop, on another loop or thread, calls the ``watchers``."""
+    passed = asyncio.Event()  # of ``loop``: set there only
+
+    def wake() -> None:
+        with contextlib.suppress(RuntimeError):  # the caller's loop closed meanwhile
+            loop.call_soon_threadsafe(passed.set)
+
+    watchers.append(wake)
+    try:
+        while True:
+            passed.clear()  # before the check: a pass after it wakes the wait below
+            if predicate():
+                return
+            await passed.wait()
+    finally:
+        watchers.remove(wake)
 
 
 def _mac_of(arbitration_id: int) -> int | None:

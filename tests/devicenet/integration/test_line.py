@@ -88,11 +88,16 @@ async def test_63_drives_come_online(can_line: LinkConfig) -> None:
                 diag = r.adapter.diagnostics()
                 line = {k: v for k, v in diag.items() if k != "drives"}
                 lost = sum(d["explicit_timeouts"] for d in diag["drives"].values())
+                node = sim_node_summary(r, m)
+                online_now = sum(1 for k in macs if r.hub.state(f"d{k}").online)
                 pytest.fail(
-                    f"d{m} not online; line {line}; explicit timeouts {lost}; "
+                    # the facts first: a CI log keeps the first line of a failure only
+                    f"d{m} not online: {online_now}/63 online, node {node['phase']}, "
+                    f"allocated {node['allocation']}, explicit timeouts {lost}; "
+                    f"line {line}; "
                     f"simulator send failures {r.sim.send_failures}; "
                     f"simulator link {r.sim.link_figures()}; "
-                    f"d{m}: {diag['drives'][f'd{m}']}; simulated node: {sim_node_summary(r, m)}"
+                    f"d{m}: {diag['drives'][f'd{m}']}; simulated node: {node}"
                 )
         diag = r.adapter.diagnostics()
         assert diag["online"] == 63
