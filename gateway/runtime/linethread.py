@@ -177,7 +177,7 @@ class LineThread:
             task.cancel()
         helpers = [
             loop.create_task(self._diagnostics_loop(main)),
-            loop.create_task(self._watch_claimed(main)),
+            loop.create_task(self._watch_claimed(main, task)),
         ]
         try:
             await task
@@ -197,11 +197,19 @@ class LineThread:
                     main.call_soon_threadsafe(self._diag_built, diag)
             await asyncio.sleep(DIAG_PERIOD)
 
-    async def _watch_claimed(self, main: asyncio.AbstractEventLoop) -> None:
+    async def _watch_claimed(
+        self, main: asyncio.AbstractEventLoop, task: asyncio.Task[None]
+    ) -> None:
+        """Tell the daemon's loop once the adapter holds its line: its own ``claimed``
+        event; an adapter without one once its run took its first step without ending
+        (a line refused at start is refused there)."""
         event = getattr(self.adapter, "claimed", None)
         if isinstance(event, asyncio.Event):
             await event.wait()
-        main.call_soon_threadsafe(self.claimed.set)
+        else:
+            await asyncio.sleep(0)  # the run task, made first, steps first
+        if not task.done():
+            main.call_soon_threadsafe(self.claimed.set)
 
     def _close(self, loop: asyncio.AbstractEventLoop) -> None:
         """Refuse new requests, cancel what is left on the line's loop, answer the requests

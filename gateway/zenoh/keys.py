@@ -329,6 +329,18 @@ def render_markdown() -> str:
     out += _table(("kind", "meaning"), [(f"`{k.value}`", EVENT_KIND_DOC[k]) for k in EventKind])
     out += [
         "",
+        "A burst of identical events is one event with a count: an event with the same kind "
+        "and text as the drive's event before it, within 1 s of the first (or of the last "
+        "count), is held back and counted; when that second is over, or just before the "
+        "drive's next different event, one event like the last one held back carries "
+        "`repeats`: how many were held back since the drive's event before it "
+        '(`{"drive": "cfw11", "kind": "fault", "text": "EMCY 0x2310 ...", "code": 8976, '
+        '"repeats": 999, ...}`). The count is in time within a second (the hub\'s tick); an '
+        "event that differs from the drive's event before it (a new fault, another code, a "
+        "fault announced again after a comm change) is never held back, and each drive's "
+        "events stay in order. Added up, the events and their `repeats` are every event "
+        "that happened.",
+        "",
         "## Session and delivery",
         "",
         "- Peer mode by default. The session listens and connects only on the endpoints of the "
@@ -348,9 +360,11 @@ def render_markdown() -> str:
         "- Events wait for the I/O thread in a queue of 1000. When it is full (a flood of "
         "refused commands faster than the network takes them), a new event is dropped and "
         "counted, and the next event put carries `dropped`: how many were lost before it. "
-        "A fault, a trip, a safety action and a comm change are never dropped. The log "
-        "writes a refusal repeated by the same client for the same reason once per 10 s, "
-        "with the count.",
+        "A fault, a trip, a safety action and a comm change are never dropped. A burst of "
+        "identical events reaches the queue as one event and one with `repeats` per second "
+        '(above, "Event kinds"). The log writes one line per event that leaves the hub, and '
+        "a refusal repeated by the same client for the same reason once per 10 s, with the "
+        "count.",
         "- Zenoh callbacks only copy the key and payload and hand them to the event loop; "
         "every query gets exactly one reply (an error reply if the gateway stops first). "
         "At most 1024 puts and queries wait for the loop; more are dropped (a query "
