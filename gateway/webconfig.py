@@ -7,6 +7,10 @@ the build (docs/operations.md, "Web status page and metrics").
 - ``bind``: HOST:PORT. Absent: the web front end is off (a site config says so on purpose).
 - ``allow``: client addresses or CIDR networks; absent: loopback only. An empty list is an
   error (it would refuse everyone); ``["0.0.0.0/0", "::/0"]`` admits any address.
+- ``names``: the host names (or addresses) users reach the page by; a request whose Host
+  names another is refused (421), and the feed is refused to a page whose Origin names
+  another. Absent: ``localhost``, ``127.0.0.1``, ``[::1]`` and the bind address itself
+  (:meth:`WebSection.host_names`); a site binding a wider address lists its names.
 - ``commands``: false (default) serves a read-only page and refuses every command request.
 - ``token_sha256``: the hex SHA-256 of the token a user gives to command (required when
   ``commands = true``). The config file holds the digest, never the token itself.
@@ -31,6 +35,38 @@ LOOPBACK: tuple[IpNetwork, ...] = (
     ipaddress.ip_network("::1/128"),
 )
 _SHA256_HEX = re.compile(r"[0-9a-f]{64}")
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "[::1]")
+"""The names a page on this very machine is reached by: the default of ``web.names``."""
+MAX_NAMES = 64
+_LABEL = r"(?!-)[a-z0-9_-]{1,63}(?<!-)"
+_HOST_NAME = re.compile(rf"{_LABEL}(?:\.{_LABEL})*", re.ASCII)
+_NAMES_HINT = "a host name or address, without scheme or port (like edge-box-3.plant.example)"
+
+
+def host_name(text: str) -> str | None:
+    """``text`` as a host name the page is reached by, in the one form names are compared
+    in (lower case, no final dot, an IPv6 address compressed and in brackets); None if it
+    is neither a host name nor an address."""
+    name = text.strip().lower()
+    bracketed = name.startswith("[") and name.endswith("]")
+    inner = name[1:-1] if bracketed else name
+    if ":" in inner:
+        try:
+            return f"[{ipaddress.IPv6Address(inner).compressed}]"
+        except ValueError:
+            return None
+    name = inner.removesuffix(".")
+    if bracketed or len(name) > 253 or not _HOST_NAME.fullmatch(name):
+        return None
+    return name
+
+
+def _is_wildcard(host: str) -> bool:
+    """Whether the bind host is "every address" (0.0.0.0, ::), which names no host."""
+    try:
+        return ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return False
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +101,16 @@ class WebSection:
     commands: bool = False
     token_sha256: str | None = None
     limits: WebLimits = field(default_factory=WebLimits)
+    names: tuple[str, ...] | None = None  # as host_name writes them; None: the default
+
+    @property
+    def host_names(self) -> frozenset[str]:
+        """The names a request's Host and a page's Origin may give: ``names`` as given,
+        else the loopback names and the bind host itself (unless it is 0.0.0.0 or ::)."""
+        if self.names is not None:
+            return frozenset(self.names)
+        own = host_name(self.host) if not _is_wildcard(self.host) else None
+        return frozenset(LOOPBACK_NAMES) | ({own} if own else set())
 
     @property
     def url(self) -> str:
@@ -105,6 +151,29 @@ def _allow(t: Table) -> tuple[IpNetwork, ...]:
         except ValueError:
             t.errors.append(t.error(f"allow[{i}]", f"{text!r} is not an address or CIDR network"))
     return tuple(out) or LOOPBACK
+
+
+def _names(t: Table) -> tuple[str, ...] | None:
+    texts: tuple[str, ...] | None = t.str_list("names", None)
+    if texts is None:
+        return None
+    if not texts or len(texts) > MAX_NAMES:
+        t.errors.append(
+            t.error(
+                "names",
+                f"give 1 to {MAX_NAMES} names users reach the page by, or leave the key out "
+                "for the loopback names and the bind address",
+            )
+        )
+        return None
+    out: list[str] = []
+    for i, text in enumerate(texts):
+        name = host_name(text)
+        if name is None:
+            t.errors.append(t.error(f"names[{i}]", f"{text!r} is not {_NAMES_HINT}"))
+        elif name not in out:
+            out.append(name)
+    return tuple(out) or None
 
 
 def _token(t: Table, commands: bool) -> str | None:
@@ -205,6 +274,7 @@ def read_web_section(t: Table) -> WebSection:
         host=where[0] if where else d.host,
         port=where[1] if where else d.port,
         allow=_allow(t),
+        names=_names(t),
         commands=commands,
         token_sha256=_token(t, commands),
         limits=_limits(t),

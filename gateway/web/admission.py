@@ -22,7 +22,9 @@ wraps aiohttp's own per-connection protocol:
   one address (:meth:`Gate.page_refusal`).
 
 A refusal repeated any number of times writes one log line per kind and
-:data:`LOG_PERIOD` (:class:`RefusalLog`, on :class:`gateway.ratelimit.LogRateLimit`).
+:data:`LOG_PERIOD` (:class:`RefusalLog`, on :class:`gateway.ratelimit.LogRateLimit`). So
+does a request aiohttp itself answers with an error (a malformed one: 400), through
+:class:`RequestLog`, the logger the front end gives aiohttp's per-connection protocol.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from gateway.ratelimit import LogRateLimit
 from gateway.web.metrics import WebCounters
@@ -148,6 +151,21 @@ REFUSALS: dict[str, Refusal] = {
         "web requests from %s held back: over web.request_rate (%s)",
         "requests held back (over web.request_rate)",
     ),
+    "host": Refusal(
+        logging.WARNING,
+        "web request from %s refused (421): its Host %s is not in web.names",
+        "requests refused (a Host not in web.names)",
+    ),
+    "bad_request": Refusal(
+        logging.INFO,
+        "web request from %s refused (400): %s",
+        "malformed requests refused (400)",
+    ),
+    "request_error": Refusal(
+        logging.ERROR,
+        "web request from %s failed in the gateway: %s",
+        "requests failed in the gateway",
+    ),
 }
 
 
@@ -159,20 +177,71 @@ class RefusalLog:
         self.clock = clock
         self._limit = LogRateLimit(LOG_PERIOD)
 
-    def note(self, kind: str, peer: str, figure: object) -> None:
-        """A refusal of ``kind`` (a key of :data:`REFUSALS`) of ``peer``."""
+    def note(
+        self, kind: str, peer: str, figure: object, exc_info: BaseException | None = None
+    ) -> None:
+        """A refusal of ``kind`` (a key of :data:`REFUSALS`) of ``peer``; ``exc_info``: the
+        failure whose traceback the line carries, if it is written."""
         held = self._limit.admit(kind, self.clock())
         if held is None:
             return
         refusal = REFUSALS[kind]
         more = f"; {held} more since the last line" if held else ""
-        log.log(refusal.level, refusal.line + "%s", peer, figure, more)
+        log.log(refusal.level, refusal.line + "%s", peer, figure, more, exc_info=exc_info)
 
     def flush(self) -> None:
         """A summary line for each kind held back over a whole period."""
         for kind, held in self._limit.flush(self.clock()):
             refusal = REFUSALS[str(kind)]
             log.log(refusal.level, "web: %d more %s since the last line", held, refusal.summary)
+
+
+REASON_MAX = 120  # characters of aiohttp's reason a line shows
+
+
+def _first_line(text: str) -> str:
+    line = text.strip().partition("\n")[0].strip()
+    return line[:REASON_MAX] or "no reason given"
+
+
+class RequestLog(logging.Logger):
+    """The logger of aiohttp's per-connection protocol (``logger=``): what it logs as an
+    error becomes one line per kind and :data:`LOG_PERIOD` on :class:`RefusalLog`, and its
+    answer stays aiohttp's own. A malformed request (aiohttp answers 400) is the client's
+    doing: its line gives aiohttp's reason, no traceback. A request that failed in the
+    gateway (a handler's exception: 500) is its own fault: the line written carries the
+    traceback. aiohttp's debug lines pass as they are."""
+
+    def __init__(self, refusals: RefusalLog) -> None:
+        super().__init__(f"{log.name}.requests")
+        self.parent = log
+        self._refusals = refusals
+
+    def handle(self, record: logging.LogRecord) -> None:
+        if record.levelno < logging.WARNING:
+            super().handle(record)
+            return
+        failure = record.exc_info[1] if record.exc_info else None
+        peer = _record_peer(record)
+        if isinstance(failure, HttpProcessingError):
+            self._refusals.note("bad_request", peer, _first_line(failure.message))
+            return
+        what = (
+            f"{type(failure).__name__}: {_first_line(str(failure))}"
+            if failure is not None
+            else record.getMessage()
+        )
+        self._refusals.note("request_error", peer, what, exc_info=failure)
+
+
+def _record_peer(record: logging.LogRecord) -> str:
+    """The client address aiohttp's line names ("Error handling request from %s")."""
+    args = record.args
+    if isinstance(args, tuple) and args and isinstance(args[0], str):
+        address = address_of(args[0])
+        if address is not None:
+            return str(address)
+    return "an unknown address"
 
 
 # ---------------------------------------------------------------- the gate

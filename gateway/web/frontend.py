@@ -16,6 +16,9 @@ accept before a byte is read; a request's head and body have ``web.header_timeou
 ``web.body_timeout``; at most ``web.max_pages`` pages, each dropped once it leaves more
 than ``web.page_send_budget_kib`` unsent; an address that gave ``web.token_failures``
 wrong tokens within ``web.token_window`` gets 429 unchecked (gateway/web/tokens.py).
+A request whose Host names no name of ``web.names`` gets 421, and a feed asked for by a
+page whose Origin names none of them 403 (gateway/web/hosts.py); a malformed request gets
+aiohttp's own 400, logged once per period (:class:`gateway.web.admission.RequestLog`).
 A command goes through ``hub.submit`` as source ``web`` and client
 ``<peer address> <page id>``, under the same safety rules as Zenoh and Modbus.
 """
@@ -37,7 +40,7 @@ from importlib import resources
 from typing import Any
 
 import orjson
-from aiohttp import WSCloseCode, WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, hdrs, web
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
@@ -45,11 +48,21 @@ from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.model import DriveCommand, Source, client_label
-from gateway.web.admission import AdmissionSite, Gate, RefusalLog, connection_of, peer_of
+from gateway.web.admission import (
+    AdmissionSite,
+    Gate,
+    RefusalLog,
+    RequestLog,
+    allowed,
+    connection_of,
+    peer_of,
+)
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
+from gateway.web.hosts import host_admitted, origin_admitted, shown
 from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
 from gateway.web.tokens import TokenFailures
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
+from gateway.webconfig import LOOPBACK
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +93,10 @@ WS_HEARTBEAT = 20.0  # s between pings: a page that went away is noticed
 WS_MAX_MESSAGE = 1024  # bytes a page may send on the feed (it sends nothing we read)
 PAGE_ID = re.compile(r"[A-Za-z0-9-]{1,40}")
 PAGES_RETRY_AFTER = 10  # s a refused page is told to wait (it retries by itself, up to 8 s)
+MISDIRECTED = (
+    "misdirected request: this gateway does not answer to the host name this request gives "
+    "(web.names)\n"
+)
 _BIND_FIXES = {
     errno.EADDRINUSE: ("the address is in use", "stop what uses it, or set [web] bind"),
     errno.EACCES: ("permission denied", "use a port above 1023, or set [web] bind"),
@@ -97,15 +114,6 @@ def load_static() -> dict[str, tuple[bytes, str]]:
     return out
 
 
-def same_origin(request: web.Request) -> bool:
-    """No Origin (not a browser), or the origin of this very host and port."""
-    origin = request.headers.get("Origin")
-    if origin is None:
-        return True
-    scheme, sep, rest = origin.partition("://")
-    return bool(sep) and scheme in ("http", "https") and rest.lower() == request.host.lower()
-
-
 def _json(body: Any, status: int = 200, headers: dict[str, str] | None = None) -> web.Response:
     return web.Response(
         body=orjson.dumps(body), status=status, content_type="application/json", headers=headers
@@ -116,6 +124,11 @@ def _peer(request: web.BaseRequest) -> str:
     """The client's address, as the admission counts it."""
     transport = request.transport
     return peer_of(transport) if transport is not None else str(request.remote or "")
+
+
+def _loopback(host: str) -> bool:
+    """Whether the bind host is this machine only (localhost, 127.x, ::1)."""
+    return host == "localhost" or allowed(host, LOOPBACK)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -141,6 +154,8 @@ class WebFrontEnd:
         self.metrics = MetricsSnapshot(self.registry, self.limits.metrics_max_age, self.counters)
         self.refusals = RefusalLog()
         self.gate = Gate(self.section, self.counters, self.refusals)
+        self.names = self.section.host_names
+        self.request_log = RequestLog(self.refusals)
         self.tokens = TokenFailures(self.limits.token_failures, self.limits.token_window)
         self.static = load_static()
         self.address: tuple[str, int] | None = None
@@ -185,6 +200,9 @@ class WebFrontEnd:
             access_log=None,
             handle_signals=False,
             shutdown_timeout=SHUTDOWN_TIMEOUT,
+            # what aiohttp answers with an error itself (a malformed request: 400) is logged
+            # once per period, a client's mistake without a traceback
+            logger=self.request_log,
             # aiohttp's own idle close, behind the header deadline of gateway/web/admission.py
             keepalive_timeout=2 * self.limits.header_timeout,
             # a body left unread (a refused request) is not waited for: the connection closes
@@ -243,6 +261,13 @@ class WebFrontEnd:
         )
         networks = ", ".join(str(n) for n in self.section.allow)
         log.info("web clients allowed from %s", networks)
+        log.info("web host names: %s", ", ".join(sorted(self.names)))
+        if self.section.names is None and not _loopback(self.section.host):
+            log.warning(
+                "web.names is not set: a request naming this host otherwise than %s is "
+                "refused (421); list the names users reach the page by",
+                ", ".join(sorted(self.names)),
+            )
         limits = self.limits
         log.info(
             "web limits: %d connections (%d per address), %d pages (%d per address), "
@@ -281,15 +306,29 @@ class WebFrontEnd:
     @web.middleware
     async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         """Every request: the connection's header deadline is off while the request runs
-        (it is due again once the answer is written), and the security headers."""
+        (it is due again once the answer is written), a Host not in ``web.names`` refused,
+        and the security headers."""
         connection = connection_of(request)
         task = asyncio.current_task()
         if connection is not None and task is not None:
             connection.request_started()
             task.add_done_callback(lambda _: connection.expect_request())
-        response = await handler(request)
+        misdirected = self._misdirected(request)
+        response = misdirected if misdirected is not None else await handler(request)
         if not response.prepared:
             response.headers.update(SECURITY_HEADERS)
+        return response
+
+    def _misdirected(self, request: web.Request) -> web.Response | None:
+        """421 for a request whose Host names no name of ``web.names`` (a page of another
+        site, its name pointed at the gateway, would be let read the answer), else None."""
+        host = request.headers.get(hdrs.HOST)
+        if host_admitted(host, request.version, self.names):
+            return None
+        self.counters.refused["host"] += 1
+        self.refusals.note("host", _peer(request), shown(host))
+        response = web.Response(status=421, text=MISDIRECTED)
+        response.force_close()  # the connection's next request would name the same host
         return response
 
     # ------------------------------------------------------------ page and feed
@@ -302,7 +341,7 @@ class WebFrontEnd:
         return web.Response(status=204)
 
     async def _ws(self, request: web.Request) -> web.StreamResponse:
-        if not same_origin(request):
+        if not origin_admitted(request.headers.get(hdrs.ORIGIN), self.names):
             # a WebSocket is not held to the same-origin rule: a page of another site open
             # in the operator's browser could otherwise read the feed
             self.counters.refused["origin"] += 1

@@ -83,7 +83,7 @@ METRICS: dict[str, str] = {
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
     f"{NS}_web_clients_over_budget": "Pages dropped: more unsent than web.page_send_budget_kib.",
     f"{NS}_web_requests_refused": (
-        "Refused requests (origin, token, token_limit, commands_off, pages, pages_per_peer)."
+        "Refused requests (host, origin, token, token_limit, commands_off, pages, pages_per_peer)."
     ),
     f"{NS}_web_commands": "Commands from the page, by result (accepted, refused).",
     f"{NS}_web_connections": (
@@ -116,7 +116,16 @@ class WebCounters:
 
     def __init__(self) -> None:
         self.refused: dict[str, int] = dict.fromkeys(
-            ("origin", "token", "token_limit", "commands_off", "pages", "pages_per_peer"), 0
+            (
+                "host",
+                "origin",
+                "token",
+                "token_limit",
+                "commands_off",
+                "pages",
+                "pages_per_peer",
+            ),
+            0,
         )
         """Requests refused, by reason."""
         self.commands: dict[str, int] = {"accepted": 0, "refused": 0}

@@ -22,7 +22,7 @@ from gateway.web.tokens import TokenFailures
 from gateway.webconfig import WebLimits
 from tests.web.harness import TIMEOUT, TOKEN, TOKEN_SHA256, Small, small_gateway, web_section
 
-HEALTH = b"GET /api/health HTTP/1.1\r\nHost: gateway\r\nConnection: close\r\n\r\n"
+HEALTH = b"GET /api/health HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
 FOREVER = 3600.0  # s: a deadline the test never reaches (the behaviour under test is another)
 
 
@@ -116,7 +116,7 @@ async def test_a_request_head_sent_a_byte_at_a_time_is_cut_at_the_header_timeout
     async with small_gateway(web_section(limits=WebLimits(header_timeout=0.5))) as gw:
         counters = gw.web.counters
         async with connection(gw) as (reader, writer):
-            writer.write(b"GET /api/health HTTP/1.1\r\nHost: gateway\r\n")
+            writer.write(b"GET /api/health HTTP/1.1\r\nHost: 127.0.0.1\r\n")
             heard = asyncio.create_task(answer(reader))
             for byte in b"X-Slow: " + b"a" * 200:  # at most 208 bytes, 0.05 s apart
                 if heard.done():
@@ -141,7 +141,7 @@ async def test_a_command_body_slower_than_the_body_timeout_gets_408() -> None:
     )
     async with small_gateway(section) as gw, connection(gw) as (reader, writer):
         writer.write(
-            b"POST /api/drives/d1/command HTTP/1.1\r\nHost: gateway\r\n"
+            b"POST /api/drives/d1/command HTTP/1.1\r\nHost: 127.0.0.1\r\n"
             b"Authorization: Bearer " + TOKEN.encode() + b"\r\n"
             b"Content-Type: application/json\r\nContent-Length: 200\r\n\r\n{"
         )
@@ -167,7 +167,7 @@ async def test_a_client_that_never_reads_its_answer_is_cut(
         sock = await raw_socket(gw, "127.0.0.1")
         try:
             await asyncio.get_running_loop().sock_sendall(
-                sock, b"GET / HTTP/1.1\r\nHost: gateway\r\n\r\n"
+                sock, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
             )
             await until(lambda: counters.timeouts["answer"] == 1)
             await until(lambda: counters.connections_open == 0)  # its place is free

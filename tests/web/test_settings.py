@@ -66,6 +66,11 @@ def test_a_full_web_table(tmp_path: Path) -> None:
         ('allow = ["10.0.0.0/33"]', "web.allow[0]: '10.0.0.0/33' is not an address or CIDR"),
         ("commands = true", "web.commands: commands = true needs token_sha256"),
         ('token_sha256 = "abc"', "web.token_sha256: must be 64 lower-case hex digits"),
+        ("names = []", "web.names: give 1 to 64 names users reach the page by"),
+        ('names = ["gw:8080"]', "web.names[0]: 'gw:8080' is not a host name or address, with"),
+        ('names = ["gw", "http://gw"]', "web.names[1]: 'http://gw' is not a host name or"),
+        ('names = ["*.plant.example"]', "web.names[0]: '*.plant.example' is not a host name"),
+        ('names = "gw"', "web.names: must be an array of strings, not a string"),
         ("comands = true", "web.comands: unknown key (did you mean 'commands'?)"),
         ("commands = 1", "web.commands: must be true or false, not an integer"),
         ("max_connections = 0", "web.max_connections: 0 is below the minimum 1"),
@@ -120,6 +125,25 @@ def test_a_lower_connection_limit_lowers_the_page_limits_left_out(tmp_path: Path
         10,
         10,
     )
+
+
+def test_the_host_names_by_default_and_as_given(tmp_path: Path) -> None:
+    loopback = {"localhost", "127.0.0.1", "[::1]"}
+    demo = load(DEFAULT_CONFIG).web
+    assert demo.names is None and demo.host_names == loopback  # the browser test's URL
+    assert load(write(tmp_path, 'bind = "[::1]:8080"')).web.host_names == loopback
+    assert load(write(tmp_path, 'bind = "0.0.0.0:8080"')).web.host_names == loopback
+    assert load(write(tmp_path, 'bind = "10.1.2.3:8080"')).web.host_names == {
+        *loopback,
+        "10.1.2.3",
+    }
+    given = load(
+        write(tmp_path, 'bind = "0.0.0.0:8080"\nnames = ["Edge-Box-3.", "FE80::1", "edge-box-3"]')
+    ).web
+    assert given.names == ("edge-box-3", "[fe80::1]")
+    assert given.host_names == {"edge-box-3", "[fe80::1]"}
+    moved = load(write(tmp_path, "")).with_overrides(web_bind="10.9.8.7:0").web
+    assert moved.host_names == {*loopback, "10.9.8.7"}
 
 
 def test_web_bind_on_the_command_line(tmp_path: Path) -> None:
