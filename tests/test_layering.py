@@ -74,6 +74,7 @@ ADAPTER_MAY_IMPORT = (
     "gateway.sim",
     "gateway.devices",
     "gateway.loader",
+    "gateway.vendorfile",  # a drive's GSD or EDS file, read safely (options layer)
 )
 
 

@@ -8,7 +8,9 @@ startup_sdo and the simulator's sim_ramp_time, sim_max_rpm, sim_boot_operational
 docs/devices.md, "CiA 402 drives (CANopen)".
 
 Every object the configuration needs must be in the drive's EDS: one it lacks is an
-error naming the file and the object, found when the config is read.
+error naming the file and the object, found when the config is read. So is a file that
+is not a regular file or is over 4 MiB (:mod:`gateway.vendorfile`), and a DefaultValue
+out of its LowLimit..HighLimit or DataType (:func:`adapters.canopen.codec.od.value_problems`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from adapters.canopen.errors import EdsError
 from adapters.link.can import REFUSED_INTERFACES
 from gateway.config import DriveConfig, shipped_file
 from gateway.schema import Table
+from gateway.vendorfile import VendorFileError, read_vendor_file
 
 BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)  # CiA 301
 # The shortest SYNC period taken whatever the line: CiA 301 0x1006 (communication cycle
@@ -168,10 +171,22 @@ def _eds_path(t: Table) -> Path:
     return path
 
 
+def read_eds(path: Path) -> bytes:
+    """The bytes of a drive's EDS/DCF read as a vendor file (:mod:`gateway.vendorfile`: a
+    regular file of at most 4 MiB, read within a time bound); EdsError naming the file and
+    the reason otherwise."""
+    try:
+        return read_vendor_file(path, "an EDS file")
+    except VendorFileError as exc:
+        raise EdsError(exc.file, "", exc.reason) from None
+
+
 def _load(t: Table, drive: DriveConfig) -> tuple[Dictionary, Path]:
+    """The drive's dictionary: its EDS read safely, parsed, and its values in their ranges
+    (the one check ``check-config`` and ``run`` make alike)."""
     path = _eds_path(t)
     try:
-        return Dictionary(path, drive.address), path
+        return Dictionary(path, drive.address, read_eds(path)), path
     except EdsError as exc:
         raise t.error("eds", str(exc)) from None
 

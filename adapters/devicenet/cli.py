@@ -23,11 +23,11 @@ from collections.abc import Callable
 from typing import Any
 
 from adapters.devicenet.cfw08 import DEFAULT_WEG_SPEED_SCALE, AssemblyPair
-from adapters.devicenet.codec.eds import ConnectionType, Eds, load_eds
+from adapters.devicenet.codec.eds import ConnectionType, Eds
 from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.errors import EdsError
 from adapters.devicenet.link import REFUSED_INTERFACES, CanLink, LinkConfig, RxFrame
-from adapters.devicenet.options import SCANNER_VENDOR_ID
+from adapters.devicenet.options import SCANNER_VENDOR_ID, load_eds
 from adapters.devicenet.scanner.probe import (
     Finished,
     LineProbe,

@@ -10,9 +10,13 @@ retry_max, status_interval, simulate. A drive's keys are its device's
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
+from adapters.devicenet.codec.eds import Eds, decode_eds
+from adapters.devicenet.errors import EdsError
 from adapters.devicenet.link import REFUSED_INTERFACES
 from gateway.schema import Table
+from gateway.vendorfile import VendorFileError, read_vendor_file
 
 BITRATES = (125_000, 250_000, 500_000)  # DeviceNet rates (seed table 4, P702)
 # The vendor ID the scanner's Duplicate MAC ID check frames carry (fact sheet 2.3). 0 is
@@ -85,3 +89,14 @@ def parse_bus(t: Table) -> BusOptions:
         status_interval=t.number("status_interval", d.status_interval, minimum=0.1, maximum=3600.0),
         simulate=simulate,
     )
+
+
+def load_eds(path: str | Path) -> Eds:
+    """A drive's EDS file read as a vendor file (:mod:`gateway.vendorfile`: a regular file
+    of at most 4 MiB, read within a time bound) and parsed; EdsError naming the file and
+    the reason otherwise."""
+    try:
+        raw = read_vendor_file(Path(path), "an EDS file")
+    except VendorFileError as exc:
+        raise EdsError(exc.file, 0, "", exc.reason) from None
+    return decode_eds(raw, str(path))

@@ -33,7 +33,7 @@ from adapters.profibus.driver import LineDriver
 from adapters.profibus.link import OPEN_ERRORS, PortHeld, Rs485, open_link
 from adapters.profibus.master.scan import Scanner, SlaveInfo
 from adapters.profibus.master.timing import BAUD_RATES, BusParams
-from adapters.profibus.options import DriveOptions
+from adapters.profibus.options import DriveOptions, find_in_dir
 from gateway.config import Config, DriveConfig
 from gateway.model import Device
 
@@ -256,7 +256,7 @@ class GsdMatch:
 
 def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
     """The GSD of ``directory`` with the slave's Ident_Number (the first by file name)."""
-    from adapters.profibus.codec.gsd import find_in_dir, match_modules
+    from adapters.profibus.codec.gsd import match_modules
 
     if directory is None or info.ident_number is None:
         return None

@@ -48,8 +48,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from adapters.profibus.codec.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
-from adapters.profibus.codec.gsd import Gsd, GsdError, GsdSetupError, build_setup
-from adapters.profibus.codec.gsd import load as load_gsd
+from adapters.profibus.codec.gsd import Gsd, GsdError, GsdSetupError, build_setup, decode
 from adapters.profibus.contract import BUILTIN_TELEGRAM
 from adapters.profibus.errors import ProfibusDecodeError
 from adapters.profibus.link import URL_SCHEMES, Rs485, is_url
@@ -57,6 +56,7 @@ from adapters.profibus.master.timing import BAUD_RATES, BusParams, bus_problems,
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
 from gateway.schema import Table
+from gateway.vendorfile import VendorFileError, read_vendor_file
 
 WATCHDOG_MIN: Final = 0.01  # 1.6: 10 ms base x 1 x 1
 WATCHDOG_MAX: Final = 650.25  # 1.6: 10 ms x 255 x 255
@@ -194,6 +194,33 @@ def _check_gsd_bus(t: Table, options: BusOptions) -> None:
                 t.file, key, f"{gsd.path} gives MaxTsdr = {tsdr} bit times at "
                 f"{options.baudrate} baud, above the line's max_tsdr = {options.max_tsdr}",
             )  # fmt: skip
+
+
+def load_gsd(path: Path) -> Gsd:
+    """A GSD file read as a vendor file (:mod:`gateway.vendorfile`: a regular file of at
+    most 4 MiB, read within a time bound) and parsed; GsdError naming the file and the
+    reason otherwise."""
+    try:
+        raw = read_vendor_file(path, "a GSD file")
+    except VendorFileError as exc:
+        raise GsdError(exc.file, 0, "", exc.reason) from None
+    return decode(raw, str(path))
+
+
+def find_in_dir(directory: str | Path, ident_number: int) -> list[Gsd]:
+    """The GSD files of ``directory`` (``*.gsd``, ``*.gs?``) whose Ident_Number matches;
+    a file that is refused or does not parse is passed over."""
+    found: list[Gsd] = []
+    for path in sorted(Path(directory).iterdir()):
+        if not path.suffix.lower().startswith(".gs"):
+            continue
+        try:
+            gsd = load_gsd(path)
+        except GsdError:
+            continue
+        if gsd.ident_number == ident_number:
+            found.append(gsd)
+    return found
 
 
 def _gsd_path(t: Table, name: str) -> Path:

@@ -114,7 +114,7 @@ def test_an_eds_that_does_not_parse(tmp_path: Path) -> None:
 
 def test_a_missing_eds(tmp_path: Path) -> None:
     text = error_of({"eds": str(tmp_path / "nowhere.eds")})
-    assert "nowhere.eds" in text and "cannot read the EDS" in text
+    assert "nowhere.eds: does not exist" in text
 
 
 def test_an_object_the_eds_lacks(tmp_path: Path) -> None:

@@ -16,12 +16,12 @@ from adapters.devicenet.codec.eds import (
     Entry,
     Quoted,
     Section,
-    load_eds,
     parse_document,
     parse_eds,
     render_document,
 )
 from adapters.devicenet.errors import EdsError
+from adapters.devicenet.options import load_eds
 from gateway.errors import ConfigError, GatewayError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -252,7 +252,7 @@ def test_bad_bytes_and_missing_file(tmp_path: Path) -> None:
     path.write_bytes(b"[File]\n$ caf\xe9\n")
     with pytest.raises(EdsError, match=r"x\.eds: line 2: byte 0xE9 is not ASCII"):
         load_eds(path)
-    with pytest.raises(EdsError, match="cannot read"):
+    with pytest.raises(EdsError, match=r"missing\.eds: does not exist"):
         load_eds(tmp_path / "missing.eds")
 
 

@@ -1,22 +1,35 @@
 """A node's object dictionary, read from its EDS or DCF with the canopen library.
 
-The library reads the file (CiA 306: ``canopen.import_od``) and knows each object's data
-type, size, access and PDO mapping flag, and encodes and decodes values
-(``ODVariable.encode_raw``/``decode_raw``); this module wraps it in the project's errors:
-a file that does not parse, or an object the file lacks, is an :class:`EdsError` naming
-the file and the object. Only the configuration side uses it: the engine gets bytes.
+The library parses the file's text (CiA 306: ``canopen.import_od`` on a text stream: the
+bytes are read by the caller, as a vendor file, ``adapters.canopen.options.read_eds``) and
+knows each object's data type, size, access and PDO mapping flag, and encodes and decodes
+values (``ODVariable.encode_raw``/``decode_raw``); this module wraps it in the project's
+errors: a file that does not parse, a value out of its range (:func:`value_problems`), or
+an object the file lacks, is an :class:`EdsError` naming the file and the object. Only the
+configuration side uses it: the engine gets bytes.
 """
 
 from __future__ import annotations
 
 import configparser
+import hashlib
+import io
 import logging
+import sys
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Final
 
 import canopen
-from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord, ODVariable
+from canopen.objectdictionary import (
+    ObjectDictionary,
+    ObjectDictionaryError,
+    ODArray,
+    ODRecord,
+    ODVariable,
+)
 from canopen.objectdictionary import datatypes as dt
 
 from adapters.canopen.errors import EdsError
@@ -25,6 +38,10 @@ log = logging.getLogger(__name__)
 
 _INTEGER_TYPES = frozenset(dt.INTEGER_TYPES)
 _SIGNED_TYPES = frozenset(dt.SIGNED_TYPES)
+_TYPE_NAMES: Final = {
+    value: name for name, value in vars(dt).items() if name.isupper() and isinstance(value, int)
+}
+_REAL32_MAX: Final = 3.4028234663852886e38  # the largest finite IEEE 754 single
 
 
 def obj_name(index: int, subindex: int | None = None) -> str:
@@ -86,11 +103,12 @@ class Variable:
 class Dictionary:
     """A node's object dictionary from one file."""
 
-    def __init__(self, path: Path, node_id: int) -> None:
+    def __init__(self, path: Path, node_id: int, raw: bytes) -> None:
+        """The dictionary of ``raw``, the bytes read from ``path``, for ``node_id``."""
         self.path = path
         self.file = str(path)
         self.node_id = node_id
-        self.od = load(path, node_id)
+        self.od = load(self.file, raw, node_id)
 
     def has(self, index: int, subindex: int = 0) -> bool:
         try:
@@ -151,30 +169,109 @@ class Dictionary:
         return tuple(sorted(self.od.indices))
 
 
-_CACHE: dict[tuple[Path, float, int], ObjectDictionary] = {}
+_CACHE: dict[tuple[str, bytes, int], ObjectDictionary] = {}
 
 
-def load(path: Path, node_id: int) -> ObjectDictionary:
-    """The file's dictionary for ``node_id`` ($NODEID resolved); EdsError for a file that
-    is missing or does not parse. Read once per file version and node."""
-    try:
-        stamp = path.stat().st_mtime
-    except OSError as exc:
-        raise EdsError(str(path), "", f"cannot read the EDS: {exc.strerror or exc}") from None
-    key = (path.resolve(), stamp, node_id)
+def load(file: str, raw: bytes, node_id: int) -> ObjectDictionary:
+    """The dictionary of the EDS/DCF bytes ``raw`` (``file`` names it) for ``node_id``
+    ($NODEID resolved), its values checked; EdsError for a file that does not parse or
+    whose values are out of range. Parsed once per content and node."""
+    key = (file, hashlib.sha256(raw).digest(), node_id)
     cached = _CACHE.get(key)
-    if cached is not None:
-        return cached
+    if cached is None:
+        cached = _CACHE[key] = parse(file, raw, node_id)
+    return cached
+
+
+def parse(file: str, raw: bytes, node_id: int | None) -> ObjectDictionary:
+    """A dictionary of its own (never shared: the simulator's LocalNode gets one) of the
+    EDS/DCF bytes ``raw``: UTF-8 text, parsed by the library, then every value checked
+    against its range (:func:`value_problems`); EdsError naming the file otherwise."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        reason = f"line {line}: byte 0x{raw[exc.start]:02X} is not UTF-8 text"
+        raise EdsError(file, "", f"does not parse as an EDS/DCF: {reason}") from None
+    stream = io.StringIO(text, newline=None)
+    stream.name = file  # the library tells an EDS from a DCF by the name's suffix
     try:
         with warnings.catch_warnings():  # the library's own logger.warn deprecation
             warnings.simplefilter("ignore", DeprecationWarning)
-            od = canopen.import_od(str(path), node_id)
-    except (configparser.Error, ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+            od = canopen.import_od(stream, node_id)
+    except (configparser.Error, ObjectDictionaryError, ValueError, KeyError, TypeError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise EdsError(str(path), "", f"does not parse as an EDS/DCF: {reason}") from None
-    except OSError as exc:
-        raise EdsError(str(path), "", f"cannot read the EDS: {exc.strerror or exc}") from None
+        raise EdsError(file, "", f"does not parse as an EDS/DCF: {reason}") from None
     if not isinstance(od, ObjectDictionary) or len(od.indices) == 0:
-        raise EdsError(str(path), "", "does not parse as an EDS/DCF: no objects")
-    _CACHE[key] = od
+        raise EdsError(file, "", "does not parse as an EDS/DCF: no objects")
+    check_values(file, od)
     return od
+
+
+# ---------------------------------------------------------------- values against their ranges
+
+
+def check_values(file: str, od: ObjectDictionary) -> None:
+    """EdsError naming the file, the first object whose value is out of its range and how
+    many more there are (:func:`value_problems`); nothing when every value is in range."""
+    problems = value_problems(od)
+    if problems:
+        where, reason = problems[0]
+        more = f" (and {len(problems) - 1} more value(s) out of range)" if len(problems) > 1 else ""
+        raise EdsError(file, where, f"{reason}{more}")
+
+
+def value_problems(od: ObjectDictionary) -> list[tuple[str, str]]:
+    """(object, reason) for each DefaultValue, and a DCF's ParameterValue, beyond its
+    DataType's range (``encode_raw`` could not put it in its bytes) or outside the
+    object's LowLimit..HighLimit: what a node answers for an object nobody wrote is its
+    DefaultValue, and the gateway reads defaults (0x6046:2, 0x6075, 0x6007)."""
+    problems: list[tuple[str, str]] = []
+    for var in _variables(od):
+        for key in ("DefaultValue", "ParameterValue"):
+            value = var.default if key == "DefaultValue" else getattr(var, "value", None)
+            why = _out_of_range(var, value)
+            if why is not None:
+                sub = var.subindex if isinstance(var.parent, ODRecord | ODArray) else None
+                problems.append((obj_name(var.index, sub), f"{key} {value} {why} ({var.name})"))
+    return problems
+
+
+def type_range(var: ODVariable) -> tuple[int | float, int | float] | None:
+    """The values ``var``'s DataType holds (None for strings and domains)."""
+    data_type = var.data_type
+    if data_type == dt.BOOLEAN:
+        return 0, 1
+    if data_type in _SIGNED_TYPES:
+        half = 1 << (len(var) - 1)
+        return -half, half - 1
+    if data_type in _INTEGER_TYPES:
+        return 0, (1 << len(var)) - 1
+    if data_type == dt.REAL32:
+        return -_REAL32_MAX, _REAL32_MAX
+    if data_type == dt.REAL64:
+        return -sys.float_info.max, sys.float_info.max
+    return None
+
+
+def _out_of_range(var: ODVariable, value: object) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    bounds = type_range(var)
+    if bounds is not None and not bounds[0] <= value <= bounds[1]:
+        name = _TYPE_NAMES.get(var.data_type or 0, f"data type 0x{var.data_type:04X}")
+        low, high = (f"{b:g}" if isinstance(b, float) else str(b) for b in bounds)
+        return f"is beyond its DataType {name} ({low}..{high})"
+    if var.min is not None and value < var.min:
+        return f"is below its LowLimit {var.min}"
+    if var.max is not None and value > var.max:
+        return f"is above its HighLimit {var.max}"
+    return None
+
+
+def _variables(od: ObjectDictionary) -> Iterator[ODVariable]:
+    for entry in od.values():
+        if isinstance(entry, ODRecord | ODArray):
+            yield from (var for var in entry.values() if isinstance(var, ODVariable))
+        elif isinstance(entry, ODVariable):
+            yield entry

@@ -63,6 +63,9 @@ from adapters.canopen.codec.frames import (
     NmtState,
     sdo_rx_id,
 )
+from adapters.canopen.codec.od import parse as parse_od
+from adapters.canopen.errors import EdsError
+from adapters.canopen.options import read_eds
 from adapters.canopen.sim.drive import Cia402Drive, CommLoss, DriveConfig, Emcy, Mode
 from gateway.config import shipped_file
 from gateway.errors import GatewayError
@@ -92,11 +95,14 @@ class EdsUnreadable(GatewayError, ValueError):
 
 
 def load_od(path: Path, node_id: int | None = None) -> canopen.ObjectDictionary:
-    """The object dictionary of an EDS, or :class:`EdsUnreadable` naming the file."""
+    """A fresh object dictionary of an EDS, read and checked as the gateway's options do
+    (a regular file of at most 4 MiB, its values in their ranges), or
+    :class:`EdsUnreadable` naming the file."""
     try:
-        return canopen.import_od(str(path), node_id)
-    except Exception as exc:  # the library's parser raises what it meets (OSError, KeyError...)
-        raise EdsUnreadable(f"{path}: not a readable EDS ({exc})") from exc
+        return parse_od(str(path), read_eds(path), node_id)
+    except EdsError as exc:
+        detail = f"{exc.key}: {exc.reason}" if exc.key else exc.reason
+        raise EdsUnreadable(f"{path}: not a readable EDS ({detail})") from None
 
 
 class BootState(Enum):

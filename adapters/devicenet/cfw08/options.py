@@ -24,9 +24,10 @@ from adapters.devicenet.cfw08.assemblies import (
     parameter_of,
 )
 from adapters.devicenet.codec import objects
-from adapters.devicenet.codec.eds import ConnectionType, Eds, Param, load_eds
+from adapters.devicenet.codec.eds import ConnectionType, Eds, Param
 from adapters.devicenet.codec.ids import ADR_MAC
 from adapters.devicenet.errors import DeviceNetDecodeError, EdsError
+from adapters.devicenet.options import load_eds
 from adapters.devicenet.scanner import IoKind
 from gateway.config import DriveConfig
 from gateway.schema import Table

@@ -27,7 +27,6 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import IntFlag
-from pathlib import Path
 
 from adapters.devicenet.errors import EdsError
 
@@ -352,13 +351,10 @@ class Eds:
     params: Mapping[int, Param]
 
 
-def load_eds(path: str | Path) -> Eds:
-    """Read and parse an EDS file (ASCII, as the format is; any other byte is an error)."""
-    name = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise EdsError(name, 0, "", f"cannot read: {exc.strerror or exc}") from None
+def decode_eds(raw: bytes, name: str = "<eds>") -> Eds:
+    """Parse an EDS file's bytes (ASCII, as the format is; any other byte is an error);
+    ``name`` names it in errors. Reading the file is the caller's
+    (``adapters.devicenet.options.load_eds``)."""
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError as exc:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 from adapters.profibus.codec.chkcfg import decode_identifiers, total_input_bytes, total_output_bytes
 from adapters.profibus.codec.gsdmodel import (
@@ -44,7 +43,7 @@ from adapters.profibus.codec.gsdmodel import (
     station_prm_len,
     user_prm_bound,
 )
-from adapters.profibus.codec.gsdparse import load, parse
+from adapters.profibus.codec.gsdparse import decode, parse
 
 __all__ = [
     "BAUD_KEYS",
@@ -64,9 +63,8 @@ __all__ = [
     "UnitDiagBit",
     "build_setup",
     "check_user_prm",
+    "decode",
     "default_user_prm",
-    "find_in_dir",
-    "load",
     "match_modules",
     "parse",
     "render",
@@ -391,18 +389,3 @@ def match_modules(gsd: Gsd, cfg: bytes) -> tuple[GsdModule, ...] | None:
             if rest is not None:
                 return (m, *rest)
     return None
-
-
-def find_in_dir(directory: str | Path, ident_number: int) -> list[Gsd]:
-    """The GSD files of ``directory`` (``*.gsd``, ``*.gs?``) whose Ident_Number matches."""
-    found: list[Gsd] = []
-    for path in sorted(Path(directory).iterdir()):
-        if not path.is_file() or not path.suffix.lower().startswith(".gs"):
-            continue
-        try:
-            gsd = load(path)
-        except GsdError:
-            continue
-        if gsd.ident_number == ident_number:
-            found.append(gsd)
-    return found

@@ -23,7 +23,6 @@ import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
-from pathlib import Path
 from typing import Final
 
 from adapters.profibus.codec.chkcfg import decode_identifiers
@@ -228,13 +227,9 @@ class _State:
 # ---------------------------------------------------------------------------- parsing
 
 
-def load(path: str | Path) -> Gsd:
-    """Read and parse a GSD file (ISO-8859-1); :class:`GsdError` on any problem."""
-    file = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise GsdError(file, 0, "", f"cannot read it: {exc.strerror or exc}") from None
+def decode(raw: bytes, file: str = "<gsd>") -> Gsd:
+    """Parse a GSD file's bytes (ISO-8859-1, as the specification says); ``file`` names it
+    in errors. Reading the file is the caller's (``adapters.profibus.options.load_gsd``)."""
     return parse(raw.decode(ENCODING), file)
 
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from adapters.devicenet.codec.eds import load_eds
 from adapters.devicenet.link import LinkConfig
+from adapters.devicenet.options import load_eds
 from adapters.devicenet.sim import SimNodeConfig
 from adapters.devicenet.sim.objects import identity_from_eds as sim_identity
 from gateway.adapter import EventKind

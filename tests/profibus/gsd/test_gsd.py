@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from adapters.profibus.codec import gsd as g
+from adapters.profibus.options import load_gsd
 from gateway.errors import GatewayError
 
 GSD_DIR = Path(__file__).resolve().parents[2] / "data" / "gsd"
@@ -32,13 +33,13 @@ def test_the_test_files_are_ours_and_parse() -> None:
     for path in FILES:
         text = path.read_bytes().decode("iso-8859-1")
         assert "TEST FILE" in text and "NOT a" in text  # labelled: not a vendor file
-        parsed = g.load(path)
+        parsed = load_gsd(path)
         assert len(parsed.modules) >= 2
         assert parsed.ext_user_prm
 
 
 def test_cfw11_keys_a_master_needs() -> None:
-    f = g.load(GSD_DIR / "TEST_CFW11.gsd")
+    f = load_gsd(GSD_DIR / "TEST_CFW11.gsd")
     assert f.ident_number == 0x0C11
     assert f.get("Station_Type") == 0
     assert f.supports(9600) and f.max_tsdr(9600) == 15 and f.max_tsdr(12000000) == 50
@@ -68,7 +69,7 @@ def test_cfw11_keys_a_master_needs() -> None:
 
 
 def test_user_data_starts_from_the_defaults_and_prm_sets_values_by_name() -> None:
-    f = g.load(GSD_DIR / "TEST_CFW11.gsd")
+    f = load_gsd(GSD_DIR / "TEST_CFW11.gsd")
     s = g.build_setup(f, ["2 words I/O (P0922 = 1)"])
     assert s.user_prm == bytes([0x80, 0, 0, 0x01, 5])  # Bit(0) default 1, delay 5
     assert s.user_prm_after_dpv1 == bytes([0x01, 5])
@@ -94,7 +95,7 @@ def test_user_data_starts_from_the_defaults_and_prm_sets_values_by_name() -> Non
 
 
 def test_a_modular_station_appends_each_modules_parameter_block() -> None:
-    f = g.load(GSD_DIR / "TEST_CFW320.gsd")
+    f = load_gsd(GSD_DIR / "TEST_CFW320.gsd")
     mods = ["Control and speed (2 words I/O)", "Extra word I/O"]
     s = g.build_setup(f, mods, {"Test: local source": "keypad", "Test: extra word filter": -10})
     assert s.cfg == bytes([0xC0, 0xC1, 0xC1, 0xF0])
@@ -208,13 +209,13 @@ def test_errors_name_the_file_the_line_and_the_key(
 
 
 def test_a_missing_file_is_a_gsd_error(tmp_path: Path) -> None:
-    with pytest.raises(g.GsdError, match="cannot read it"):
-        g.load(tmp_path / "none.gsd")
+    with pytest.raises(g.GsdError, match=r"none\.gsd: does not exist"):
+        load_gsd(tmp_path / "none.gsd")
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
 def test_the_test_files_round_trip(path: Path) -> None:
-    f = g.load(path)
+    f = load_gsd(path)
     assert g.parse(g.render(f), "again.gsd") == f
 
 

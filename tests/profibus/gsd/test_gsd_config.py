@@ -97,7 +97,10 @@ def test_a_gsd_gives_ident_cfg_and_user_data() -> None:
             {"gsd": "TEST_CFW700.gsd", "module": "2 words I/O", "prm": {"Test: word limit": 40000}},
             "buses.pb.drives[d].prm.Test: word limit: 40000 is outside its range 0-30000",
         ),
-        ({"gsd": "none.gsd", "module": "x"}, "buses.pb.drives[d].gsd: {dir}/none.gsd: cannot read"),
+        (
+            {"gsd": "none.gsd", "module": "x"},
+            "buses.pb.drives[d].gsd: {dir}/none.gsd: does not exist",
+        ),
         (
             {"gsd": "TEST_CFW700.gsd", "module": "2 words I/O", "modules": ["x"]},
             "give module (one) or modules (a list), not both",

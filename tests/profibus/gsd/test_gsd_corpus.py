@@ -9,11 +9,12 @@ import pytest
 
 from adapters.profibus.codec import gsd as g
 from adapters.profibus.codec.dp import Dpv1Status, SetPrm
+from adapters.profibus.options import load_gsd
 from tests.profibus.gsd.corpus import CASES, CORPUS_DIR, Case
 
 
 def load(name: str) -> g.Gsd:
-    return g.load(CORPUS_DIR / name)
+    return load_gsd(CORPUS_DIR / name)
 
 
 def test_the_corpus_is_every_file_of_its_folder() -> None:
