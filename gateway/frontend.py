@@ -41,6 +41,8 @@ class FrontEndCounters:
     """Connections closed at accept: the front end's limit of open connections was reached."""
     connections_open: int = 0
     """Connected now (Modbus connections, web pages)."""
+    accept_failures: int = 0
+    """Accepts that failed (no descriptor left): the connection waits in the kernel."""
 
 
 class FrontEnd(Protocol):

@@ -42,6 +42,7 @@ import asyncio
 import contextlib
 import errno
 import logging
+import math
 import os
 import select
 import socket
@@ -357,21 +358,25 @@ class SerialLink:
             self._fail(exc)
             return
         if not data:
-            if self._readable_now():  # a hangup stays readable: the device is gone
+            if self._hung_up():  # the device is gone (a pty's other end closed, unplugged)
                 self._fail(OSError(errno.EIO, f"{self.name}: end of file (device gone?)"))
             # else a tty (VMIN = 0) read nothing: what made it readable was read meanwhile
-            # (read_now, in a callback of the same loop turn)
+            # (read_now, in a callback of the same loop turn), and bytes that came just
+            # after that read are read on the next call
             return
         self.bytes_in += len(data)
         self.on_data(data, self.loop.time())
 
-    def _readable_now(self) -> bool:
+    def _hung_up(self) -> bool:
+        """The port says hang-up or error (``poll``: any descriptor number, and new bytes
+        are never taken for a hang-up)."""
         if self._fd is None:
             return False
         try:
-            return bool(select.select([self._fd], [], [], 0)[0])
-        except (OSError, ValueError):
+            events = _poll_once(self._fd, 0.0)
+        except OSError:
             return True  # a descriptor that cannot be polled is no good either
+        return bool(events & _GONE)
 
     def wait_readable(self, timeout: float) -> bool:
         """Block up to ``timeout`` s until bytes can be read (True) or the time is over
@@ -381,8 +386,8 @@ class SerialLink:
             time.sleep(timeout)
             return True
         try:
-            return bool(select.select([self._fd], [], [], timeout)[0])
-        except (OSError, ValueError):
+            return _ready(self._fd, timeout)
+        except OSError:
             return True  # the reader reports what is wrong with the port
 
     def read_now(self) -> None:
@@ -391,7 +396,11 @@ class SerialLink:
         if self._fd is None:
             self._polled_once()
             return
-        if self._readable_now():  # a tty (VMIN = 0) reads nothing, not EAGAIN: look first
+        try:
+            ready = _ready(self._fd, 0.0)
+        except OSError:
+            ready = True  # the read says what is wrong with the port
+        if ready:  # a tty (VMIN = 0) reads nothing, not EAGAIN: look first
             self._readable()
 
     def _polled_once(self) -> None:
@@ -520,3 +529,27 @@ def _fileno(ser: Any) -> int | None:
     except (AttributeError, OSError, ValueError, serial.SerialException):
         return None
     return fd if isinstance(fd, int) and fd >= 0 else None
+
+
+_GONE = select.POLLHUP | select.POLLERR | select.POLLNVAL
+
+
+def _poll_once(fd: int, timeout: float) -> int:
+    """The events of ``fd`` within ``timeout`` s, rounded up to a millisecond (0: none).
+    ``poll`` takes any descriptor number (``select`` none above 1023: a gateway with many
+    connections open may give a reopened port such a number)."""
+    poller = select.poll()
+    poller.register(fd, select.POLLIN)
+    ready = poller.poll(math.ceil(timeout * 1000) if timeout > 0 else 0)
+    return ready[0][1] if ready else 0
+
+
+def _ready(fd: int, timeout: float) -> bool:
+    """Whether ``fd`` can be read (or says why not) within ``timeout`` s: ``select`` to the
+    microsecond (an idle time of 66 us) where it can, ``poll`` above its descriptor limit."""
+    if fd < _SELECT_LIMIT:
+        return bool(select.select([fd], [], [], timeout)[0])
+    return bool(_poll_once(fd, timeout))
+
+
+_SELECT_LIMIT = 1024  # FD_SETSIZE on Linux

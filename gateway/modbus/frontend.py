@@ -312,6 +312,7 @@ class ModbusFrontEnd:
             connections_refused=c.connections_refused,
             connections_over_limit=c.connections_over_limit,
             connections_open=self._server.connections_open if self._server else 0,
+            accept_failures=c.accept_failures,
         )
 
     async def run(self) -> None:

@@ -73,7 +73,9 @@ METRICS: dict[str, str] = {
     f"{NS}_modbus_requests": "Modbus TCP requests served.",
     f"{NS}_modbus_exceptions": "Modbus TCP requests answered with an exception.",
     f"{NS}_modbus_commands": "Modbus commands, by result (accepted, refused).",
-    f"{NS}_modbus_connections": "Modbus connections by result (accepted, refused, over_limit).",
+    f"{NS}_modbus_connections": (
+        "Modbus connections by result (accepted, refused, over_limit, accept_failed)."
+    ),
     f"{NS}_modbus_connections_open": "Modbus TCP connections open now.",
     f"{NS}_zenoh_requests": "Zenoh requests taken, by kind (put, query).",
     f"{NS}_zenoh_commands": "Zenoh commands, by result (accepted, refused).",
@@ -295,6 +297,7 @@ class GatewayCollector(Collector):
             connections.add_metric(["accepted"], counted.connections_accepted)
             connections.add_metric(["refused"], counted.connections_refused)
             connections.add_metric(["over_limit"], counted.connections_over_limit)
+            connections.add_metric(["accept_failed"], counted.accept_failures)
             open_now.add_metric([], float(counted.connections_open))
         yield from (requests, exceptions, commands, connections, open_now)
 

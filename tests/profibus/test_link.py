@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import math
 import os
+import resource
 import select
 import socket
 import termios
@@ -426,3 +427,57 @@ async def test_bytes_arriving_during_a_slept_idle_time_are_stepped_before_it() -
         finally:
             driver.stop()
             link.close()
+
+
+async def test_an_empty_read_with_bytes_just_arrived_is_no_device_gone() -> None:
+    """A tty read that gives nothing while the next bytes arrive just after it: the port
+    is readable again, but not hung up; nothing fails, and the bytes are read."""
+    loop = asyncio.get_running_loop()
+    errors: list[BaseException] = []
+    received: list[bytes] = []
+    with pty_pair() as (master, path):
+        link = await open_link(path, 500000, loop, lambda d, now: received.append(d), errors.append)
+        try:
+            real_read = os.read
+
+            def read_then_bytes_come(fd: int, n: int) -> bytes:
+                os.read = real_read  # once: an empty read, and the bytes come meanwhile
+                os.write(master, b"\x10\x02")
+                time.sleep(0.01)  # the pty hands them over
+                return b""
+
+            os.read = read_then_bytes_come
+            try:
+                link._readable()
+            finally:
+                os.read = real_read
+            assert errors == []
+            await until(lambda: b"".join(received) == b"\x10\x02")
+        finally:
+            link.close()
+
+
+def test_a_port_above_descriptor_1023_is_waited_on_and_read() -> None:
+    """``select`` takes no descriptor above 1023; a gateway with many connections open may
+    give a reopened port such a number."""
+    from adapters.link.serial import _poll_once, _ready
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 2048:
+        pytest.skip(f"the descriptor limit ({hard}) is below 2048")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 2048), hard))
+    read_end, write_end = os.pipe()
+    high = os.dup2(read_end, 1500)
+    try:
+        assert not _ready(high, 0.0)
+        os.write(write_end, b"x")
+        assert _ready(high, 0.0)
+        assert _poll_once(high, 0.0) & select.POLLIN
+        os.close(write_end)
+        write_end = -1
+        assert _poll_once(high, 0.0) & select.POLLHUP  # the other end gone: a hang-up
+    finally:
+        for fd in (read_end, high, write_end):
+            if fd >= 0:
+                os.close(fd)
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))

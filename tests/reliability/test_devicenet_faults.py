@@ -7,6 +7,8 @@ controller going bus-off (E34). A node leaving and returning is shown by
 
 from __future__ import annotations
 
+import asyncio
+
 import can
 import pytest
 
@@ -63,6 +65,8 @@ async def test_scanner_bus_off_and_restart(tmp_path, monkeypatch: pytest.MonkeyP
                 await events.text("cfw08", "cannot send (Network is down): backing off")
                 await gw.wait_for("cfw08", lambda s: s.comm is CommState.OFFLINE)
                 await token.auntil(lambda g: not g.put, TIMEOUT)
+                # the line's figures as built after the bus-off (every 0.25 s, on its loop)
+                await asyncio.wait_for(gw.line(DEVICENET).next_diagnostics(), TIMEOUT)
                 health = (await gw.client.aone(f"{PREFIX}/gateway/health")).json()
                 line = health["buses"][DEVICENET]
                 assert (line["health"], line["bus_conditions"]) == ("bus-off", {"bus-off": 1})
