@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from typing import Final, Generic, Protocol, TypeVar
 
 from adapters.link.can import CanConfig, CanLinks, FrameT
@@ -69,3 +70,27 @@ class SimulatedLine(CanLinks[FrameT], Generic[FrameT, RunnerT]):
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await task
+
+
+async def until_watched(
+    watchers: list[Callable[[], None]],
+    predicate: Callable[[], bool],
+    loop: asyncio.AbstractEventLoop,
+) -> None:
+    """Until ``predicate()`` holds, checked on ``loop`` (the caller's) each time a pass of
+    a simulator's loop, on another loop or thread, calls the ``watchers``."""
+    passed = asyncio.Event()  # of ``loop``: set there only
+
+    def wake() -> None:
+        with contextlib.suppress(RuntimeError):  # the caller's loop closed meanwhile
+            loop.call_soon_threadsafe(passed.set)
+
+    watchers.append(wake)
+    try:
+        while True:
+            passed.clear()  # before the check: a pass after it wakes the wait below
+            if predicate():
+                return
+            await passed.wait()
+    finally:
+        watchers.remove(wake)

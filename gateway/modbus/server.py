@@ -69,7 +69,7 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import SimDevice
 from pymodbus.transaction import TransactionManager
 
-from gateway.errors import StartupError
+from gateway.errors import GatewayError, StartupError
 from gateway.modbus.limits import (
     OVER_LIMIT_LOG_INTERVAL,
     Admission,
@@ -640,7 +640,8 @@ class GatewayServer(ModbusTcpServer):
             conn.close()
             return
         handler = self.handle_new_connection()  # among active_connections from now
-        assert isinstance(handler, GatewayRequestHandler)
+        if not isinstance(handler, GatewayRequestHandler):
+            raise GatewayError(f"Modbus server: unexpected connection handler {handler!r}")
         handler.admitted(host)
         keep_alive(conn)
         task = self.loop.create_task(self._attach(handler, conn), name="modbus-accept")

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from aiohttp import web
 from aiohttp.http_exceptions import HttpProcessingError
 
+from gateway.errors import StartupError
 from gateway.ratelimit import LogRateLimit
 from gateway.web.metrics import WebCounters
 from gateway.web.rate import RequestRate
@@ -511,7 +512,12 @@ class AdmissionSite(web.BaseSite):
         await super().start()
         loop = asyncio.get_running_loop()
         http = self._runner.server
-        assert http is not None  # the runner is set up before a site is made
+        if http is None:
+            raise StartupError(
+                "web front end",
+                "its site was started before its runner was set up",
+                "report this as a bug of drive-gateway",
+            )
         self._server = await loop.create_server(
             lambda: AdmittedConnection(self._gate, http, loop),
             self._host,

@@ -11,7 +11,6 @@ bus shut down on the way out.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import threading
 from collections.abc import Callable, Iterable
@@ -20,6 +19,7 @@ from typing import Any
 import can
 import canopen
 
+from adapters.can.simulated import until_watched
 from adapters.canopen.sim.clock import StillClock
 from adapters.canopen.sim.node import SimNode, SimNodeConfig
 from adapters.link.can import REFUSED_INTERFACES, CanConfig, open_problem
@@ -176,28 +176,4 @@ class SimRunner:
                 self.stepped.clear()
                 await self.stepped.wait()
             return
-        await _until_watched(self.watchers, predicate, loop)
-
-
-async def _until_watched(
-    watchers: list[Callable[[], None]],
-    predicate: Callable[[], bool],
-    loop: asyncio.AbstractEventLoop,
-) -> None:
-    """Until ``predicate()`` holds, checked on ``loop`` (the caller's) each time a pass of
-    the simulator's loop, on another loop or thread, calls the ``watchers``."""
-    passed = asyncio.Event()  # of ``loop``: set there only
-
-    def wake() -> None:
-        with contextlib.suppress(RuntimeError):  # the caller's loop closed meanwhile
-            loop.call_soon_threadsafe(passed.set)
-
-    watchers.append(wake)
-    try:
-        while True:
-            passed.clear()  # before the check: a pass after it wakes the wait below
-            if predicate():
-                return
-            await passed.wait()
-    finally:
-        watchers.remove(wake)
+        await until_watched(self.watchers, predicate, loop)

@@ -8,13 +8,13 @@ deadlines from a heap. Runs until cancelled; the link is always closed.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import heapq
 import logging
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from adapters.can.simulated import until_watched
 from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.codec.ids import match_predefined
 from adapters.devicenet.errors import InvalidCanId
@@ -119,7 +119,7 @@ class SimRunner:
                 self.stepped.clear()
                 await self.stepped.wait()
             return
-        await _until_watched(self.watchers, predicate, loop)
+        await until_watched(self.watchers, predicate, loop)
 
     def _route(self, now: float, frame: CanFrame) -> None:
         mac = self._macs.get(frame.arbitration_id, -1)
@@ -175,30 +175,6 @@ class SimRunner:
         if result.error is not None:
             self.send_failures += 1
             log.debug("simulator send failed: %s", result.error)
-
-
-async def _until_watched(
-    watchers: list[Callable[[], None]],
-    predicate: Callable[[], bool],
-    loop: asyncio.AbstractEventLoop,
-) -> None:
-    """Until ``predicate()`` holds, checked on ``loop`` (the caller's) each time a pass of a
-    simulator's loop, on another loop or thread, calls the ``watchers``."""
-    passed = asyncio.Event()  # of ``loop``: set there only
-
-    def wake() -> None:
-        with contextlib.suppress(RuntimeError):  # the caller's loop closed meanwhile
-            loop.call_soon_threadsafe(passed.set)
-
-    watchers.append(wake)
-    try:
-        while True:
-            passed.clear()  # before the check: a pass after it wakes the wait below
-            if predicate():
-                return
-            await passed.wait()
-    finally:
-        watchers.remove(wake)
 
 
 def _mac_of(arbitration_id: int) -> int | None:
