@@ -12,7 +12,7 @@ writes, and reports its bus diagnostics.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import MappingProxyType
@@ -148,6 +148,12 @@ class HubPort(Protocol):
     def event(self, drive_id: str, kind: EventKind, text: str, **data: Any) -> None: ...
 
     def now(self) -> float: ...
+
+    def on_command(self, listener: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``listener(drive_id)`` on the adapter's own loop whenever a drive's desired
+        command changed (the adapter need not read ``desired`` on every cycle to see a
+        new one: a line's steady fast path); returns the call that ends it."""
+        ...
 
 
 @runtime_checkable

@@ -398,12 +398,19 @@ class Hub:
     def desired(self, drive_id: str) -> DesiredCommand:
         return self._drive(drive_id).desired
 
-    def on_command(self, listener: Callable[[str], None]) -> None:
-        """Call ``listener(drive_id)`` whenever a desired command changes."""
+    def on_command(self, listener: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``listener(drive_id)`` whenever a desired command changes; returns the
+        call that ends it."""
         self._listeners.append(listener)
 
+        def off() -> None:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+
+        return off
+
     def _notify_command(self, drive_id: str) -> None:
-        for listener in self._listeners:
+        for listener in list(self._listeners):
             listener(drive_id)
 
     def check(self, drive_id: str, source: Source, cmd: DriveCommand, client: str = "") -> None:

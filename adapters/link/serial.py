@@ -59,6 +59,7 @@ import serial
 import serial.rs485
 
 from adapters.link.portlock import PortHeld, clear_exclusive, find_holder, held, set_exclusive
+from adapters.link.timer import loop_clock
 
 log = logging.getLogger(__name__)
 
@@ -324,6 +325,7 @@ class SerialLink:
     ) -> None:
         self.ser = ser
         self.loop = loop
+        self._clock = loop_clock(loop)
         self.name = name or str(getattr(ser, "port", "port"))
         self.on_data = on_data
         self.on_error = on_error
@@ -365,7 +367,7 @@ class SerialLink:
             # after that read are read on the next call
             return
         self.bytes_in += len(data)
-        self.on_data(data, self.loop.time())
+        self.on_data(data, self._clock())
 
     def _hung_up(self) -> bool:
         """The port says hang-up or error (``poll``: any descriptor number, and new bytes

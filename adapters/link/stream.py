@@ -40,7 +40,7 @@ from typing import Any, Final, Generic, Protocol, TypeVar
 
 from adapters.link.engine import Engine
 from adapters.link.serial import SerialLink
-from adapters.link.timer import loop_timer, precise_sleeps
+from adapters.link.timer import loop_clock, loop_timer, precise_sleeps
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +122,7 @@ class StreamDriver(Generic[EventT]):
         self.link = link
         self.protocol = protocol
         self.loop = link.loop
-        self._time = self.loop.time  # bound once: several reads of the clock per message
+        self._time = loop_clock(self.loop)  # bound once: several reads of the clock per message
         self.on_action = on_action
         self.on_flushed = on_flushed
         self.on_stepped = on_stepped
@@ -139,6 +139,13 @@ class StreamDriver(Generic[EventT]):
         self._postpones = 0
         self.postponed = 0  # reply deadlines judged later because their timer ran late
         self._stopped = False
+        # an engine's steady lane, if it has one: ``lane(data, now, horizon)``, a reply
+        # taken by its bytes (the actions, a request among them only if it may go within
+        # ``horizon`` s; None: not such a reply, nothing changed); every whole read is
+        # offered to it first (docs/decisions/0096)
+        lane = getattr(engine, "lane", None)
+        self._lane: Callable[[bytes, float, float], Sequence[Any] | None] | None = lane
+        self.lane_taken = 0  # replies the steady lane took
         link.on_data = self._on_data
         precise_sleeps()  # the short idle times slept in _step end on time (1 us slack)
 
@@ -284,6 +291,17 @@ class StreamDriver(Generic[EventT]):
 
     def _on_data(self, data: bytes, now: float) -> None:
         protocol = self.protocol
+        lane = self._lane
+        if (
+            lane is not None
+            and not self._stepping
+            and not self._writes
+            and protocol.receiving() is None
+        ):
+            actions = lane(data, now, SLEEP_LIMIT)  # a longer idle time: a timer, as _step
+            if actions is not None:
+                self._lane_run(actions)
+                return
         whole = protocol.whole(data)
         if whole is not None:
             self._step(whole)
@@ -293,6 +311,27 @@ class StreamDriver(Generic[EventT]):
         receiving = protocol.receiving()
         if receiving is not None:
             self._step(receiving)
+
+    def _lane_run(self, actions: Sequence[Any]) -> None:
+        """The steady lane's actions: its request written once its idle time is over (a
+        short one slept here, as :meth:`_step` sleeps it), then what :meth:`_step` does
+        after a step (anything queued meanwhile is stepped, the timer armed)."""
+        self.lane_taken += 1
+        self._stepping = True
+        try:
+            first = self.protocol.transmission(actions[0]) if actions else None
+            if first is not None:
+                wait = first.not_before - self._time()
+                if 0 < wait <= SLEEP_LIMIT:
+                    self.link.wait_readable(wait)  # bytes meanwhile: read after the write
+            self._run(actions)
+        finally:
+            self._stepping = False
+        if self._queued:
+            self._step(self._queued.popleft())
+            return
+        self._arm(self.engine.next_deadline())
+        self.on_stepped()
 
     # ------------------------------------------------------------------ sending
 

@@ -232,3 +232,12 @@ def loop_timer(loop: asyncio.AbstractEventLoop, callback: Callable[[], None]) ->
             _no_timerfd = str(exc) or type(exc).__name__
             log.warning("no timerfd (%s): waits use the loop's timers (up to 1 ms late)", exc)
     return CallAtTimer(loop, callback)
+
+
+def loop_clock(loop: asyncio.AbstractEventLoop) -> Callable[[], float]:
+    """``loop.time`` as a callable read several times per message: ``time.monotonic``
+    itself when the loop's clock is asyncio's own (one Python frame less per read), the
+    loop's method when a loop has a clock of its own (a test's)."""
+    if getattr(type(loop), "time", None) is asyncio.BaseEventLoop.time:
+        return time.monotonic
+    return loop.time

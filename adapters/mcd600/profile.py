@@ -196,6 +196,19 @@ class Mcd600Profile(DpProfileBase):
 
     # ------------------------------------------------------------------ outputs
 
+    @property
+    def steady(self) -> bool:
+        """Without monitoring and programming words (their polls run in every telegram)
+        and with no reset pulse under way, the telegrams depend on the inputs and the
+        desired command only."""
+        return (
+            not self.layout.monitoring
+            and not self.layout.programming
+            and self._reset_until is None
+            and not self._reset_pending
+            and not self._reset_high
+        )
+
     def outputs(self, desired: DesiredCommand, now: float) -> bytes:
         control = self._control_word(desired, now)
         request = self._poller.next_request(now) if self.layout.monitoring else 0

@@ -263,12 +263,14 @@ class ProfibusAdapter:
         for drive in self._drives.values():
             hub.set_capabilities(drive.id, drive.profile.capabilities())
             hub.update(drive.id, comm=CommState.OFFLINE)
+        off = hub.on_command(self._on_command)
         try:
             self._port = links.start()
             if self.options.clear_on_lost_control:
                 self._control_timer = self._loop.call_later(CONTROL_CHECK, self._check_control)
             await self._serve()
         finally:
+            off()
             await self._leave()
 
     async def _serve(self) -> None:
@@ -456,11 +458,41 @@ class ProfibusAdapter:
             if drive.profile.wants_codes:
                 self._read_codes(drive, now)
         if self.master.outputs_pending(drive.address):
+            self.master.quiet_inputs(drive.address, False)
             return  # the last outputs computed have not gone out: they go first
         if drive.configured:
             self._set_outputs(drive, self._hub.desired(drive.id), now)
         else:
             self._set_unconfigured(drive, now)
+        self.master.quiet_inputs(drive.address, self._steady(drive))
+
+    def _steady(self, drive: _Drive) -> bool:
+        """Whether the drive's unchanged inputs tell the adapter nothing (the line's fast
+        path, docs/decisions/0096): configured, no codes to read, nothing under way on
+        the adapter's side, and a profile whose telegrams then depend on nothing else."""
+        return (
+            drive.configured
+            and drive.up
+            and drive.codes_task is None
+            and not drive.lock.locked()
+            and not drive.profile.wants_codes
+            and drive.profile.steady
+        )
+
+    def _want(self, drive: _Drive) -> None:
+        """Something besides the inputs changed for the drive: its next reply is handled."""
+        if drive.up:
+            self.master.quiet_inputs(drive.address, False)
+
+    def _on_command(self, drive_id: str) -> None:
+        """The hub's desired command changed: the new outputs go with the slave's next
+        Data_Exchange (a stop waits for no reply), and its next reply is handled."""
+        drive = self._drives.get(drive_id)
+        if drive is None or not drive.up or self._hub is None or self._loop is None:
+            return
+        self._want(drive)
+        if drive.configured and not self.master.outputs_pending(drive.address):
+            self._set_outputs(drive, self._hub.desired(drive.id), self._loop.time())
 
     def _read_codes(self, drive: _Drive, now: float) -> None:
         """The profile wants fault/alarm codes its telegram does not carry: read them."""
@@ -483,6 +515,7 @@ class ProfibusAdapter:
                 drive.codes_retry_at = self._loop.time() + CODES_RETRY
         finally:
             drive.codes_task = None
+            self._want(drive)
 
     def _on_diag(self, action: DiagnosisRead) -> None:
         drive = self._drive_at(action.address)
@@ -560,6 +593,7 @@ class ProfibusAdapter:
                 changes["failsafe_text"] = WATCHDOG_OFF + (f" ({own} never acts)" if own else "")
             if changes:
                 hub.update(drive.id, **changes)
+            self._want(drive)
             self._event(drive, EventKind.COMM, "configured: data exchange with the drive's profile")
             return
 
@@ -629,8 +663,11 @@ class ProfibusAdapter:
         drive = self._drive(drive_id)
         if not drive.up:
             raise DriveOffline(f"drive {drive_id} is not in data exchange")
-        async with drive.lock:
-            await drive.profile.write_param(Channel(self._jobs, drive), number, subindex, value)
+        try:
+            async with drive.lock:
+                await drive.profile.write_param(Channel(self._jobs, drive), number, subindex, value)
+        finally:
+            self._want(drive)  # a cyclic output word or the speed scale may have changed
 
     def global_control(
         self,

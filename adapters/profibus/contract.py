@@ -183,6 +183,14 @@ class DpProfile(Protocol):
         carry: the adapter then calls :meth:`read_codes` (the WEG drives)."""
         ...
 
+    @property
+    def steady(self) -> bool:
+        """True while :meth:`outputs` and :meth:`inputs` depend on nothing but the input
+        telegram and the desired command (no pulse running, no poll under way): the
+        adapter then need not call them for a reply whose inputs did not change
+        (the line's fast path, docs/decisions/0096)."""
+        ...
+
     async def read_codes(self, channel: RecordChannel) -> Readings:
         """Fault and alarm codes read over DP-V1 (when :attr:`wants_codes`)."""
         ...
@@ -251,6 +259,10 @@ class DpProfileBase:
     @property
     def wants_codes(self) -> bool:
         return False
+
+    @property
+    def steady(self) -> bool:
+        return False  # a profile that does not say otherwise sees every reply
 
     async def read_codes(self, channel: RecordChannel) -> Readings:
         return {}

@@ -39,7 +39,7 @@ class FdlStream:
 
     def whole(self, data: bytes) -> Event | None:
         telegram = self.decoder.whole(data)
-        return None if telegram is None else FrameIn(telegram)
+        return None if telegram is None else FrameIn(telegram, data)
 
     def feed(self, data: bytes) -> list[Event]:
         self.decoder.feed(data)

@@ -25,6 +25,8 @@ never sends a run the hub would have cleared.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import threading
 from collections.abc import Callable, Mapping
@@ -123,6 +125,18 @@ class LinePort:
 
     def now(self) -> float:
         return self._hub.now()
+
+    def on_command(self, listener: Callable[[str], None]) -> Callable[[], None]:
+        """``listener(drive_id)`` on the calling (the line's) loop whenever the hub changed a
+        desired command; the relay is registered at once (a list append), so no change
+        made after this call is missed."""
+        loop = asyncio.get_running_loop()
+
+        def relay(drive_id: str) -> None:  # on the hub's loop
+            with contextlib.suppress(RuntimeError):  # the line's loop has closed
+                loop.call_soon_threadsafe(listener, drive_id)
+
+        return self._hub.on_command(relay)
 
     def desired(self, drive_id: str) -> DesiredCommand:
         desired = self._hub.desired(drive_id)

@@ -180,7 +180,7 @@ def test_nothing_from_a_master_makes_the_simulated_slave_raise(script: list[Data
 class GeneralPathOnly(Master):
     """The engine without its short path for the steady case of data exchange."""
 
-    def _steady_reply(self, t: object, now: float) -> bool:
+    def _steady_reply(self, t: object, now: float, raw: bytes = b"") -> bool:
         return False
 
 

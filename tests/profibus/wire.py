@@ -14,6 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from adapters.link.stream import SLEEP_LIMIT
 from adapters.profibus.codec.fdl import (
     DataTelegram,
     Discarded,
@@ -76,8 +77,27 @@ class Wire:
         self.late_by = 0.0  # extra delay of every reply
         self.write_lag = 0.0  # how late every write is (the driver's callback run late)
         self.on_action: Callable[[Action], None] | None = None  # the caller, as a driver's
+        # a reply read whole (one read, nothing held) is decoded as the driver's FdlStream
+        # does, raw bytes kept; with ``lane`` it is offered to Master.lane first
+        self.whole = False
+        self.lane = False
+        self.lane_taken = 0
 
     # ------------------------------------------------------------------ driving
+
+    def settle(self) -> None:
+        """Step the deadlines due within the driver's SLEEP_LIMIT, as the driver does inside
+        one step (nothing else, a command included, runs between)."""
+        while not self._arrivals or self._arrivals[0][0] > self.now + SLEEP_LIMIT:
+            deadline = self.master.next_deadline()
+            if deadline is None or deadline - self.now > SLEEP_LIMIT:
+                return
+            if self.master.awaiting_reply():
+                return
+            self.now = max(self.now, deadline)
+            self.line.tick(self.now)
+            self._queue.extend(self.master.step(self.now))
+            self._drain()
 
     def poke(self) -> None:
         """Step the master now (after a command)."""
@@ -106,12 +126,29 @@ class Wire:
             if self._arrivals and self._arrivals[0][0] <= self.now:
                 _, _, data = heapq.heappop(self._arrivals)
                 self.received.append((self.now, data))
+                if self.whole and not self.decoder.buffered and self._take_whole(data):
+                    continue
                 self.decoder.feed(data)
                 for event in self._events():
                     self._queue.extend(self.master.step(self.now, event))
             else:
                 self.line.tick(self.now)
                 self._queue.extend(self.master.step(self.now))
+
+    def _take_whole(self, data: bytes) -> bool:
+        """A reply read whole, as the driver takes it: the lane first (with ``lane``), else
+        decoded whole with its bytes; False: not one whole telegram (fed instead)."""
+        if self.lane:
+            actions = self.master.lane(data, self.now, SLEEP_LIMIT)
+            if actions is not None:
+                self.lane_taken += 1
+                self._queue.extend(actions)
+                return True
+        telegram = self.decoder.whole(data)
+        if telegram is None:
+            return False
+        self._queue.extend(self.master.step(self.now, FrameIn(telegram, data)))
+        return True
 
     def _events(self) -> list[FrameIn | LineNoise]:
         out: list[FrameIn | LineNoise] = []

@@ -22,6 +22,7 @@ the general path on the same lines and finds every telegram, action and counter 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from typing import Any
 
@@ -157,6 +158,12 @@ class Master:
         """
         return self._slave(address).outputs_pending
 
+    def quiet_inputs(self, address: int, quiet: bool) -> None:
+        """``quiet``: the slave's unchanged inputs need not be reported on every reply,
+        only when they change and every :data:`~.station.INPUTS_REFRESH` s; False: the
+        next reply's inputs are reported, and every one after until quiet again."""
+        self._slave(address).quiet = quiet
+
     def set_mode(self, mode: LineMode, now: float) -> None:
         """Operate or Clear; the new Global_Control goes out at the end of this cycle."""
         self._scheduler.set_mode(mode, now)
@@ -212,7 +219,7 @@ class Master:
             return []
         if event is not None:
             self._steady_due = False
-            if type(event) is FrameIn and self._steady_reply(event.telegram, now):
+            if type(event) is FrameIn and self._steady_reply(event.telegram, now, event.raw):
                 return self._take()
             self._on_event(event, now)
         elif self._steady_due and self._steady_turn(now):
@@ -309,7 +316,7 @@ class Master:
             return self._slaves[pending.address].params.input_len == 0
         return pending.purpose in SHORT_ACK_PURPOSES
 
-    def _steady_reply(self, t: object, now: float) -> bool:
+    def _steady_reply(self, t: object, now: float, raw: bytes = b"") -> bool:
         """The steady case of data exchange on a short path; False (nothing changed) else.
 
         A DL reply without SAPs, with the configured inputs, to a Data_Exchange, while no
@@ -326,7 +333,8 @@ class Master:
         line.pending = None  # line.end_request(now), inline on the path of every reply
         line.idle_since = max(line.idle_since, now)
         sl.answered(p, now)
-        sl.took_inputs(bytes(t.data))
+        sl.took_inputs(bytes(t.data), now)
+        sl.steady_reply = raw
         if line.unwritten or now < line.busy_until or now < line.idle_since + line.tsyn:
             # the line is not free yet (with TSYN > 0, always: its idle time starts at this
             # reply), and the scheduler would send nothing: the step at that deadline takes
@@ -337,6 +345,46 @@ class Master:
         if not scheduler.steady_next(now):
             scheduler.send_next(now)
         return True
+
+    def lane(self, data: bytes, now: float, horizon: float = math.inf) -> list[Action] | None:
+        """The steady exchange by its bytes: a reply identical to the slave's last plain
+        Data_Exchange reply taken whole, from a slave whose caller is quiet
+        (:meth:`quiet_inputs`) and whose inputs are not due, while nothing else waits. It is
+        taken as :meth:`step` would take it (the turn ends, its inputs unchanged and not
+        reported) without decoding it, and the next turn is built for the moment the line
+        is free (TSYN after the reply), as the step at that deadline would build it, when
+        that moment is within ``horizon`` s (the caller waits that long without taking
+        anything else: a command cannot come between; later, the step at the deadline
+        builds it). The
+        actions, as :meth:`step` returns them; None: not such a reply, nothing changed (step
+        it). A property test runs the lane and the steps on the same lines and finds every
+        telegram and counter equal (docs/decisions/0096)."""
+        line = self._line
+        p = line.pending
+        if (
+            p is None
+            or not p.written
+            or p.purpose is not Purpose.DATA
+            or self._jobs
+            or self._timed
+            or self._stopped
+            or line.unwritten
+            or line.retry is not None
+        ):
+            return None
+        sl = self._slaves[p.address]
+        if not sl.quiet or data != sl.steady_reply or now >= sl.inputs_due or sl.diag_pending:
+            return None
+        line.pending = None
+        line.idle_since = max(line.idle_since, now)
+        sl.answered(p, now)
+        sl.figures.exchanges += 1
+        free = max(line.busy_until, line.idle_since + line.tsyn)
+        if free - now > horizon:
+            self._steady_due = True  # the step at that deadline takes the short path
+            return self._take()
+        self._steady_due = not self._scheduler.steady_next(free)
+        return self._take()
 
     def _steady_turn(self, now: float) -> bool:
         """A step without an event after a steady reply, nothing else having happened but

@@ -83,9 +83,11 @@ class RecordFailure(Enum):
 
 @dataclass(frozen=True)
 class FrameIn:
-    """A telegram decoded off the line."""
+    """A telegram decoded off the line; ``raw``: its bytes when it came whole in one read
+    (the steady lane compares a reply with the slave's last by them), else empty."""
 
     telegram: DataTelegram | ShortAck | TokenTelegram
+    raw: bytes = b""
 
 
 @dataclass(frozen=True)

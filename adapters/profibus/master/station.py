@@ -56,6 +56,7 @@ from adapters.profibus.master.timing import MAX_TELEGRAM, BusParams
 from gateway.errors import FrameEncodeError
 
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"
+INPUTS_REFRESH: Final = 0.1  # s: unchanged inputs of a quiet slave reported at least this often
 FRAME_MEMO: Final = 4  # Data_Exchange telegrams kept encoded per slave (2 FCBs x outputs)
 
 # 1.5, pyprofibus state timeouts (s): how long a start-up state may last before restarting.
@@ -112,6 +113,12 @@ class Station:
         self.fault: str | None = None
         self.last_diag: SlaveDiag | None = None
         self.frames: dict[tuple[bool, bool, bytes], bytes] = {}
+        # the steady case (see took_inputs): the inputs last reported and until when
+        # unchanged ones need not be; quiet: the caller said unchanged inputs tell it nothing
+        self.quiet = False
+        self.last_inputs: bytes | None = None
+        self.inputs_due = 0.0
+        self.steady_reply = b""  # the bytes of the last plain Data_Exchange reply taken whole
         self.turn = Turn()
         self.figures = SlaveFigures()
 
@@ -228,10 +235,20 @@ class Station:
             return
         if status in (ResponseStatus.DH, ResponseStatus.RDH):
             self.diag_pending = True
-        self.took_inputs(data)
+        self.took_inputs(data, now)
 
-    def took_inputs(self, data: bytes) -> None:
+    def took_inputs(self, data: bytes, now: float) -> None:
+        """A Data_Exchange's inputs: reported as :class:`InputsReceived` when they changed,
+        when the caller has not said it is quiet, and at least every
+        :data:`INPUTS_REFRESH` s. A quiet caller (its outputs and readings depend on
+        nothing but the inputs and what it is told otherwise: docs/decisions/0096) is not
+        called for a reply that says nothing new: the steady exchange costs the line only
+        its telegrams (issue 34's fast path)."""
         self.figures.exchanges += 1
+        if self.quiet and data == self.last_inputs and now < self.inputs_due:
+            return
+        self.last_inputs = data
+        self.inputs_due = now + INPUTS_REFRESH
         self._out.append(InputsReceived(self.address, data))
 
     def _invalid(self, text: str, now: float) -> None:
@@ -357,6 +374,8 @@ class Station:
         if old is new:
             return
         self.state = new
+        self.quiet, self.last_inputs = False, None  # a new start: every reply reported
+        self.steady_reply = b""
         context = self.context
         if new in TIMED_STATES:
             context.timed[self.address] = self

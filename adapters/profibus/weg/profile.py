@@ -556,6 +556,13 @@ class WegProfile(DpProfileBase):
     # ------------------------------------------------------------------ codes by DP-V1
 
     @property
+    def steady(self) -> bool:
+        """No reset pulse running (the only use of ``now`` in :meth:`outputs`): the
+        telegrams are then functions of the inputs, the desired command, and what a
+        parameter write or a codes read changes (the adapter is told of those)."""
+        return self._pulse_until is None
+
+    @property
     def wants_codes(self) -> bool:
         """True when the status shows a fault or alarm that no telegram word numbers.
 

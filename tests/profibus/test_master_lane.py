@@ -1,0 +1,182 @@
+"""The steady lane (Master.lane, docs/decisions/0096) against the engine's steps.
+
+A reply identical to the slave's last plain Data_Exchange reply, from a slave whose caller
+is quiet, is taken by its bytes without decoding, and the next turn is built for the moment
+the line is free. These tests run the same scripted lines (noise, power cycles, diagnosis,
+DP-V1 jobs, Clear and Operate, replies lost, new outputs from a command) once with the lane
+and once through the steps only, and find every telegram (bytes and time), every action
+and every counter equal; and they show that a quiet caller, told of its commands, puts on
+the line exactly what a caller handling every reply does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from functools import partial
+from typing import Any
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.master import InputsReceived, LineMode, Master
+from adapters.profibus.master.station import INPUTS_REFRESH
+from adapters.profibus.sim.echo import EchoSim
+from gateway.sim import FaultInjector
+from tests.profibus.wire import FAST_BUS, Wire, echo_line, echo_params
+
+Command = tuple[str, int]
+commands: st.SearchStrategy[Command] = st.tuples(
+    st.sampled_from(
+        ["read", "write", "clear", "operate", "sync", "power", "diag", "drop", "outputs"]
+    ),
+    st.integers(0, 3),
+)
+EXT_DIAG = bytes([0x03, 0x01, 0x02])
+
+
+class Caller:
+    """A caller as the Profibus adapter is one: outputs from a table a command changes (set
+    at once, the next reply wanted), quiet after each reply it handled when ``quiet``."""
+
+    def __init__(self, w: Wire, addresses: list[int], quiet: bool) -> None:
+        self.w = w
+        self.quiet = quiet
+        self.table = {a: bytes([a, 0, 0, 0]) for a in addresses}
+        self.handled = 0
+
+    def on_action(self, action: object) -> None:
+        if not isinstance(action, InputsReceived):
+            return
+        self.handled += 1
+        master = self.w.master
+        if not master.outputs_pending(action.address):
+            master.set_outputs(action.address, self.table[action.address])
+            master.quiet_inputs(action.address, self.quiet)
+        else:
+            master.quiet_inputs(action.address, False)
+
+    def command(self, address: int, n: int) -> None:
+        """New outputs at once (a table without pulses: replacing outputs not yet carried
+        loses nothing), the next reply wanted."""
+        master = self.w.master
+        self.table[address] = bytes([address, n, n, n])
+        master.quiet_inputs(address, False)
+        master.set_outputs(address, self.table[address])
+
+
+def _apply(w: Wire, caller: Caller, addresses: list[int], command: Command) -> None:
+    what, n = command
+    address = addresses[n % len(addresses)]
+    w.settle()  # a command comes when the driver is back on its loop
+    device = w.line[address].device
+    assert isinstance(device, EchoSim)
+    actions: dict[str, Callable[[], object]] = {
+        "read": lambda: w.master.read_record(address, 0, 1 + n, 4, w.now),
+        "write": lambda: w.master.write_record(address, 0, 1, bytes([n] * 4), w.now),
+        "clear": lambda: w.master.set_mode(LineMode.CLEAR, w.now),
+        "operate": lambda: w.master.set_mode(LineMode.OPERATE, w.now),
+        "sync": lambda: w.master.global_control(GlobalControl(sync=True)),
+        "power": lambda: w.line[address].power_cycle(w.now, off_time=0.01),
+        "diag": lambda: setattr(device, "diag", b"" if device.diag else EXT_DIAG),
+        "drop": lambda: setattr(w, "drop_replies", n),
+        "outputs": lambda: caller.command(address, n),
+    }
+    actions[what]()
+    w.poke()
+
+
+def _trace(
+    *,
+    lane: bool,
+    quiet: bool,
+    addresses: list[int],
+    noise: float,
+    seed: int,
+    script: list[tuple[float, Command]],
+) -> tuple[Any, ...]:
+    bus = dataclasses.replace(FAST_BUS, live_list_period=0.0)
+    master = Master(bus, [echo_params(a) for a in addresses])
+    line = echo_line(addresses)
+    line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
+    w = Wire(master, line)
+    w.whole, w.lane = True, lane
+    caller = Caller(w, addresses, quiet)
+    w.on_action = caller.on_action
+    w.run(0.2)
+    for wait, command in script:
+        w.run(wait)
+        _apply(w, caller, addresses, command)
+    w.run(0.5)
+    w.settle()  # as a driver ends its step: the lane's last turn is the steps' too
+    slaves = [master.slave_diagnostics(a) for a in addresses]
+    actions = [a for a in w.actions if not isinstance(a, InputsReceived)]
+    return w.sent, actions, master.line_diagnostics(), slaves, w.lane_taken, caller.handled
+
+
+scripts = st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    addresses=st.lists(st.integers(3, 9), min_size=1, max_size=4, unique=True),
+    noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
+    seed=st.integers(0, 99),
+    script=scripts,
+)
+def test_the_lane_sends_and_reports_what_the_steps_do(
+    addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
+) -> None:
+    trace = partial(_trace, quiet=True, addresses=addresses, noise=noise, seed=seed, script=script)
+    with_lane, steps = trace(lane=True), trace(lane=False)
+    assert with_lane[:4] == steps[:4]
+    assert with_lane[5] == steps[5]  # the caller handled the same replies
+    assert steps[4] == 0
+    assert len(steps[0]) > 50  # telegrams went out: the comparison compared something
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    addresses=st.lists(st.integers(3, 9), min_size=1, max_size=4, unique=True),
+    seed=st.integers(0, 99),
+    script=scripts,
+)
+def test_a_quiet_caller_puts_on_the_line_what_a_caller_of_every_reply_does(
+    addresses: list[int], seed: int, script: list[tuple[float, Command]]
+) -> None:
+    trace = partial(_trace, lane=True, addresses=addresses, noise=0.0, seed=seed, script=script)
+    quiet, every = trace(quiet=True), trace(quiet=False)
+    assert quiet[0] == every[0]  # the telegrams, bytes and times
+    assert quiet[1] == every[1]  # the actions other than inputs
+    assert every[4] == 0  # a caller of every reply: the lane never taken
+
+
+def test_a_quiet_slave_goes_the_lane_and_still_reports_its_inputs_every_refresh() -> None:
+    trace = _trace(lane=True, quiet=True, addresses=[3, 4], noise=0.0, seed=0, script=[])
+    _, _, _, slaves, taken, handled = trace
+    exchanges = sum(s["exchanges"] for s in slaves)
+    assert taken > 0.8 * exchanges  # the steady exchange went the lane
+    # 0.7 s of data exchange: the inputs reported at start and at least every refresh
+    assert 2 * 0.7 / INPUTS_REFRESH <= handled < 0.2 * exchanges
+
+
+def test_changed_inputs_leave_the_lane() -> None:
+    """A reply whose bytes differ (new inputs) is stepped and its inputs reported."""
+    master = Master(FAST_BUS, [echo_params(3)])
+    w = Wire(master, echo_line([3]))
+    w.whole = w.lane = True
+    seen: list[bytes] = []
+
+    def caller(action: object) -> None:
+        if isinstance(action, InputsReceived):
+            seen.append(action.data)
+            master.quiet_inputs(3, True)
+
+    w.on_action = caller
+    w.run(0.1)
+    assert w.lane_taken > 0
+    master.set_outputs(3, b"\x01\x02\x03\x04")  # the echo slave answers with its outputs
+    w.poke()
+    w.run(0.01)
+    assert seen[-1] == b"\x01\x02\x03\x04"
