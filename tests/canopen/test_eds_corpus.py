@@ -17,6 +17,9 @@ from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord, ODVari
 from adapters.canopen.codec.od import Dictionary, canonical_text
 from adapters.canopen.errors import EdsError
 from adapters.canopen.options import read_eds
+from adapters.canopen.sim.node import load_od
+from gateway.config import parse as parse_config
+from gateway.errors import ConfigErrors
 
 CORPUS = Path(__file__).parents[1] / "data" / "eds" / "corpus" / "canopen"
 NODE = 5
@@ -47,6 +50,12 @@ GOLDEN: dict[str, dict[tuple[int, int], Row]] = {
         (0x1018, 0): ("Number of entries", 5, "const", 2, None, None, False, None, ""),
         (0x1018, 1): ("Vendor-ID", 7, "ro", 0x123, None, None, False, None, ""),
         (0x1018, 2): ("Product code", 7, "ro", 0x2200, None, None, False, None, ""),
+        (0x1400, 0): ("Highest sub-index supported", 5, "const", 2, None, None, False, None, ""),
+        (0x1400, 1): ("COB-ID used by RPDO1", 7, "rw", 0x200 + NODE, None, None, False, None, ""),
+        (0x1400, 2): ("Transmission type", 5, "rw", 0xFF, None, None, False, None, ""),
+        (0x1600, 0): ("Number of mapped objects", 5, "rw", 2, None, None, False, None, ""),
+        (0x1600, 1): ("Mapped object 1", 7, "rw", 0x60400010, None, None, False, None, ""),
+        (0x1600, 2): ("Mapped object 2", 7, "rw", 0x60420010, None, None, False, None, ""),
         (0x1800, 0): ("Highest sub-index supported", 5, "const", 2, None, None, False, None, ""),
         (0x1800, 1): ("COB-ID used by TPDO1", 7, "rw", 0x180 + NODE, None, None, False, None, ""),
         (0x1800, 2): ("Transmission type", 5, "rw", 0xFF, None, None, False, None, ""),
@@ -58,6 +67,10 @@ GOLDEN: dict[str, dict[tuple[int, int], Row]] = {
         (0x6041, 0): ("Statusword", 6, "ro", 0, None, None, True, None, ""),
         (0x6042, 0): ("vl target velocity", 3, "rww", 0, -3000, 3000, True, None, ""),
         (0x6044, 0): ("vl velocity actual value", 3, "ro", 0, None, None, True, None, ""),
+        (0x6046, 0): ("Number of entries", 5, "const", 2, None, None, False, None, ""),
+        (0x6046, 1): ("vl velocity min amount", 7, "rw", 0, None, None, False, None, ""),
+        (0x6046, 2): ("vl velocity max amount", 7, "rw", 1500, None, None, False, None, ""),
+        (0x6060, 0): ("Modes of operation", 2, "rw", 2, None, None, True, None, ""),
     },
     "reordered.eds": {
         **IDENTITY,
@@ -166,3 +179,35 @@ def test_a_nul_byte_is_no_text(tmp_path: Path) -> None:
     path.write_bytes((CORPUS / "minimal.eds").read_bytes().replace(b"Minimal", b"Mini\0al"))
     with pytest.raises(EdsError, match="line 11: byte 0x00"):
         Dictionary(path, NODE, read_eds(path))
+
+
+def drive_table(name: str, **keys: object) -> dict[str, object]:
+    drive = {"id": "a", "device": "CiA 402", "address": NODE, "eds": str(CORPUS / name), **keys}
+    bus = {"adapter": "canopen", "interface": "virtual", "channel": "corpus", "simulate": True}
+    return {"buses": {"co": {**bus, "drives": [drive]}}}
+
+
+def test_a_vendor_tool_s_eds_configures_a_drive() -> None:
+    """The same reading check-config and run make: the objects the gateway needs, their
+    PDO mapping flags, and ``max_rpm`` from 0x6046:2's default."""
+    config = parse_config(drive_table("vendor-tool.eds"), "site.toml")
+    options = config.buses[0].drives[0].options
+    assert options.max_rpm == 1500.0
+    assert (options.controlword.index, options.target.index) == (0x6040, 0x6042)
+    assert options.target.signed and options.target.bits == 16
+    sim = load_od(options.eds_path, NODE)
+    assert sim[0x1800][1].default == 0x185
+
+
+@pytest.mark.parametrize(
+    ("name", "problem"),
+    [
+        ("minimal.eds", "0x6040: the EDS has no object 0x6040 (controlword)"),
+        ("latin1.eds", "0x6040: the EDS has no object 0x6040 (controlword)"),
+    ],
+)
+def test_a_file_without_the_drive_objects_is_refused_by_name(name: str, problem: str) -> None:
+    with pytest.raises(ConfigErrors) as err:
+        parse_config(drive_table(name, max_rpm=1500), "site.toml")
+    [error] = err.value.errors
+    assert error.reason == f"{CORPUS / name}: {problem}"
