@@ -196,7 +196,9 @@ def test_a_vendor_tool_s_eds_configures_a_drive() -> None:
     assert (options.controlword.index, options.target.index) == (0x6040, 0x6042)
     assert options.target.signed and options.target.bits == 16
     sim = load_od(options.eds_path, NODE)
-    assert sim[0x1800][1].default == 0x185
+    tpdo1 = sim[0x1800]
+    assert isinstance(tpdo1, ODRecord)
+    assert tpdo1[1].default == 0x185
 
 
 @pytest.mark.parametrize(
