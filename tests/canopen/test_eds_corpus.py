@@ -2,9 +2,9 @@
 styles vendors' tools use): each file loaded by the drive's loader (``read_eds`` and
 ``Dictionary``) and its objects compared with what was worked out by hand, and, where the
 canopen library reads the file as written, with the library's own ``import_od`` of the
-same file, object by object. The loader reads two files the library refuses as written:
-sub-index sections before their object with keywords in another case, and ISO-8859-1
-text (before, the loader refused both)."""
+same file, object by object. The loader reads three files the library refuses as written:
+sub-index sections before their object with keywords in another case, a CompactSubObj's
+names before the array, and ISO-8859-1 text (before, the loader refused all three)."""
 
 from __future__ import annotations
 
@@ -88,6 +88,13 @@ GOLDEN: dict[str, dict[tuple[int, int], Row]] = {
         (0x1800, 1): ("COB-ID used by TPDO1", 7, "rw", 0x185, None, None, False, 0x185, ""),
         (0x6042, 0): ("vl target velocity", 3, "rww", 0, -3000, 3000, True, -1500, ""),
     },
+    "compact.eds": {
+        (0x1000, 0): ("Device type", 7, "ro", 0x191, None, None, False, None, ""),
+        (0x1001, 0): IDENTITY[(0x1001, 0)],
+        (0x1003, 0): ("Number of entries", 5, "rw", None, None, None, False, None, ""),
+        (0x1003, 1): ("Newest error", 7, "ro", None, None, None, False, None, ""),
+        (0x1003, 2): ("Older error", 7, "ro", None, None, None, False, None, ""),
+    },
     "latin1.eds": {
         (0x1000, 0): ("Gerätetyp", 7, "ro", 0x00020192, None, None, False, None, ""),
         (0x1001, 0): ("Fehlerregister", 5, "ro", 0, None, None, False, None, ""),
@@ -143,9 +150,11 @@ def test_the_loader_reads_what_the_library_reads(name: str) -> None:
 
 
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
-def test_the_library_refuses_two_files_the_loader_reads() -> None:
+def test_the_library_refuses_three_files_the_loader_reads() -> None:
     with pytest.raises(KeyError, match="0x1018 was not found"):
         canopen.import_od(str(CORPUS / "reordered.eds"), NODE)
+    with pytest.raises(KeyError, match="0x1003 was not found"):
+        canopen.import_od(str(CORPUS / "compact.eds"), NODE)
     with pytest.raises(UnicodeDecodeError):
         canopen.import_od(str(CORPUS / "latin1.eds"), NODE)
 
