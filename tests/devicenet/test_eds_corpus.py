@@ -2,7 +2,7 @@
 the styles vendors' tools use): each file loaded by the drive's loader (``load_eds``) and
 its identity, I/O images and integer parameters compared with what was worked out by hand
 from the file. Before the loader read numbers with leading zeros, UTF-8 and ISO-8859-1
-text and REAL parameters, 3 of the 5 files were refused."""
+text, REAL parameters and parameters without a link path, 4 of the 5 files were refused."""
 
 from __future__ import annotations
 
@@ -42,6 +42,7 @@ GOLDEN: dict[str, tuple[object, ...]] = {
             1: ("20 2A 24 01 30 08", 0xC7, 2, "Speed reference", "rpm", 0, 1800, 0, 0),
             2: ("20 28 24 01 30 06", 0xC7, 2, "Rated current", "A", 0, 9999, 41, 1),
             3: ("20 29 24 01 30 11", 0xC6, 1, "Comm loss action", "", 0, 3, 2, 0),
+            4: ("", 0xC7, 2, "Start delay", "ms", 0, 5000, 100, 0),  # no link path
         },
     ),
     "reordered.eds": (
@@ -153,4 +154,14 @@ def test_a_real_parameter_is_still_checked() -> None:
         + " 1, 1, 1, 0, 0, 0, 0, 0, 0;\n"
     )
     with pytest.raises(EdsError, match="data type 0xCA is 4 bytes, not 2"):
+        parse_eds(text, "t.eds")
+
+
+def test_a_link_path_size_without_its_path_is_refused() -> None:
+    text = (
+        HEAD
+        + 'MajRev = 1; MinRev = 0; ProdName = "x";\n[Params]\n'
+        + 'Param1 = 0, 6, "", 0, 0xC7, 2, "r", "", "", 0, 1, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0;\n'
+    )
+    with pytest.raises(EdsError, match="the link path has 0 bytes, its size field says 6"):
         parse_eds(text, "t.eds")

@@ -623,10 +623,7 @@ def _other_param(r: _Reader) -> None:
     the gateway reads and writes integers only, so it is left out of the parameters;
     its link path and data size are still checked."""
     r.need(PARAM_FIELDS - 1)
-    path_size = r.integer(1, "link path size", 0, 0xFF)
-    path = r.path(2, "link path")
-    if len(path) != path_size:
-        raise r.error(f"the link path has {len(path)} bytes, its size field says {path_size}")
+    _link_path(r)
     data_type = r.integer(4, "data type", 0, 0xFF)
     data_size = r.integer(5, "data size", 0, 0xFF)
     expected = _DATA_SIZES.get(data_type)
@@ -634,12 +631,20 @@ def _other_param(r: _Reader) -> None:
         raise r.error(f"data type 0x{data_type:02X} is {expected} bytes, not {data_size}")
 
 
+def _link_path(r: _Reader) -> bytes:
+    """Fields 2-3: the link path and its size; both empty for a parameter linked to no
+    attribute (configuration tools write ``, ,,`` for one that only a configuration
+    assembly carries)."""
+    size = r.optional(1, "link path size", 0, 0xFF)
+    path = r.path(2, "link path")
+    if len(path) != (size or 0):
+        raise r.error(f"the link path has {len(path)} bytes, its size field says {size or 0}")
+    return path
+
+
 def _param(r: _Reader, number: int) -> Param:
     r.need(PARAM_FIELDS - 1)  # the decimal places may be left out
-    path_size = r.integer(1, "link path size", 0, 0xFF)
-    path = r.path(2, "link path")
-    if len(path) != path_size:
-        raise r.error(f"the link path has {len(path)} bytes, its size field says {path_size}")
+    path = _link_path(r)
     data_type = r.integer(4, "data type", 0, 0xFF)
     data_size = r.integer(5, "data size", 0, 0xFF)
     expected = _DATA_SIZES.get(data_type)
