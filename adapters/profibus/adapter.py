@@ -181,6 +181,27 @@ class ProfibusAdapter:
         return opts.parse_drive_options(table, drive, profile_options, builtin, telegram)
 
     @classmethod
+    def check_bus(
+        cls, table: Table, options: opts.BusOptions, drives: list[opts.DriveOptions]
+    ) -> None:
+        """``clear_on_lost_control`` only on a line whose every drive takes a Clear as a
+        stop: Clear is for the whole line (no per-slave Clear without groups), and a drive
+        that takes no outputs in Clear would get no client's stop while it lasts
+        (decision 0091)."""
+        if not options.clear_on_lost_control:
+            return
+        for d in drives:
+            if not isinstance(d, opts.DriveOptions) or d.device is None:
+                continue
+            why = cls.profile_class(d.device).outputs_in_clear
+            if why:
+                raise table.error(
+                    "clear_on_lost_control",
+                    f"drive {d.drive_id} ({d.device.value}): {why}; the command watchdog "
+                    "already stops the drive whose client is lost",
+                )
+
+    @classmethod
     def safety_warnings(cls, bus: BusConfig, drive: DriveConfig) -> list[str]:
         """``check-config``: what the drive's profile says of its safety settings from the
         config alone (its ``safety_warnings(drive, watchdog)`` hook, given the profile's

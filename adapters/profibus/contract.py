@@ -165,6 +165,11 @@ class DpProfile(Protocol):
     failsafe_needs_watchdog: ClassVar[bool]
     """True: the device sees a lost master only through the DP watchdog, so with the
     watchdog off the adapter publishes ``failsafe`` false (docs/safety.md)."""
+    outputs_in_clear: ClassVar[str]
+    """What the device does with the outputs while the line is in Clear: "" when a Clear
+    is a stop the line may use for any drive (the MCD 600: a quick stop); else why no
+    client's stop reaches it then (a WEG drive: outputs not taken, P0313 acts), and a
+    bus with ``clear_on_lost_control`` is refused (decision 0091)."""
 
     @classmethod
     def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
@@ -247,6 +252,7 @@ class DpProfileBase:
     sees_every_diag: ClassVar[bool] = False
     record_error_texts: ClassVar[Mapping[int, str] | None] = None
     failsafe_needs_watchdog: ClassVar[bool] = False
+    outputs_in_clear: ClassVar[str] = ""
 
     @classmethod
     def safety_warnings(cls, drive: DriveConfig, watchdog: float) -> list[str]:
@@ -279,6 +285,7 @@ class DpProfileBase:
 class ProfileFactory(Protocol):
     device: ClassVar[Device]
     addresses: ClassVar[AddressRange]
+    outputs_in_clear: ClassVar[str]
 
     @classmethod
     def telegram_keys(cls, input_bytes: int, output_bytes: int) -> tuple[str, ...]:
@@ -356,7 +363,17 @@ class SimDevice(Protocol):
         ...
 
     def global_control(self, control: GlobalControl, now: float) -> None:
-        """Every Global_Control for the slave (Clear, Sync, Freeze: the MCD 600)."""
+        """Every Global_Control for the slave (Clear, Sync, Freeze: the MCD 600, WEG)."""
+        ...
+
+    def baud_detected(self, baudrate: int) -> None:
+        """The slave took the line's baud rate (bit/s) at a Set_Prm (a WEG drive shows it
+        in P0963 / P754)."""
+        ...
+
+    def write_answer_length(self, written: int) -> int:
+        """The length a positive DS_Write answer carries for ``written`` bytes (the
+        written length by default; a WEG drive answers 0)."""
         ...
 
     def expected_cfg(self) -> bytes:
@@ -427,3 +444,9 @@ class SimDeviceBase:
 
     def global_control(self, control: GlobalControl, now: float) -> None:
         return None
+
+    def baud_detected(self, baudrate: int) -> None:
+        return None
+
+    def write_answer_length(self, written: int) -> int:
+        return written

@@ -55,6 +55,7 @@ from adapters.profibus.link import URL_SCHEMES, Rs485, is_url
 from adapters.profibus.master.timing import BAUD_RATES, BusParams, bus_problems, defaults_for
 from gateway.config import DriveConfig
 from gateway.errors import ConfigError
+from gateway.model import Device
 from gateway.schema import Table
 from gateway.vendorfile import VendorFileError, read_vendor_file
 
@@ -121,6 +122,8 @@ class DriveOptions:
     profile: Any = None
     watchdog: float | None = None  # None: the bus's watchdog
     setup: SetupOverride | None = None  # None: the profile's built-in setup
+    device: Device | None = None  # the drive's device (bus-wide rules: check_bus)
+    drive_id: str = ""
 
 
 def profile_config(drive: DriveConfig) -> tuple[DriveConfig, SetupOverride | None]:
@@ -289,7 +292,11 @@ def parse_drive_options(
     if setup is not None and builtin is not None and setup.cfg is not None:
         _check_sizes(t, setup, builtin, telegram)
     return DriveOptions(
-        profile=profile_options, watchdog=_watchdog(t, "watchdog", None), setup=setup
+        profile=profile_options,
+        watchdog=_watchdog(t, "watchdog", None),
+        setup=setup,
+        device=drive.device,
+        drive_id=drive.id,
     )
 
 

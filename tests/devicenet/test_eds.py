@@ -249,8 +249,8 @@ def test_bad_files(text: str, message: str) -> None:
 
 def test_bad_bytes_and_missing_file(tmp_path: Path) -> None:
     path = tmp_path / "x.eds"
-    path.write_bytes(b"[File]\n$ caf\xe9\n")
-    with pytest.raises(EdsError, match=r"x\.eds: line 2: byte 0xE9 is not ASCII"):
+    path.write_bytes(b"[File]\n$ caf\x00\n")
+    with pytest.raises(EdsError, match=r"x\.eds: line 2: byte 0x00 is not text"):
         load_eds(path)
     with pytest.raises(EdsError, match=r"missing\.eds: does not exist"):
         load_eds(tmp_path / "missing.eds")

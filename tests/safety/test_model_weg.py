@@ -16,7 +16,7 @@ on three front ends (runs, JOGs, speeds, stops of every kind, resets, LOC/REM).
 
 The CFW-11 is configured PROFIdrive without ``verify_mapping``, the CFW700 (V/f, where
 P0684 bit 6 is ignored) PROFIdrive with ``startup_params`` P0741 = 0, the CFW320 as
-manufacturer; each starts at a drawn P0741 and P0313.
+manufacturer with the second ramp (P0684 bit 5); each starts at a drawn P0741 and P0313.
 
 Invariants after every cycle:
 
@@ -130,7 +130,8 @@ MODELS = {
         {202: 0},  # V/f 60 Hz: P0684 bit 6 "not allowed", ignored
         True,
     ),
-    Device.CFW320: Model(Cfw320Profile, Cfw320Sim, WegOptions(), {}, False),
+    # the second ramp (P0684 bit 5) in every telegram: it selects ramp times only (issue 36)
+    Device.CFW320: Model(Cfw320Profile, Cfw320Sim, WegOptions(second_ramp=True), {}, False),
 }
 
 

@@ -15,6 +15,7 @@ import configparser
 import hashlib
 import io
 import logging
+import re
 import sys
 import warnings
 from collections.abc import Iterator
@@ -185,15 +186,10 @@ def load(file: str, raw: bytes, node_id: int) -> ObjectDictionary:
 
 def parse(file: str, raw: bytes, node_id: int | None) -> ObjectDictionary:
     """A dictionary of its own (never shared: the simulator's LocalNode gets one) of the
-    EDS/DCF bytes ``raw``: UTF-8 text, parsed by the library, then every value checked
-    against its range (:func:`value_problems`); EdsError naming the file otherwise."""
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        reason = f"line {line}: byte 0x{raw[exc.start]:02X} is not UTF-8 text"
-        raise EdsError(file, "", f"does not parse as an EDS/DCF: {reason}") from None
-    stream = io.StringIO(text, newline=None)
+    EDS/DCF bytes ``raw``: text (:func:`decode_text`) put in the form the library reads
+    (:func:`canonical_text`), parsed by the library, then every value checked against its
+    range (:func:`value_problems`); EdsError naming the file otherwise."""
+    stream = io.StringIO(canonical_text(decode_text(file, raw)), newline=None)
     stream.name = file  # the library tells an EDS from a DCF by the name's suffix
     try:
         with warnings.catch_warnings():  # the library's own logger.warn deprecation
@@ -206,6 +202,108 @@ def parse(file: str, raw: bytes, node_id: int | None) -> ObjectDictionary:
         raise EdsError(file, "", "does not parse as an EDS/DCF: no objects")
     check_values(file, od)
     return od
+
+
+# ---------------------------------------------------------------- the text the library reads
+
+_BOM: Final = "\ufeff"
+_SECTIONS: Final = {
+    name.lower(): name
+    for name in (
+        "FileInfo",
+        "DeviceInfo",
+        "DummyUsage",
+        "Comments",
+        "MandatoryObjects",
+        "OptionalObjects",
+        "ManufacturerObjects",
+        "DeviceComissioning",
+    )
+}
+_KEYS: Final = {
+    name.lower(): name
+    for name in (
+        *("ParameterName", "ObjectType", "DataType", "AccessType", "DefaultValue"),
+        *("PDOMapping", "LowLimit", "HighLimit", "SubNumber", "CompactSubObj"),
+        *("StorageLocation", "ParameterValue", "ObjectFlags", "Denotation", "NrOfEntries"),
+        *("Lines", "SupportedObjects", "VendorName", "VendorNumber", "ProductName"),
+        *("ProductNumber", "RevisionNumber", "OrderCode", "SimpleBootUpMaster"),
+        *("SimpleBootUpSlave", "Granularity", "DynamicChannelsSupported", "GroupMessaging"),
+        *("NrOfRXPDO", "NrOfTXPDO", "LSS_Supported", "NodeID", "Baudrate", "NetNumber"),
+        *("NetworkName", "CANopenManager", "LSS_SerialNumber", "Factor", "Description"),
+        *("Unit", "FileName", "FileVersion", "FileRevision", "EDSVersion", "CreationTime"),
+        *("CreationDate", "CreatedBy", "ModificationTime", "ModificationDate", "ModifiedBy"),
+    )
+}
+_NUMBERED_KEY: Final = re.compile(r"(?i)(baudrate_|dummy|line)(\d+)$")
+_NUMBERED_NAMES: Final = {"baudrate_": "BaudRate_", "dummy": "Dummy", "line": "Line"}
+_SUB_SECTION: Final = re.compile(r"(?i)([0-9a-f]{4})(sub)([0-9a-f]+)$")
+_NAME_SECTION: Final = re.compile(r"(?i)([0-9a-f]{4})(name)$")
+_HEADER: Final = re.compile(r"\s*\[([^\]]*)\]\s*$")
+
+
+def decode_text(file: str, raw: bytes) -> str:
+    """The text of an EDS/DCF: UTF-8 when its bytes are UTF-8 (a byte order mark dropped),
+    ISO-8859-1 otherwise (the format is ASCII; vendors' tools write a unit's degree sign
+    or a name in their language in either); a NUL byte is no text: EdsError."""
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        line = raw[:nul].count(b"\n") + 1
+        raise EdsError(file, "", f"does not parse as an EDS/DCF: line {line}: byte 0x00")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("iso-8859-1")
+    return text[1:] if text.startswith(_BOM) else text
+
+
+def canonical_text(text: str) -> str:
+    """``text`` as the library reads it, meaning unchanged: CiA 306 puts no order on the
+    sections and the field's tools write keywords and section names in any case, but
+    the library looks its keywords up as spelled and wants an object's section before
+    its sub-index sections. So the known keywords and section names are spelled as CiA
+    306 spells them and each object's ``sub``/``Name`` sections are moved after every
+    other section (their own order kept); lines and values are left as written."""
+    blocks: list[list[str]] = [[]]
+    for line in text.splitlines():
+        header = _HEADER.match(line)
+        if header is not None:
+            blocks.append([f"[{_section_name(header.group(1).strip())}]"])
+        else:
+            blocks[-1].append(_key_line(line))
+    head, body = blocks[0], blocks[1:]
+    ordered = sorted(body, key=lambda block: _is_part(block[0][1:-1]))
+    return "\n".join(line for block in (head, *ordered) for line in block) + "\n"
+
+
+def _section_name(name: str) -> str:
+    sub = _SUB_SECTION.match(name)
+    if sub is not None:
+        return f"{sub.group(1).upper()}sub{sub.group(3).upper()}"
+    named = _NAME_SECTION.match(name)
+    if named is not None:
+        return f"{named.group(1).upper()}Name"
+    if re.fullmatch(r"[0-9A-Fa-f]{4}", name):
+        return name.upper()
+    return _SECTIONS.get(name.lower(), name)
+
+
+def _key_line(line: str) -> str:
+    key, sep, value = line.partition("=")
+    stripped = key.strip()
+    if not sep or not stripped or stripped[0] in ";#":
+        return line
+    known = _KEYS.get(stripped.lower())
+    if known is None:
+        numbered = _NUMBERED_KEY.match(stripped)
+        if numbered is None:
+            return line
+        known = _NUMBERED_NAMES[numbered.group(1).lower()] + numbered.group(2)
+    return f"{known}={value}"
+
+
+def _is_part(name: str) -> bool:
+    return bool(_SUB_SECTION.match(name) or _NAME_SECTION.match(name))
 
 
 # ---------------------------------------------------------------- values against their ranges

@@ -7,8 +7,9 @@ tables as "table 6"). Assemblies 20/70 and 21/71 follow the ODVA AC/DC drive pro
 selects it in the gateway and the adapter checks both agree at connect.
 
 Speeds: assemblies 20/70 and 21/71 carry rpm (seed 3.1.1, 3.1.2). For 100/150 the seed
-gives no scale: the gateway's decision (docs/devices.md) is a 13-bit word where
-``weg_speed_scale`` counts (default 8192) are the drive's maximum speed ``max_rpm``.
+gives no scale: the gateway's decision (docs/devices.md) is WEG's Profibus convention,
+``weg_speed_scale`` counts (default 8192 = 2**13 = 0x2000, which takes 14 bits of the
+16-bit word) for the drive's maximum speed ``max_rpm``.
 """
 
 from __future__ import annotations

@@ -203,6 +203,19 @@ def _field(sc: _Scanner, where: str, bare: list[str], quoted: list[str] | None) 
     return token
 
 
+def _number(text: str) -> int:
+    """An EDS number: ``0x``-prefixed hex, else decimal, leading zeros allowed (``01``,
+    as vendors write revisions); ValueError otherwise."""
+    body = text[1:] if text[:1] in "+-" else text
+    if body[:2].lower() == "0x":
+        value = int(body[2:], 16)
+    elif body.isdigit():
+        value = int(body, 10)
+    else:
+        raise ValueError(text)
+    return -value if text[:1] == "-" else value
+
+
 def _string(sc: _Scanner, where: str) -> str:
     line = sc.line
     sc.take()  # opening quote
@@ -352,15 +365,26 @@ class Eds:
 
 
 def decode_eds(raw: bytes, name: str = "<eds>") -> Eds:
-    """Parse an EDS file's bytes (ASCII, as the format is; any other byte is an error);
-    ``name`` names it in errors. Reading the file is the caller's
+    """Parse an EDS file's bytes; ``name`` names it in errors. The format's text is ASCII;
+    vendors' files carry other bytes in comments and strings (a unit in degrees, a name
+    in their language), written by their tools as UTF-8 (with or without a byte order
+    mark) or ISO-8859-1: UTF-8 when the bytes are UTF-8, ISO-8859-1 otherwise (every byte
+    is a character there). A NUL byte is no text. Reading the file is the caller's
     (``adapters.devicenet.options.load_eds``)."""
+    if raw.startswith(_BOM):
+        raw = raw[len(_BOM) :]
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        line = raw[:nul].count(b"\n") + 1
+        raise EdsError(name, line, "", "byte 0x00 is not text")
     try:
-        text = raw.decode("ascii")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise EdsError(name, line, "", f"byte 0x{raw[exc.start]:02X} is not ASCII") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("iso-8859-1")
     return parse_eds(text, name)
+
+
+_BOM = b"\xef\xbb\xbf"
 
 
 def parse_eds(text: str, file: str = "<eds>") -> Eds:
@@ -405,7 +429,7 @@ class _Reader:
         if not f:
             return None
         try:
-            value = int(f, 0)
+            value = _number(f)
         except ValueError:
             raise self.error(f"field {index + 1} ({what}) {f!r} is not a number") from None
         if not lo <= value <= hi:
@@ -556,7 +580,25 @@ def _io_entry(r: _Reader, number: int) -> IoEntry:
 
 
 PARAM_FIELDS = 21
-_DATA_SIZES = {0xC1: 1, 0xC2: 1, 0xC3: 2, 0xC4: 4, 0xC6: 1, 0xC7: 2, 0xC8: 4, 0xD1: 1, 0xD2: 2}
+_DATA_SIZES = {
+    0xC1: 1,  # BOOL
+    0xC2: 1,  # SINT
+    0xC3: 2,  # INT
+    0xC4: 4,  # DINT
+    0xC5: 8,  # LINT
+    0xC6: 1,  # USINT
+    0xC7: 2,  # UINT
+    0xC8: 4,  # UDINT
+    0xC9: 8,  # ULINT
+    0xCA: 4,  # REAL
+    0xCB: 8,  # LREAL
+    0xD1: 1,  # BYTE
+    0xD2: 2,  # WORD
+    0xD3: 4,  # DWORD
+    0xD4: 8,  # LWORD
+}
+_SIGNED = frozenset((0xC2, 0xC3, 0xC4, 0xC5))
+INTEGER_TYPES = frozenset(_DATA_SIZES) - {0xCA, 0xCB}
 
 
 def _params(doc: Document, file: str) -> dict[int, Param]:
@@ -566,17 +608,43 @@ def _params(doc: Document, file: str) -> dict[int, Param]:
         return out
     for e in s.entries:
         kind, number = _numbered(e.key.lower(), ("param",))
-        if kind is not None:
-            out[number] = _param(_Reader(file, s.name, e), number)
+        if kind is None:
+            continue
+        r = _Reader(file, s.name, e)
+        if r.integer(4, "data type", 0, 0xFF) in INTEGER_TYPES:
+            out[number] = _param(r, number)
+        else:  # a REAL, a string...: its path and size checked, the parameter left out
+            _other_param(r)
     return out
+
+
+def _other_param(r: _Reader) -> None:
+    """A parameter whose data type is no integer (REAL, LREAL, a string, a structure):
+    the gateway reads and writes integers only, so it is left out of the parameters;
+    its link path and data size are still checked."""
+    r.need(PARAM_FIELDS - 1)
+    _link_path(r)
+    data_type = r.integer(4, "data type", 0, 0xFF)
+    data_size = r.integer(5, "data size", 0, 0xFF)
+    expected = _DATA_SIZES.get(data_type)
+    if expected is not None and data_size != expected:
+        raise r.error(f"data type 0x{data_type:02X} is {expected} bytes, not {data_size}")
+
+
+def _link_path(r: _Reader) -> bytes:
+    """Fields 2-3: the link path and its size; both empty for a parameter linked to no
+    attribute (configuration tools write ``, ,,`` for one that only a configuration
+    assembly carries)."""
+    size = r.optional(1, "link path size", 0, 0xFF)
+    path = r.path(2, "link path")
+    if len(path) != (size or 0):
+        raise r.error(f"the link path has {len(path)} bytes, its size field says {size or 0}")
+    return path
 
 
 def _param(r: _Reader, number: int) -> Param:
     r.need(PARAM_FIELDS - 1)  # the decimal places may be left out
-    path_size = r.integer(1, "link path size", 0, 0xFF)
-    path = r.path(2, "link path")
-    if len(path) != path_size:
-        raise r.error(f"the link path has {len(path)} bytes, its size field says {path_size}")
+    path = _link_path(r)
     data_type = r.integer(4, "data type", 0, 0xFF)
     data_size = r.integer(5, "data size", 0, 0xFF)
     expected = _DATA_SIZES.get(data_type)
@@ -620,7 +688,7 @@ def _scaling(r: _Reader, index: int, what: str) -> int:
 
 def _range(data_type: int, data_size: int) -> tuple[int, int]:
     bits = 8 * max(data_size, 1)
-    if data_type in (0xC2, 0xC3, 0xC4):  # SINT, INT, DINT
+    if data_type in _SIGNED:  # SINT, INT, DINT, LINT
         return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
     return 0, (1 << bits) - 1
 

@@ -81,6 +81,12 @@ class GsdSim:
     def global_control(self, control: GlobalControl, now: float) -> None:
         self.device.global_control(control, now)
 
+    def baud_detected(self, baudrate: int) -> None:
+        self.device.baud_detected(baudrate)
+
+    def write_answer_length(self, written: int) -> int:
+        return self.device.write_answer_length(written)
+
     def exchange(self, outputs: bytes, now: float) -> bytes:
         return self.device.exchange(outputs, now)
 

@@ -50,6 +50,7 @@ class SimulatedLine(SerialLinks):
                 with_setup(
                     make_device(config.device, config, self.sim_devices), config.device, override
                 ),
+                self.options.baudrate,
             )
             for config, override in self.drives
         )

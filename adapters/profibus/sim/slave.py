@@ -103,9 +103,12 @@ class SlaveCounters:
 class DpSlave:
     """One simulated DP slave at ``address`` hosting ``device``."""
 
-    def __init__(self, address: int, device: SimDevice) -> None:
+    def __init__(self, address: int, device: SimDevice, baudrate: int | None = None) -> None:
+        """``baudrate``: the line's (bit/s), which the slave detects and gives its device at
+        each Set_Prm; None: not known (a test's line)."""
         self.address = address
         self.device = device
+        self.baudrate = baudrate
         self.dpv1: bool = device.dpv1
         self.injector = device.faults if device.faults is not None else FaultInjector()
         self.faults = SlaveFaults()
@@ -262,6 +265,8 @@ class DpSlave:
         self.group = prm.group_ident
         self.dpv1_active = self.dpv1 and (prm.dpv1 is None or prm.dpv1.dpv1_enable)
         self.last_contact = now
+        if self.baudrate is not None:
+            self.device.baud_detected(self.baudrate)
         if self.faults.prm_req_forever:
             self.mode = SlaveMode.WAIT_PRM
         return SHORT_ACK
@@ -374,7 +379,8 @@ class DpSlave:
                 return dpv1.ReadResponse(pdu.slot, pdu.index, bytes(values[: pdu.length]))
             if isinstance(pdu, dpv1.WriteRequest):
                 self.device.write_record(pdu.slot, pdu.index, pdu.data, now)
-                return dpv1.WriteResponse(pdu.slot, pdu.index, len(pdu.data))
+                length = self.device.write_answer_length(len(pdu.data))
+                return dpv1.WriteResponse(pdu.slot, pdu.index, length)
         except RecordAccessError as exc:
             function = (
                 dpv1.Dpv1Function.READ

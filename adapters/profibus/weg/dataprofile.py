@@ -45,6 +45,7 @@ class Order:
     reference: int  # speed magnitude (and sign) as a raw word of the speed scale
     quick_stop_as_ramp: bool  # P0202 V/f or VVW: a quick stop is sent as a ramp stop
     zsw: w.ProfidriveStatus | None  # the last ZSW1 read (PROFIdrive: the state walked)
+    second_ramp: bool = False  # P0684 bit 5 (manufacturer profile, the drive's option)
 
 
 @dataclass(frozen=True)

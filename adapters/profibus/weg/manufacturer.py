@@ -74,7 +74,8 @@ class ManufacturerWords:
         Quick stop and coast stop clear run (bit 0) and JOG (bit 3): a drive that does not
         execute bit 6 (CFW700 "not allowed" in V/f or VVW) still ramps down, and the
         release of either stop never restarts the motor. With P0202 V/f or VVW bit 6 is
-        not sent: the quick stop is a ramp stop (docs/devices.md).
+        not sent: the quick stop is a ramp stop (docs/devices.md). Bit 5 selects the
+        second ramp (P0102/P0103) when the drive's ``second_ramp`` option says so.
         """
         d = order.desired
         forward = d.direction is Direction.FORWARD
@@ -86,6 +87,7 @@ class ManufacturerWords:
             forward=forward,
             jog=jog,
             remote=d.remote,
+            second_ramp=order.second_ramp,
             quick_stop=d.quick_stop and self.spec.quick_stop and not order.quick_stop_as_ramp,
             fault_reset=order.reset,
         )

@@ -39,6 +39,8 @@ class WegOptions:
     at_reference_band: float = 1.0  # % of the speed base: "at reference" tolerance
     record_retries: int = 20  # DS_Read retries while the answer is not ready (C3h)
     record_retry_delay: float = 0.02  # s between those retries
+    second_ramp: bool = False  # P0684 bit 5: the second ramp P0102/P0103 (manufacturer)
+    factory_settings: tuple[tuple[int, int], ...] = ()  # (number, raw): the drive's own
 
     def mapped_in(self) -> tuple[int, ...]:
         """Parameter of each input word 3..N (0 = disabled), padded to the telegram size."""
@@ -92,6 +94,13 @@ def parse_options(t: Table, spec: ModelSpec) -> WegOptions:
             f"gives {len(out_values)} values for {len(words_out)} words_out entries "
             "(one raw value per output word: the drive writes it into the parameter)",
         )
+    second_ramp = t.boolean("second_ramp", d.second_ramp)
+    if second_ramp and profile is not DataProfile.MANUFACTURER:
+        raise t.error(
+            "second_ramp",
+            "the second ramp is P0684 bit 5 of the manufacturer profile; the PROFIdrive "
+            "STW1 has no such bit (bit 5 reserved)",
+        )
     options = WegOptions(
         data_profile=profile,
         frame=frame,
@@ -118,6 +127,8 @@ def parse_options(t: Table, spec: ModelSpec) -> WegOptions:
         record_retry_delay=t.number(
             "record_retry_delay", d.record_retry_delay, minimum=0.0, maximum=5.0
         ),
+        second_ramp=second_ramp,
+        factory_settings=_factory_settings(t, spec),
     )
     return options
 
@@ -133,9 +144,30 @@ def _frame20_mapping(
     return FRAME20_INPUTS, ()
 
 
+def _factory_settings(t: Table, spec: ModelSpec) -> tuple[tuple[int, int], ...]:
+    """``[...drives.factory_settings]``: the drive's factory values of the parameters its
+    manual says must keep them (CFW320 2.4: P308, P310, P311, P312), where they are not
+    the ones the gateway takes (docs/devices.md)."""
+    out = _param_values(t, "factory_settings")
+    for number, _ in out:
+        if number not in spec.factory_settings:
+            named = ", ".join(spec.pname(n) for n in spec.factory_settings) or "none"
+            raise t.table("factory_settings").error(
+                spec.pname(number),
+                f"not a parameter the {spec.device.value} manual says must keep its factory "
+                f"setting ({named})",
+            )
+    return out
+
+
 def _startup_params(t: Table) -> tuple[tuple[int, int], ...]:
     """``[...drives.startup_params]``: "P0313" = 1 (or "313" = 1), written at every connect."""
-    sub = t.table("startup_params")
+    return _param_values(t, "startup_params")
+
+
+def _param_values(t: Table, table: str) -> tuple[tuple[int, int], ...]:
+    """A table of "P0313" = 1 (or "313" = 1) entries, in order."""
+    sub = t.table(table)
     out: list[tuple[int, int]] = []
     for key in sub.data:
         text = key[1:] if key[:1] in ("P", "p") else key
@@ -145,5 +177,5 @@ def _startup_params(t: Table) -> tuple[tuple[int, int], ...]:
         out.append((int(text), value))
     numbers = [n for n, _ in out]
     if len(set(numbers)) != len(numbers):
-        raise t.error("startup_params", "names a parameter twice")
+        raise t.error(table, "names a parameter twice")
     return tuple(out)

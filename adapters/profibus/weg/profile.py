@@ -46,6 +46,7 @@ from adapters.profibus.weg.programming import (
     DataProfilePending,
     DriveProgrammingMismatch,
     check_data_profile,
+    check_factory_settings,
     expected_programming,
     verify_programming,
     write_startup_param,
@@ -100,6 +101,12 @@ class WegProfile(DpProfileBase):
     # the drive's reaction to a lost master (P0313) needs the DP watchdog: with it off the
     # drive never detects the loss (the adapter publishes failsafe false then)
     failsafe_needs_watchdog: ClassVar[bool] = True
+    # Clear: the manuals give A138/F238 per P0313 and nothing on the outputs (all zero in
+    # Clear); taken as not applied, as the simulator does (decision 0091)
+    outputs_in_clear: ClassVar[str] = (
+        "in Clear a WEG drive takes no outputs (its P0313 acts: A138/F238), so no client's "
+        "stop would reach it while one drive's lost client holds the line in Clear"
+    )
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -172,6 +179,7 @@ class WegProfile(DpProfileBase):
         self._stop_held = False  # a quick/coast stop seen: no run until run and JOG seen off
         self._p0741_seen: int | None = None  # P0741 read in this data exchange (not yet: None)
         self._status_values: dict[str, int] = {}  # P0680 bits of the last status word
+        self._factory_values: dict[str, int] = {}  # CFW320 P308, P310-P312 read at connect
         # inputs' fast path: (key, the memory the call left, its readings)
         self._inputs_memo: tuple[tuple[object, ...], tuple[object, ...], Readings] | None = None
         # outputs' fast path: (key, the memory before the call, the memory after, telegram)
@@ -245,6 +253,9 @@ class WegProfile(DpProfileBase):
             expected = expected_programming(self.spec, self.options, self.in_map, self.out_map)
             await verify_programming(self.params, channel, self.spec, expected)
         await self._read_ratings(channel)
+        self._factory_values = await check_factory_settings(
+            self.params, channel, event, self.spec, self.options
+        )
         self._event = event
         if self.spec.reads_control_type:
             self._set_control_type(await self.params.read(channel, 202))
@@ -255,7 +266,7 @@ class WegProfile(DpProfileBase):
             "failsafe": failsafe,
             "failsafe_text": failsafe_text,
         }
-        if self.control_type is not None:
+        if self.control_type is not None or self._factory_values:
             changes["values"] = self._own_values()
         return changes
 
@@ -297,12 +308,11 @@ class WegProfile(DpProfileBase):
 
     def _own_values(self) -> dict[str, float | int]:
         """The profile's entries of ``DriveState.values`` (docs/devices.md)."""
-        if self.control_type is None:
-            return {}
-        return {
-            self.spec.pname(202): self.control_type,
-            "quick_stop_as_ramp": int(self.quick_stop_as_ramp),
-        }
+        own: dict[str, float | int] = dict(self._factory_values)
+        if self.control_type is not None:
+            own[self.spec.pname(202)] = self.control_type
+            own["quick_stop_as_ramp"] = int(self.quick_stop_as_ramp)
+        return own
 
     async def _read_data_profile(self, channel: RecordChannel) -> int:
         """P0741 as read at this connect. The first value read after the slave entered data
@@ -400,6 +410,7 @@ class WegProfile(DpProfileBase):
             self._reference(desired),
             self.quick_stop_as_ramp,
             self._zsw,
+            self.options.second_ramp,
         )
         control, reference, self._sent = self.data_words.control(order)
         words = [control, w.to_word(reference), *self.out_values]

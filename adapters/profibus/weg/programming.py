@@ -75,6 +75,39 @@ async def write_startup_param(
     return written
 
 
+async def check_factory_settings(
+    params: RecordParams,
+    channel: RecordChannel,
+    event: EventSink,
+    spec: ModelSpec,
+    options: WegOptions,
+) -> dict[str, int]:
+    """Read the parameters the manual says must keep their factory settings (CFW320 2.4
+    WARNING: P308, P310, P311, P312 "must be programmed with the factory settings" for the
+    Profibus DP module to work); a difference is one ``config`` event naming each. Their
+    values, by name, for ``DriveState.values``. The factory values are the spec's unless
+    the drive's ``factory_settings`` key gives its own."""
+    expected = {**spec.factory_settings, **dict(options.factory_settings)}
+    if not expected:
+        return {}
+    numbers = sorted(expected)
+    got = await params.read_many(channel, [(n, 0) for n in numbers])
+    wrong = [
+        f"{spec.pname(n)} = {value} (factory setting {expected[n]})"
+        for n, value in zip(numbers, got, strict=True)
+        if value != expected[n]
+    ]
+    if wrong:
+        names = ", ".join(spec.pname(n) for n in numbers)
+        event(
+            f"{', '.join(wrong)}: the {spec.device.value} manual requires {names} at their "
+            "factory settings for the Profibus DP module to work",
+            DiagKind.CONFIG,
+            **{spec.pname(n): v for n, v in zip(numbers, got, strict=True)},
+        )
+    return {spec.pname(n): v for n, v in zip(numbers, got, strict=True)}
+
+
 def check_data_profile(spec: ModelSpec, want: DataProfile, got: int) -> None:
     """P741 against the configured data profile (CFW320 Table 4.6 note: the control,
     status, speed reference and motor speed words depend on it): a mismatch would be

@@ -204,6 +204,12 @@ class ModelSpec:
     # (CFW-11 Table 3.6, CFW700 Table 4.6, CFW320 Table 4.6 note) and a word of the other
     # profile can be a motion command (issue 32 item 2); all three models set it
     reads_data_profile: bool = False
+    baud_param: int = 963  # the detected baud rate: P0963 (CFW-11, CFW700); CFW320 P754
+    # parameters the manual says must keep their factory settings, with the values taken
+    # as factory (CFW320 2.4 WARNING: P308, P310, P311, P312; the values are the
+    # programming manual's, not in the seed: a drive's ``factory_settings`` key says
+    # otherwise); read at every connect, a difference is a config event
+    factory_settings: Mapping[int, int] = field(default_factory=dict)
 
     @property
     def reads_control_type(self) -> bool:
@@ -339,6 +345,8 @@ CFW320: Final = ModelSpec(
     interface_fault=32,
     default_ident=0x0C32,
     reads_data_profile=True,
+    baud_param=754,
+    factory_settings=MappingProxyType({308: 1, 310: 0, 311: 0, 312: 0}),
 )
 
 SPECS: Final[Mapping[Device, ModelSpec]] = MappingProxyType(

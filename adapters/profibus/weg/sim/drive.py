@@ -28,11 +28,11 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, ClassVar, Final
 
 from adapters.profibus.codec.chkcfg import CompactId, IoDirection
-from adapters.profibus.contract import SimDeviceBase
 from adapters.profibus.weg import spec as specs
 from adapters.profibus.weg import words as w
 from adapters.profibus.weg.options import WegOptions
 from adapters.profibus.weg.sim import params as sp
+from adapters.profibus.weg.sim.busside import SyncFreeze, WegBusSide
 from adapters.profibus.weg.sim.commands import Commands, NetCommand, Panel, sync_rpm
 from adapters.profibus.weg.sim.commloss import COMM_ACTIONS
 from adapters.profibus.weg.sim.dataprofile import PdState, PdStop, SimDataWords
@@ -56,7 +56,7 @@ SIM_DATA_WORDS: Final[Mapping[DataProfile, SimDataWords]] = {
 """The words of each data profile (P0741) on the drive's side."""
 
 
-class WegSim(SimDeviceBase):
+class WegSim(WegBusSide):
     """A simulated WEG drive (one model per subclass); implements the SimDevice protocol."""
 
     handles_clear = True  # Clear is A138/F238 per P0313, not a lost communication
@@ -176,6 +176,7 @@ class WegSim(SimDeviceBase):
         self._reset_level = False
         self._online_since: float | None = None
         self._records = Records(self)
+        self.sync_freeze = SyncFreeze()
         self.motor.speed = 0.0
         self.motor.coast()
         self.faults.clear()
@@ -230,9 +231,11 @@ class WegSim(SimDeviceBase):
                 "%s: %d output bytes, expected %d", self.spec.device, len(outputs), 2 * self.n_words
             )
         elif not self.clear:
-            self._take_outputs(struct.unpack(f">{self.n_words}H", outputs), now)
+            taken = self.sync_freeze.outputs(struct.unpack(f">{self.n_words}H", outputs))
+            if taken is not None:
+                self._take_outputs(taken, now)
         self._drive_motor()
-        return self._inputs()
+        return self.sync_freeze.inputs(self._inputs())
 
     def comm_lost(self, now: float) -> None:
         """DP watchdog expired: offline, A139 or F239 per P0313 (section 5 / 6 / 7)."""
@@ -241,6 +244,7 @@ class WegSim(SimDeviceBase):
             return  # "only if the transition from online to offline occurs"
         self.comm = specs.COMM_OFFLINE
         self.clear = False
+        self.sync_freeze = SyncFreeze()
         self._online_since = None
         self._comm_error(139)
         self._take_offline_params()
