@@ -132,7 +132,10 @@ def session(endpoint: str) -> Iterator[zenoh.Session]:
         s.close()
 
 
-def add_common(p: argparse.ArgumentParser) -> None:
+JSON_HELP = "print JSON instead of text (default: text)"
+
+
+def add_common(p: argparse.ArgumentParser, json_help: str = JSON_HELP) -> None:
     """``--connect``, ``--prefix``, ``--zenoh-config`` and ``--json`` of every tool."""
     p.add_argument(
         "--connect",
@@ -151,10 +154,26 @@ def add_common(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="a Zenoh JSON5 client config (TLS certificates for a secured gateway; default: none)",
     )
-    p.add_argument("--json", action="store_true", help="print JSON instead of text (default: text)")
+    p.add_argument("--json", action="store_true", help=json_help)
 
 
 _common = add_common
+
+
+def add_common_after(p: argparse.ArgumentParser) -> None:
+    """The options of :func:`add_common` once more on a sub-subcommand (``param DRIVE read``),
+    so they may come anywhere on the line; given there they win, absent they leave the
+    values given before (or the defaults) as they are."""
+    for flags, kwargs in (
+        (("--connect",), {"metavar": "ENDPOINT", "help": "the gateway's Zenoh endpoint"}),
+        (("--prefix",), {"help": "the gateway's zenoh.prefix"}),
+        (
+            ("--zenoh-config",),
+            {"type": _use_config_file, "metavar": "FILE", "help": "a Zenoh JSON5 client config"},
+        ),
+        (("--json",), {"action": "store_true", "help": "print JSON instead of text"}),
+    ):
+        p.add_argument(*flags, default=argparse.SUPPRESS, **kwargs)
 
 
 def _use_config_file(path: str) -> str:
@@ -206,6 +225,19 @@ def query(endpoint: str, key: str, payload: Any | None = None) -> Any:
             return query_in(s, key, payload)
         except RuntimeError:
             raise RuntimeError(f"no answer on {key} from {endpoint}") from None
+
+
+def query_or_no_gateway(args: argparse.Namespace, key: str, payload: Any | None = None) -> Any:
+    """:func:`query_in` on a session of its own; when nothing answers, :class:`NoGateway`
+    (exit 3) if the gateway's liveliness token is not there either, else RuntimeError (a
+    gateway that does not answer this key: exit 1)."""
+    with session(args.connect) as s:
+        try:
+            return query_in(s, key, payload)
+        except RuntimeError:
+            if not gateway_alive(s, args.prefix):
+                raise NoGateway(no_gateway_text(args)) from None
+            raise RuntimeError(f"no answer on {key} from {args.connect}") from None
 
 
 def query_all(s: zenoh.Session, key: str, timeout: float = QUERY_TIMEOUT) -> list[Any]:
@@ -267,15 +299,24 @@ def add_health(sub: Any) -> None:
         "health",
         help="the gateway's health: live lists and cycle figures",
         description="Ask the gateway for its health: name, version, uptime, drives, per "
-        "bus the live list and cycle figures (always JSON).",
+        "bus the live list and cycle figures. The answer is printed as JSON, with or "
+        "without --json.",
+        epilog="exit status: 0 answered; 1 the gateway did not answer the health query; "
+        "3 no gateway answers.",
     )
-    _common(p)
+    _common(
+        p,
+        json_help="accepted for scripts that give it to every tool; the health is "
+        "always printed as JSON",
+    )
     p.set_defaults(handler=cmd_health)
 
 
 def cmd_health(args: argparse.Namespace) -> int:
     try:
-        doc = query(args.connect, f"{args.prefix}/gateway/health")
+        doc = query_or_no_gateway(args, f"{args.prefix}/gateway/health")
+    except NoGateway as exc:
+        return fail(str(exc), EXIT_NO_GATEWAY)
     except RuntimeError as exc:
         return fail(str(exc))
     _print_json(doc)
@@ -466,7 +507,10 @@ def add_param(sub: Any) -> None:
         "param",
         help="read or write one drive parameter",
         description="Read or write one parameter through the gateway's params service "
-        "(writes only to the drive's writable_params).",
+        "(writes only to the drive's writable_params). --connect, --prefix, --zenoh-config "
+        "and --json may come before or after the drive.",
+        epilog="exit status: 0 done; 1 refused by the gateway or the drive, or no answer "
+        "for this drive; 2 usage; 3 no gateway answers.",
     )
     _common(p)
     p.add_argument("drive", help="the drive's id")
@@ -474,12 +518,14 @@ def add_param(sub: Any) -> None:
     r = ops.add_parser("read", help="read a parameter", description="Read a parameter.")
     r.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     r.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
+    add_common_after(r)
     w = ops.add_parser(
         "write", help="write a parameter (raw value)", description="Write a parameter."
     )
     w.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     w.add_argument("value", type=float, help="the raw value (P0100 = 2.0 s is 20)")
     w.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
+    add_common_after(w)
     p.set_defaults(handler=cmd_param)
 
 
@@ -527,7 +573,9 @@ def cmd_param(args: argparse.Namespace) -> int:
         value: float | int = int(args.value) if args.value.is_integer() else args.value
         payload = {"value": value}
     try:
-        answer = query(args.connect, key, payload)
+        answer = query_or_no_gateway(args, key, payload)
+    except NoGateway as exc:
+        return fail(str(exc), EXIT_NO_GATEWAY)
     except RuntimeError as exc:
         return fail(str(exc))
     if args.json:
