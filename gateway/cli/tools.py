@@ -32,6 +32,7 @@ from typing import Any, TextIO
 import zenoh
 
 from gateway.config import parse_param_ref, read_zenoh_config_file
+from gateway.devices import code_text
 from gateway.errors import ConfigError, GatewayError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -164,14 +165,28 @@ def add_common_after(p: argparse.ArgumentParser) -> None:
     """The options of :func:`add_common` once more on a sub-subcommand (``param DRIVE read``),
     so they may come anywhere on the line; given there they win, absent they leave the
     values given before (or the defaults) as they are."""
+    before = "default: as given before the drive, else"
     for flags, kwargs in (
-        (("--connect",), {"metavar": "ENDPOINT", "help": "the gateway's Zenoh endpoint"}),
-        (("--prefix",), {"help": "the gateway's zenoh.prefix"}),
+        (
+            ("--connect",),
+            {
+                "metavar": "ENDPOINT",
+                "help": f"the gateway's Zenoh endpoint ({before} {DEFAULT_CONNECT})",
+            },
+        ),
+        (("--prefix",), {"help": f"the gateway's zenoh.prefix ({before} {DEFAULT_PREFIX})"}),
         (
             ("--zenoh-config",),
-            {"type": _use_config_file, "metavar": "FILE", "help": "a Zenoh JSON5 client config"},
+            {
+                "type": _use_config_file,
+                "metavar": "FILE",
+                "help": f"a Zenoh JSON5 client config ({before} none)",
+            },
         ),
-        (("--json",), {"action": "store_true", "help": "print JSON instead of text"}),
+        (
+            ("--json",),
+            {"action": "store_true", "help": f"print JSON instead of text ({before} text)"},
+        ),
     ):
         p.add_argument(*flags, default=argparse.SUPPRESS, **kwargs)
 
@@ -369,6 +384,15 @@ def build_command(args: argparse.Namespace) -> dict[str, Any]:
     return command
 
 
+def _code(state: dict[str, Any], name: str) -> str:
+    """A code of a state JSON as the drive's documents write it (``0x8130`` for CANopen)."""
+    code = state.get(name)
+    if isinstance(code, bool) or not isinstance(code, int):
+        return str(code)
+    device = state.get("device")
+    return code_text(device if isinstance(device, str) else None, code)
+
+
 def state_line(s: dict[str, Any]) -> str:
     """``cfw11: online running forward 900 rpm (ref 900 rpm) remote`` and the fault."""
     parts = [str(s.get("comm")), str(s.get("status")), str(s.get("direction"))]
@@ -378,7 +402,7 @@ def state_line(s: dict[str, Any]) -> str:
         parts.append(f"(ref {s['speed_ref_rpm']:.0f} rpm)")
     parts.append("remote" if s.get("remote") else "local")
     if s.get("fault_code") is not None:
-        parts.append(f"fault {s['fault_code']} {s.get('fault_text') or ''}".rstrip())
+        parts.append(f"fault {_code(s, 'fault_code')} {s.get('fault_text') or ''}".rstrip())
     return f"{s.get('id')}: " + " ".join(parts)
 
 
@@ -387,7 +411,7 @@ def why_not(s: dict[str, Any], action: str, wait: float) -> str:
     if s.get("comm") != "online":
         return f"the drive is not online (comm {s.get('comm')})"
     if s.get("status") in ("faulted", "tripped") and action != "reset":
-        return f"the drive is {s.get('status')} ({s.get('fault_code')} {s.get('fault_text')})"
+        return f"the drive is {s.get('status')} ({_code(s, 'fault_code')} {s.get('fault_text')})"
     if not s.get("remote") and action not in ("remote", "local"):
         return "the drive is not in remote: the network is not in control of it"
     return f"it did not within {wait:g} s"
@@ -661,7 +685,7 @@ class Board:
             current = "-"
         fault = "-"
         if d.get("fault_code") is not None:
-            fault = f"{d['fault_code']} {d.get('fault_text') or ''}".strip()
+            fault = f"{_code(d, 'fault_code')} {d.get('fault_text') or ''}".strip()
         comm = d.get("comm", "?")
         if d["id"] not in self.alive and comm == "online":
             comm = "gone"
