@@ -4,7 +4,9 @@ without) its script; the script's first snapshot then takes the same elements ov
 
 Every value is put in as escaped text (``html.escape``), as the script puts it in with
 ``textContent``. The places filled are found by their elements' ids; a template without
-one of them is a packaging error named at start (:func:`check_template`).
+one of them is a packaging error named at start (:func:`check_template`). The table body
+says who rendered its rows last: ``data-rendered="server"``, then ``"feed"`` once the
+script has shown the first snapshot.
 """
 
 from __future__ import annotations
@@ -169,7 +171,7 @@ def render(template: str, runtime: RuntimeView, now: float | None = None) -> str
         "version": f'<small id="gw-version">{html.escape(runtime.version, quote=False)}</small>',
         "summary": f'<div id="summary" class="summary">{summary_text(counts(states))}</div>',
         "head": f'<tr id="drives-head">{head}</tr>',
-        "body": f'<tbody id="drives-body">{rows}</tbody>',
+        "body": f'<tbody id="drives-body" data-rendered="server">{rows}</tbody>',
     }
     for slot, text in fills.items():
         template = template.replace(SLOTS[slot], text, 1)

@@ -396,6 +396,7 @@ function onSnapshot(m) {
   renderHead();
   renderCommandBar();
   $("drives-body").replaceChildren();
+  $("drives-body").dataset.rendered = "feed";  // the server's first rows replaced
   S.drives.clear();
   for (const d of m.drives) {
     S.drives.set(d.id, d); renderDrive(d);
