@@ -1,4 +1,4 @@
-"""drive-gateway: Profibus DP and DeviceNet drives on Zenoh and Modbus TCP."""
+"""drive-gateway: Profibus DP, DeviceNet and CANopen drives on Zenoh and Modbus TCP."""
 
 from importlib.metadata import PackageNotFoundError, version
 

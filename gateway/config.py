@@ -2,7 +2,7 @@
 
 Layout (see config/site.example.toml for every key)::
 
-    [gateway]            name, log_level, shutdown_timeout, tick
+    [gateway]            name, log_level, library_log_level, shutdown_timeout, tick
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          max_connections_per_peer, idle_timeout
@@ -93,6 +93,9 @@ MAX_DEPTH = 32
 class GatewaySection:
     name: str = "drive-gateway"
     log_level: str = "INFO"
+    library_log_level: str = "WARNING"
+    """The level of the libraries' own loggers (the canopen library narrates each PDO map
+    and SDO at INFO: about 100 lines per reconnect); DEBUG to see them."""
     shutdown_timeout: float = 10.0
     tick: float = 0.05
 
@@ -208,6 +211,7 @@ def _gateway_section(t: Table) -> GatewaySection:
     section = GatewaySection(
         name=t.string("name", d.name),
         log_level=t.string("log_level", d.log_level, choices=LOG_LEVELS),
+        library_log_level=t.string("library_log_level", d.library_log_level, choices=LOG_LEVELS),
         shutdown_timeout=t.number(
             "shutdown_timeout", d.shutdown_timeout, minimum=0.0, maximum=300.0
         ),

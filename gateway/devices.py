@@ -35,7 +35,9 @@ class DeviceSpec:
     ``firmware_param``: the parameter holding its firmware version, as its manual says (a
     parameter backup names the firmware with it; None: the gateway reads it elsewhere, or
     cannot). ``test``: a device of the tests, in no adapter's production set and in no
-    published list.
+    published list. ``code_digits``: its fault and alarm codes are written in hex with this
+    many digits, as its documents write them (CANopen EMCY codes: 4, ``0x8130``); 0: in
+    decimal, as the WEG and Danfoss manuals number their faults (F021, trip 26).
     """
 
     model: str
@@ -50,6 +52,7 @@ class DeviceSpec:
     firmware_param: int | None = None
     soft_starter: bool = False
     test: bool = False
+    code_digits: int = 0
 
 
 class Device(Enum):
@@ -122,6 +125,7 @@ class Device(Enum):
         bus="canopen",
         package="adapters.canopen",
         doc="a drive of the CiA 402 profile on CANopen (docs/devices.md, CiA 402 drives (CANopen))",
+        code_digits=4,  # EMCY error codes and 0x603F, CiA 301 §7.2.7.1
     )
     TEST = DeviceSpec(
         "test",
@@ -152,6 +156,19 @@ class Device(Enum):
     @property
     def is_soft_starter(self) -> bool:
         return self.spec.soft_starter
+
+
+def code_text(device: Device | str | None, code: int) -> str:
+    """A fault or alarm code of ``device`` (a member, or its model name as the state JSON
+    gives it) as its documents write it: ``0x8130`` for a CANopen drive, ``21`` for a WEG
+    one; a model not known here: decimal."""
+    if not isinstance(device, Device):
+        try:
+            device = Device(str(device))
+        except ValueError:
+            return str(code)
+    digits = device.spec.code_digits
+    return f"0x{code:0{digits}X}" if digits and code >= 0 else str(code)
 
 
 def devices_of(bus: str) -> frozenset[Device]:

@@ -44,6 +44,7 @@ from functools import partial
 from typing import Any, Protocol, Unpack
 
 from gateway.adapter import Capabilities, Event, EventKind, ParamValue
+from gateway.devices import code_text
 from gateway.errors import (
     CommandRejected,
     DriveOffline,
@@ -692,7 +693,7 @@ def _check_start(drive_id: str, drv: _Drive, cmd: DriveCommand) -> None:
             "(a run given now would not be kept for later)"
         )
     if state.faulted:
-        code = "" if state.fault_code is None else f" {state.fault_code}"
+        code = "" if state.fault_code is None else f" {code_text(state.device, state.fault_code)}"
         text = f" ({state.fault_text})" if state.fault_text else ""
         raise CommandRejected(
             f"drive {drive_id} is {state.status.label}{code}{text}: "

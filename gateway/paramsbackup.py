@@ -475,6 +475,20 @@ def table_from_json(rows: Any) -> ParamTable:
         raise BackupError(f"table: {exc}") from None
 
 
+def reading_table(drive_table: ParamTable, backup: Backup) -> ParamTable:
+    """The table to read a file's parameters back from a drive with, so both sides of a
+    compare are in the same unit: the drive's own table (its decimals, multiplier and
+    offset), and for a number it lacks, the file's name without a unit (the file keeps no
+    scale, so such a value is shown raw, never a raw value with a unit beside it)."""
+    rows = dict(drive_table)
+    for entry in backup.params:
+        if entry.number not in rows and entry.name:
+            unscaled = type(entry.scaled) is type(entry.raw) and entry.scaled == entry.raw
+            unit = entry.unit if unscaled else ""
+            rows[entry.number] = ParamInfo(entry.number, entry.name, unit, code=entry.code)
+    return param_table(rows.values())
+
+
 # ---------------------------------------------------------------- compare
 
 

@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 from gateway.adapter import EventKind
+from gateway.devices import code_text
 from gateway.model import CommState, DriveState, DriveStatus
 
 TRANSITION_FIELDS = frozenset(
@@ -113,7 +114,8 @@ def on_transitions(
         clear_run("fault ended")
     if new.alarm and (not old.alarm or new.alarm_code != old.alarm_code):
         known = alarm_texts.get(new.alarm_code) if new.alarm_code else None
-        text = f"alarm {new.alarm_code}" + (f": {known}" if known else "")
+        shown = "" if new.alarm_code is None else code_text(new.device, new.alarm_code)
+        text = f"alarm {shown}".rstrip() + (f": {known}" if known else "")
         event(drive_id, EventKind.ALARM, text, code=new.alarm_code)
 
 
@@ -153,7 +155,7 @@ def _on_trust_transitions(
 
 def _fault_event(drive_id: str, new: DriveState, event: EventSink) -> EventKind:
     kind = EventKind.TRIP if new.status is DriveStatus.TRIPPED else EventKind.FAULT
-    code = "" if new.fault_code is None else f" {new.fault_code}"
+    code = "" if new.fault_code is None else f" {code_text(new.device, new.fault_code)}"
     text = f": {new.fault_text}" if new.fault_text else ""
     event(drive_id, kind, f"{kind.value}{code}{text}", code=new.fault_code)
     return kind

@@ -10,11 +10,13 @@ CiA 301/402 tables (adapters/canopen/codec/codes.py).
 
 from __future__ import annotations
 
+import functools
+
 from adapters.canopen.codec import cia402
 from adapters.canopen.codec.cia402 import State
 from adapters.canopen.codec.codes import emcy_text
 from adapters.canopen.master.control import Want
-from adapters.canopen.options import DriveOptions
+from adapters.canopen.options import DriveOptions, Mode
 from gateway.model import DesiredCommand, Direction, DriveStatus, Readings
 
 MOVING_RPM = 1.0  # |speed| above which a drive that is not enabled is still stopping
@@ -43,6 +45,17 @@ def want(desired: DesiredCommand, opts: DriveOptions) -> Want:
         coast=desired.coast_stop,
         target=raw,
     )
+
+
+@functools.lru_cache(maxsize=64)
+def speed_base(mode: Mode, max_rpm: float, speed_scale: float) -> str:
+    """What 100 % speed is, with its value and the object the speed is written to:
+    ``"100 % = max_rpm 1800 rpm; 0x6042 in rpm"`` (vl), ``"100 % = max_rpm 1500 rpm;
+    0x60FF = rpm x 10"`` (pv with ``speed_scale = 10``). Made once per drive's settings,
+    not per TPDO1."""
+    target = "0x6042" if mode is Mode.VELOCITY else "0x60FF"
+    unit = "in rpm" if speed_scale == 1.0 else f"= rpm x {speed_scale:g}"
+    return f"100 % = max_rpm {max_rpm:g} rpm; {target} {unit}"
 
 
 def status_of(state: State | None, speed_rpm: float) -> DriveStatus:
@@ -95,7 +108,7 @@ def readings(
         "speed_ref_pct": round(100.0 * ref / opts.max_rpm, 2) if desired.run else 0.0,
         "fault_code": fault_code if faulted else None,
         "fault_text": emcy_text(fault_code) if faulted and fault_code is not None else None,
-        "speed_base": "max_rpm",
+        "speed_base": speed_base(opts.mode, opts.max_rpm, opts.speed_scale),
     }
     extras = dict(zip((v.index for v in opts.extras), values[1:], strict=False))
     current = extras.get(cia402.CURRENT_ACTUAL)

@@ -25,6 +25,7 @@ import signal
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from adapters.profibus.codec.fdl import MAX_STATION, StationType
@@ -252,6 +253,7 @@ class GsdMatch:
     gsd: Any  # adapters.profibus.codec.gsd.Gsd
     modules: tuple[str, ...] | None
     cfg: bytes | None
+    by_sizes: bool = False  # the module has the slave's I/O sizes, in other identifier bytes
 
 
 def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
@@ -265,7 +267,37 @@ def match_gsd(directory: str | None, info: SlaveInfo) -> GsdMatch | None:
         modules = match_modules(gsd, info.cfg) if info.cfg else None
         if modules is not None:
             return GsdMatch(gsd, tuple(m.name for m in modules), info.cfg)
+    for gsd in files:  # a compact station's one module of the same I/O sizes
+        sized = module_of_sizes(gsd, info.cfg)
+        if sized is not None:
+            return GsdMatch(gsd, (sized,), info.cfg, by_sizes=True)
     return GsdMatch(files[0], None, info.cfg) if files else None
+
+
+def _sizes(cfg: bytes) -> tuple[int, int] | None:
+    from adapters.profibus.codec.chkcfg import (
+        decode_identifiers,
+        total_input_bytes,
+        total_output_bytes,
+    )
+
+    try:
+        ids = decode_identifiers(cfg)
+    except ValueError:
+        return None
+    return total_input_bytes(ids), total_output_bytes(ids)
+
+
+def module_of_sizes(gsd: Any, cfg: bytes | None) -> str | None:
+    """The one module of a compact station (``Modular_Station = 0``) with the I/O sizes of
+    ``cfg``, written in other identifier bytes (a slave not yet configured answers Get_Cfg
+    with its own default form: the simulated CFW-11 ``F1``, its GSD module ``C0 C1 C1``),
+    or None (no such module, several, or a modular station)."""
+    if not cfg or gsd.modular:
+        return None
+    sizes = _sizes(cfg)
+    same = [m.name for m in gsd.modules if sizes is not None and _sizes(m.config) == sizes]
+    return same[0] if len(same) == 1 else None
 
 
 def _station_text(station: StationType, info: SlaveInfo | None, match: GsdMatch | None) -> str:
@@ -323,14 +355,19 @@ def stanza(address: int, match: GsdMatch) -> str:
         f'id = "station{address}"',
         f'device = "{device.value}"' if device else 'device = ""  # not a model the gateway knows',
         f"address = {address}",
-        f"gsd = {json.dumps(str(match.gsd.path))}",
+        f"gsd = {json.dumps(str(Path(match.gsd.path).resolve()))}",  # pasted anywhere
     ]
-    if match.modules is None:
-        cfg = match.cfg.hex(" ").upper() if match.cfg else "none"
-        lines.append(f'module = ""  # the slave\'s configuration {cfg} is no module of the GSD')
+    cfg = match.cfg.hex(" ").upper() if match.cfg else "none"
+    if match.modules is None:  # no module line: pasted, check-config names the modules
+        known = ", ".join(json.dumps(m.name) for m in match.gsd.modules) or "none"
+        lines.append(f"# module: the slave's configuration {cfg} is no module of the GSD;")
+        lines.append(f"# give the one the drive is set for: {known}")
         return "\n".join(lines) + "\n"
     if len(match.modules) == 1 and not match.gsd.modular:
-        lines.append(f"module = {json.dumps(match.modules[0])}")
+        line = f"module = {json.dumps(match.modules[0])}"
+        if match.by_sizes:
+            line += f"  # its I/O sizes; the slave answered {cfg}"
+        lines.append(line)
     else:
         lines.append(f"modules = {json.dumps(list(match.modules))}")
     ids = decode_identifiers(match.cfg or b"")

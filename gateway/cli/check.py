@@ -4,6 +4,7 @@ safety warnings and what is left to fill in; and the loading both commands share
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import sys
 from pathlib import Path
 from typing import Any
@@ -46,8 +47,9 @@ def add_check_config(sub: Any) -> None:
         "check-config",
         help="validate a config file, list its drives and what is left to fill in",
         description="Check a config file as `run` would and list its drives; then list what "
-        "is left to fill in: a CHANGE-ME, no drive, a line without drives, a serial port or "
-        "CAN interface this machine does not have.",
+        "is left to fill in: a value still CHANGE-ME, a modbus.allow network of the "
+        "documentation ranges (the template's example), no drive, a line without drives, a "
+        "serial port or CAN interface this machine does not have.",
         epilog="exit status: 0 ok; 1 valid, but something is left to fill in; 2 errors (each "
         "with the file, the key and the reason).",
     )
@@ -62,21 +64,68 @@ def add_check_config(sub: Any) -> None:
 
 
 PLACEHOLDER = "CHANGE-ME"
-"""What config/site.example.toml marks as left to fill in."""
+"""What config/site.example.toml marks as left to fill in (in a value: a comment that says
+CHANGE-ME is text, not a value still to change)."""
+
+EXAMPLE_NETWORKS = tuple(
+    ipaddress.ip_network(n)
+    for n in ("192.0.2.0/24", "198.51.100.0/24", "203.0.113.0/24", "2001:db8::/32")
+)
+"""The documentation networks (RFC 5737, RFC 3849): the template's example ``allow``; no
+plant's PLCs are in them."""
+
+
+def code_part(line: str) -> str:
+    """``line`` without its TOML comment (a ``#`` outside a string)."""
+    quote = ""
+    escaped = False
+    for i, char in enumerate(line):
+        if quote:
+            if escaped:
+                escaped = False
+            elif char == "\\" and quote == '"':
+                escaped = True
+            elif char == quote:
+                quote = ""
+        elif char in "\"'":
+            quote = char
+        elif char == "#":
+            return line[:i]
+    return line
+
+
+def _placeholders(text: str) -> list[str]:
+    """Each value that still says CHANGE-ME, by line and key (a continued array: the key
+    it continues)."""
+    todo = []
+    table = key = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        code = code_part(line).strip()
+        if code.startswith("["):
+            table, key = code.strip("[]").strip(), ""
+            continue
+        name, equals, _ = code.partition("=")
+        if equals and not name.strip().startswith(('"', "'")):
+            key = name.strip()
+        if PLACEHOLDER in code:
+            todo.append(f"line {number}: {table}.{key}: replace {PLACEHOLDER}")
+    return todo
+
+
+def _example_networks(config: Config) -> list[str]:
+    return [
+        f"modbus.allow: {net} is a documentation network (the template's example): "
+        "give the PLC/HMI networks"
+        for net in config.modbus.allow
+        if any(net.version == doc.version and net.subnet_of(doc) for doc in EXAMPLE_NETWORKS)  # type: ignore[arg-type]
+    ]
 
 
 def left_to_fill(config: Config, text: str) -> list[str]:
     """What a valid config still lacks before it runs a real line (the site template's
-    CHANGE-ME marks, no drives, a port or CAN interface this machine does not have)."""
-    todo = []
-    table = ""
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if stripped.startswith("["):
-            table = stripped.strip("[]").strip()
-        elif PLACEHOLDER in line and not stripped.startswith("#"):
-            key = stripped.split("=", 1)[0].strip()
-            todo.append(f"line {number}: {table}.{key}: replace {PLACEHOLDER}")
+    CHANGE-ME values and example networks, no drives, a port or CAN interface this
+    machine does not have)."""
+    todo = _placeholders(text) + _example_networks(config)
     if not config.drives:
         todo.append(
             "no drive is configured: uncomment the examples under [buses.<name>] "

@@ -166,7 +166,7 @@ def man_page(parser: argparse.ArgumentParser) -> str:
     out = [
         f'.TH DRIVE\\-GATEWAY 1 "{date}" "{PROG} {__version__}" "User Commands"',
         ".SH NAME",
-        f"{PROG} \\- Profibus DP and DeviceNet drives on Zenoh and Modbus TCP",
+        f"{PROG} \\- Profibus DP, DeviceNet and CANopen drives on Zenoh and Modbus TCP",
         ".SH SYNOPSIS",
         f".B {PROG}",
         "COMMAND [OPTIONS] ...",

@@ -22,7 +22,7 @@ from typing import Any, TextIO
 import zenoh
 
 from gateway import paramsbackup as pb
-from gateway.adapter import ParamTable, ParamValue
+from gateway.adapter import ParamValue
 from gateway.cli.tools import (
     EXIT_FAILED,
     EXIT_NO_GATEWAY,
@@ -310,8 +310,9 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
     def body(s: zenoh.Session) -> int:
         remote = Remote(s, args.prefix, args.other)
-        _require_online(remote.state())
-        table = _table_of(left)
+        described = remote.describe()
+        _require_online(described.get("state") or remote.state())
+        table = pb.reading_table(pb.table_from_json(described.get("table", [])), left)
         progress = ProgressOut(f"read {args.other}")
         entries = asyncio.run(
             pb.read_all([p.key for p in left.params], table, remote.read, progress)
@@ -319,16 +320,6 @@ def cmd_diff(args: argparse.Namespace) -> int:
         return _report_diff(args, pb.compare(left.params, entries), f"drive {args.other}")
 
     return _run(args, body)
-
-
-def _table_of(backup: pb.Backup) -> ParamTable:
-    """Names and units as the file gives them (the drive's table at backup time)."""
-    from gateway.adapter import ParamInfo, param_table
-
-    return param_table(
-        ParamInfo(e.number, e.name, e.unit, code=e.code)
-        for e in {e.number: e for e in backup.params if e.name}.values()
-    )
 
 
 def _report_diff(args: argparse.Namespace, rows: list[pb.DiffRow], right: str) -> int:
@@ -376,7 +367,7 @@ def cmd_restore(args: argparse.Namespace) -> int:
         why = pb.not_stopped(state)
         if why is not None:
             return fail(f"restore refused: {why}")
-        table = pb.table_from_json(described.get("table", [])) or _table_of(backup)
+        table = pb.reading_table(pb.table_from_json(described.get("table", [])), backup)
         progress = ProgressOut(f"read {args.drive}")
         entries = asyncio.run(
             pb.read_all([p.key for p in backup.params], table, remote.read, progress)

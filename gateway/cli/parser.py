@@ -76,7 +76,7 @@ def apply_formatter(parser: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Profibus DP and DeviceNet drives on Zenoh and Modbus TCP.",
+        description="Profibus DP, DeviceNet and CANopen drives on Zenoh and Modbus TCP.",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -32,6 +32,7 @@ from typing import Any, TextIO
 import zenoh
 
 from gateway.config import parse_param_ref, read_zenoh_config_file
+from gateway.devices import code_text
 from gateway.errors import ConfigError, GatewayError
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -132,7 +133,10 @@ def session(endpoint: str) -> Iterator[zenoh.Session]:
         s.close()
 
 
-def add_common(p: argparse.ArgumentParser) -> None:
+JSON_HELP = "print JSON instead of text (default: text)"
+
+
+def add_common(p: argparse.ArgumentParser, json_help: str = JSON_HELP) -> None:
     """``--connect``, ``--prefix``, ``--zenoh-config`` and ``--json`` of every tool."""
     p.add_argument(
         "--connect",
@@ -151,10 +155,40 @@ def add_common(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="a Zenoh JSON5 client config (TLS certificates for a secured gateway; default: none)",
     )
-    p.add_argument("--json", action="store_true", help="print JSON instead of text (default: text)")
+    p.add_argument("--json", action="store_true", help=json_help)
 
 
 _common = add_common
+
+
+def add_common_after(p: argparse.ArgumentParser) -> None:
+    """The options of :func:`add_common` once more on a sub-subcommand (``param DRIVE read``),
+    so they may come anywhere on the line; given there they win, absent they leave the
+    values given before (or the defaults) as they are."""
+    before = "default: as given before the drive, else"
+    for flags, kwargs in (
+        (
+            ("--connect",),
+            {
+                "metavar": "ENDPOINT",
+                "help": f"the gateway's Zenoh endpoint ({before} {DEFAULT_CONNECT})",
+            },
+        ),
+        (("--prefix",), {"help": f"the gateway's zenoh.prefix ({before} {DEFAULT_PREFIX})"}),
+        (
+            ("--zenoh-config",),
+            {
+                "type": _use_config_file,
+                "metavar": "FILE",
+                "help": f"a Zenoh JSON5 client config ({before} none)",
+            },
+        ),
+        (
+            ("--json",),
+            {"action": "store_true", "help": f"print JSON instead of text ({before} text)"},
+        ),
+    ):
+        p.add_argument(*flags, default=argparse.SUPPRESS, **kwargs)
 
 
 def _use_config_file(path: str) -> str:
@@ -206,6 +240,19 @@ def query(endpoint: str, key: str, payload: Any | None = None) -> Any:
             return query_in(s, key, payload)
         except RuntimeError:
             raise RuntimeError(f"no answer on {key} from {endpoint}") from None
+
+
+def query_or_no_gateway(args: argparse.Namespace, key: str, payload: Any | None = None) -> Any:
+    """:func:`query_in` on a session of its own; when nothing answers, :class:`NoGateway`
+    (exit 3) if the gateway's liveliness token is not there either, else RuntimeError (a
+    gateway that does not answer this key: exit 1)."""
+    with session(args.connect) as s:
+        try:
+            return query_in(s, key, payload)
+        except RuntimeError:
+            if not gateway_alive(s, args.prefix):
+                raise NoGateway(no_gateway_text(args)) from None
+            raise RuntimeError(f"no answer on {key} from {args.connect}") from None
 
 
 def query_all(s: zenoh.Session, key: str, timeout: float = QUERY_TIMEOUT) -> list[Any]:
@@ -267,15 +314,24 @@ def add_health(sub: Any) -> None:
         "health",
         help="the gateway's health: live lists and cycle figures",
         description="Ask the gateway for its health: name, version, uptime, drives, per "
-        "bus the live list and cycle figures (always JSON).",
+        "bus the live list and cycle figures. The answer is printed as JSON, with or "
+        "without --json.",
+        epilog="exit status: 0 answered; 1 the gateway did not answer the health query; "
+        "3 no gateway answers.",
     )
-    _common(p)
+    _common(
+        p,
+        json_help="accepted for scripts that give it to every tool; the health is "
+        "always printed as JSON",
+    )
     p.set_defaults(handler=cmd_health)
 
 
 def cmd_health(args: argparse.Namespace) -> int:
     try:
-        doc = query(args.connect, f"{args.prefix}/gateway/health")
+        doc = query_or_no_gateway(args, f"{args.prefix}/gateway/health")
+    except NoGateway as exc:
+        return fail(str(exc), EXIT_NO_GATEWAY)
     except RuntimeError as exc:
         return fail(str(exc))
     _print_json(doc)
@@ -328,6 +384,15 @@ def build_command(args: argparse.Namespace) -> dict[str, Any]:
     return command
 
 
+def _code(state: dict[str, Any], name: str) -> str:
+    """A code of a state JSON as the drive's documents write it (``0x8130`` for CANopen)."""
+    code = state.get(name)
+    if isinstance(code, bool) or not isinstance(code, int):
+        return str(code)
+    device = state.get("device")
+    return code_text(device if isinstance(device, str) else None, code)
+
+
 def state_line(s: dict[str, Any]) -> str:
     """``cfw11: online running forward 900 rpm (ref 900 rpm) remote`` and the fault."""
     parts = [str(s.get("comm")), str(s.get("status")), str(s.get("direction"))]
@@ -337,7 +402,7 @@ def state_line(s: dict[str, Any]) -> str:
         parts.append(f"(ref {s['speed_ref_rpm']:.0f} rpm)")
     parts.append("remote" if s.get("remote") else "local")
     if s.get("fault_code") is not None:
-        parts.append(f"fault {s['fault_code']} {s.get('fault_text') or ''}".rstrip())
+        parts.append(f"fault {_code(s, 'fault_code')} {s.get('fault_text') or ''}".rstrip())
     return f"{s.get('id')}: " + " ".join(parts)
 
 
@@ -346,7 +411,7 @@ def why_not(s: dict[str, Any], action: str, wait: float) -> str:
     if s.get("comm") != "online":
         return f"the drive is not online (comm {s.get('comm')})"
     if s.get("status") in ("faulted", "tripped") and action != "reset":
-        return f"the drive is {s.get('status')} ({s.get('fault_code')} {s.get('fault_text')})"
+        return f"the drive is {s.get('status')} ({_code(s, 'fault_code')} {s.get('fault_text')})"
     if not s.get("remote") and action not in ("remote", "local"):
         return "the drive is not in remote: the network is not in control of it"
     return f"it did not within {wait:g} s"
@@ -466,7 +531,10 @@ def add_param(sub: Any) -> None:
         "param",
         help="read or write one drive parameter",
         description="Read or write one parameter through the gateway's params service "
-        "(writes only to the drive's writable_params).",
+        "(writes only to the drive's writable_params). --connect, --prefix, --zenoh-config "
+        "and --json may come before or after the drive.",
+        epilog="exit status: 0 done; 1 refused by the gateway or the drive, or no answer "
+        "for this drive; 2 usage; 3 no gateway answers.",
     )
     _common(p)
     p.add_argument("drive", help="the drive's id")
@@ -474,12 +542,14 @@ def add_param(sub: Any) -> None:
     r = ops.add_parser("read", help="read a parameter", description="Read a parameter.")
     r.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     r.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
+    add_common_after(r)
     w = ops.add_parser(
         "write", help="write a parameter (raw value)", description="Write a parameter."
     )
     w.add_argument("number", type=param_ref, help="the parameter: 100, P0100, 0x6083 or 0x2000:1")
     w.add_argument("value", type=float, help="the raw value (P0100 = 2.0 s is 20)")
     w.add_argument("--subindex", type=int, default=0, help="subindex (default: %(default)s)")
+    add_common_after(w)
     p.set_defaults(handler=cmd_param)
 
 
@@ -527,7 +597,9 @@ def cmd_param(args: argparse.Namespace) -> int:
         value: float | int = int(args.value) if args.value.is_integer() else args.value
         payload = {"value": value}
     try:
-        answer = query(args.connect, key, payload)
+        answer = query_or_no_gateway(args, key, payload)
+    except NoGateway as exc:
+        return fail(str(exc), EXIT_NO_GATEWAY)
     except RuntimeError as exc:
         return fail(str(exc))
     if args.json:
@@ -613,7 +685,7 @@ class Board:
             current = "-"
         fault = "-"
         if d.get("fault_code") is not None:
-            fault = f"{d['fault_code']} {d.get('fault_text') or ''}".strip()
+            fault = f"{_code(d, 'fault_code')} {d.get('fault_text') or ''}".strip()
         comm = d.get("comm", "?")
         if d["id"] not in self.alive and comm == "online":
             comm = "gone"

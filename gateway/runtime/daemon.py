@@ -151,6 +151,7 @@ class Runtime:
             "drives": len(self.config.drives),
             "drive_ids": [d.id for d in self.config.drives],
             "online": sum(1 for s in self.hub.states() if s.online),
+            "faulted": sum(1 for s in self.hub.states() if s.online and s.faulted),
             "buses": buses,
         }
 

@@ -60,6 +60,8 @@ from gateway.web.admission import (
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
 from gateway.web.hosts import host_admitted, origin_admitted, shown
 from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
+from gateway.web.page import check_template
+from gateway.web.page import render as render_page
 from gateway.web.tokens import TokenFailures
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
 from gateway.webconfig import LOOPBACK
@@ -158,6 +160,7 @@ class WebFrontEnd:
         self.request_log = RequestLog(self.refusals)
         self.tokens = TokenFailures(self.limits.token_failures, self.limits.token_window)
         self.static = load_static()
+        check_template(self.static["/"][0].decode("utf-8"))
         self.address: tuple[str, int] | None = None
         self.ready = asyncio.Event()  # set while the server listens
         self._writers: set[asyncio.Task[None]] = set()
@@ -335,6 +338,8 @@ class WebFrontEnd:
 
     async def _static(self, request: web.Request) -> web.Response:
         body, content_type = self.static[request.path]
+        if request.path == "/":  # the drives as they are now, shown before the script runs
+            body = render_page(body.decode("utf-8"), self.runtime).encode("utf-8")
         return web.Response(body=body, content_type=content_type, charset="utf-8")
 
     async def _no_icon(self, request: web.Request) -> web.Response:

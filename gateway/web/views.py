@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from gateway.devices import code_text
 from gateway.frontend import RuntimeView
 from gateway.model import DriveState
 from gateway.web.history import current_unit
@@ -122,9 +123,13 @@ def _scalars(diag: Mapping[str, Any]) -> dict[str, Any]:
 
 def drive_row(runtime: RuntimeView, state: DriveState) -> dict[str, Any]:
     """One drive as the table and ``/api/drives`` show it: the state's JSON, the unit of
-    its current in the trend and the command it is given."""
+    its current in the trend, its fault and alarm codes as its documents write them
+    (``fault_code_text``: ``0x8130`` for a CANopen EMCY code) and the command it is given."""
     row = state.to_json()
     row["current_unit"] = current_unit(state)
+    for name in ("fault_code", "alarm_code"):  # as the device's documents write them
+        code = getattr(state, name)
+        row[f"{name}_text"] = None if code is None else code_text(state.device, code)
     row["desired"] = runtime.hub.desired(state.id).to_json()
     return row
 

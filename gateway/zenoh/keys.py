@@ -136,7 +136,8 @@ KEYS: tuple[KeySpec, ...] = (
         KeyKind.HEALTH,
         "{prefix}/gateway/health",
         (Role.QUERYABLE,),
-        "JSON: name, version, uptime_s, drives, online, per bus live list and cycle figures",
+        "JSON: name, version, uptime_s, drives, online, faulted (online and faulted or "
+        "tripped), per bus live list and cycle figures",
         "reply",
         "The gateway's health (`Runtime.health()`).",
     ),
@@ -282,6 +283,96 @@ def _table(header: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> list[str
     return lines
 
 
+ZENOH_SERIES = "1.10"
+"""The Zenoh release the gateway is built with (pyproject.toml pins eclipse-zenoh to it; a
+test holds the two equal)."""
+
+CLIENT_EXAMPLE = """\
+import itertools
+import json
+
+import zenoh  # pip install "eclipse-zenoh>=1.10,<1.11"
+
+ENDPOINT = "tcp/127.0.0.1:7447"  # the gateway's zenoh.listen
+PREFIX = "demo"  # the gateway's zenoh.prefix
+DRIVE = "cfw11"
+
+conf = zenoh.Config()
+conf.insert_json5("mode", '"peer"')
+conf.insert_json5("connect/endpoints", json.dumps([ENDPOINT]))
+conf.insert_json5("listen/endpoints", "[]")
+conf.insert_json5("scouting/multicast/enabled", "false")
+session = zenoh.open(conf)
+
+# This client's identity, sent with every put and query: the id of a publisher it declares
+# (its session's Zenoh id) and a sequence number. Without it, the gateway takes every such
+# client for one and the same "anonymous" client.
+me = session.declare_publisher(f"{PREFIX}/drives/{DRIVE}/command")
+sequence = itertools.count(1)
+
+
+def source() -> zenoh.SourceInfo:
+    return zenoh.SourceInfo(me.id, next(sequence))
+
+
+def query(key: str, payload: object = None) -> object:
+    \"\"\"The gateway's one reply, as JSON.\"\"\"
+    options = {"source_info": source(), "timeout": 10.0}
+    if payload is not None:
+        options["payload"] = json.dumps(payload)
+    for reply in session.get(key, **options):
+        if reply.ok is not None:
+            return json.loads(reply.ok.payload.to_string())
+        return json.loads(reply.err.payload.to_string())  # {"error": "..."}
+    raise TimeoutError(f"no answer on {key}: is the gateway running?")
+
+
+print("state", query(f"{PREFIX}/drives/{DRIVE}/state"))
+# a command as a query gets one reply: {"accepted": true} or the reason it was refused;
+# {"run": true, "speed_rpm": 900} would start the motor
+print("command", query(f"{PREFIX}/drives/{DRIVE}/command", {"run": False}))
+print("P100", query(f"{PREFIX}/drives/{DRIVE}/params/100"))
+# a command as a put (no reply; a refusal goes to the drive's events key)
+me.put(json.dumps({"run": False}), source_info=source())
+session.close()
+"""
+"""A client in Python, as docs/zenoh-keys.md shows it (a test runs it against a gateway)."""
+
+
+def _client_section() -> list[str]:
+    return [
+        "## Clients",
+        "",
+        f"The gateway is built with Zenoh {ZENOH_SERIES} (the Python binding eclipse-zenoh "
+        f"{ZENOH_SERIES}.x, on the Zenoh {ZENOH_SERIES} protocol): give clients the same "
+        "release; another release may not talk to it.",
+        "",
+        "**Every client sends its source info** with each put and query "
+        "(`source_info=zenoh.SourceInfo(publisher.id, sequence_number)`: the id of a "
+        "publisher the client declares, which carries its session's Zenoh id). The gateway "
+        'tells clients apart by it (docs/operations.md, "Control belongs to a client"): '
+        "only the client in control feeds a drive's command watchdog, with "
+        '`control = "any"` a command from another client takes control and the drive '
+        "stops until that client sends run, and the state names the client in "
+        "`control_client`. A put or query without source info is the `anonymous` client: "
+        "every client that sends none is that same one client, so one of them takes over "
+        "another's drive without the stop, and its keep-alive feeds the watchdog of a motor "
+        "another one started. "
+        "`drive-gateway cmd`, `param` and `params` send it.",
+        "",
+        "A client in Python (read a state, send a command as a query and as a put, read a "
+        "parameter):",
+        "",
+        "```python",
+        *CLIENT_EXAMPLE.rstrip("\n").split("\n"),
+        "```",
+        "",
+        "`drive-gateway watch`, `cmd`, `param` and `params` are such clients "
+        "(gateway/cli/tools.py).",
+        "",
+    ]
+
+
 def render_markdown() -> str:
     """docs/zenoh-keys.md, generated from the tables of this module."""
     out = [
@@ -308,6 +399,7 @@ def render_markdown() -> str:
     out.append("")
     for spec in KEYS:
         out += [f"### `{_display(spec.template)}`", "", _display(spec.summary), ""]
+    out += _client_section()
     out += ["## Command fields", ""]
     out += _table(("field", "meaning"), [(f"`{n}`", COMMAND_FIELD_DOC[n]) for n in COMMAND_FIELDS])
     out += [

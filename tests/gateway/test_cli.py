@@ -38,11 +38,47 @@ def test_no_command_prints_help_and_fails(capsys: pytest.CaptureFixture[str]) ->
     assert "run" in capsys.readouterr().err
 
 
-def test_run_defaults_to_the_demo_config() -> None:
-    from gateway.cli.parser import build_parser
+def test_run_defaults_to_the_demo_config_and_says_so_loudly(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No --config: the simulated demo runs, with a banner on stderr and a WARNING in the
+    log at start (a new user must not take it for a real line)."""
+    import logging
 
-    args = build_parser().parse_args(["run"])
-    assert args.config.endswith("config/demo.toml")
+    import gateway.runtime.daemon
+    from gateway.cli import run as run_cli
+    from gateway.config import shipped_file
+
+    ran: list[str] = []
+
+    def fake_run(config: object) -> int:
+        ran.append(str(getattr(config, "path", "")))
+        return 0
+
+    def leave(status: int) -> None:
+        raise SystemExit(status)
+
+    monkeypatch.setattr(gateway.runtime.daemon, "run", fake_run)
+    monkeypatch.setattr(run_cli, "_leave_process", leave)
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    try:
+        with pytest.raises(SystemExit):
+            main(["run"])
+        err = capsys.readouterr().err
+        with pytest.raises(SystemExit):
+            main(["run", "--config", str(shipped_file("demo.toml"))])
+        quiet = capsys.readouterr().err
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
+        run_cli.set_library_level("WARNING")
+    assert len(ran) == 2
+    banner, *rest = err.splitlines()
+    assert banner.startswith("*** no --config given: running the SIMULATED demo (")
+    assert "config/demo.toml" in banner
+    assert any("WARNING gateway.cli: no --config given" in line for line in rest), err
+    assert "SIMULATED" not in quiet  # a config given, even the demo's: no banner
 
 
 # ------------------------------------------------------------------ cmd against a gateway

@@ -38,7 +38,28 @@ def test_an_alarm_event_has_the_devices_text_when_its_adapter_gives_one() -> Non
         hub.update("d", alarm=True, alarm_code=140)  # not in the table: its number only
         alarms = [(e.text, e.data) for e in sub.drain() if e.kind is EventKind.ALARM]
     assert alarms == [
-        ("alarm None", {"code": None}),
+        ("alarm", {"code": None}),  # the code not read yet: no "None" in the text
         ("alarm 139: Profibus DP interface offline", {"code": 139}),
         ("alarm 140", {"code": 140}),
     ]
+
+
+def test_a_canopen_drive_s_codes_are_in_hex_as_cia_301_writes_them() -> None:
+    """EMCY 0x8130 (heartbeat or life guard error), never 33072: in the fault and alarm
+    events, and in the refusal of a run command while faulted."""
+    import pytest
+
+    from gateway.errors import CommandRejected
+    from gateway.model import DriveCommand, Source
+
+    hub = Hub(clock=lambda: 0.0, wallclock=lambda: 0.0)
+    hub.add_drive(DriveState(id="co", device=Device.CIA402, bus="b", address=5), DrivePolicy())
+    hub.update("co", comm=CommState.ONLINE, status=DriveStatus.READY)
+    with hub.subscribe_events() as sub:
+        hub.update("co", alarm=True, alarm_code=0x4210)
+        hub.update("co", status=DriveStatus.FAULTED, fault_code=0x8130, fault_text="life guard")
+        texts = [(e.text, e.data) for e in sub.drain() if e.kind is not EventKind.COMM]
+    assert ("alarm 0x4210", {"code": 0x4210}) in texts
+    assert ("fault 0x8130: life guard", {"code": 33072}) in texts  # the JSON keeps a number
+    with pytest.raises(CommandRejected, match=r"faulted 0x8130 \(life guard\)"):
+        hub.submit("co", Source.ZENOH, DriveCommand(run=True))

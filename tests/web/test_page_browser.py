@@ -18,7 +18,7 @@ import pytest
 import pytest_asyncio
 from playwright.async_api import Page, async_playwright
 
-from gateway.model import CommState, DriveStatus, Source
+from gateway.model import CommState, Device, DriveState, DriveStatus, Source
 from gateway.web.feed import PUSH_PERIOD
 from tests.support.simulated import sim_runner
 from tests.support.timing import scaled
@@ -103,6 +103,7 @@ async def rows(page: Page) -> list[str]:
 
 async def open_page(page: Page, url: str, drives: int) -> None:
     await page.goto(url)
+    await page.wait_for_selector('#drives-body[data-rendered="feed"]', timeout=WAIT_MS)
     await page.wait_for_function(
         f"document.querySelectorAll('#drives-body tr').length === {drives}", timeout=WAIT_MS
     )
@@ -266,3 +267,27 @@ async def test_local_control_no_failsafe_and_doubtful_show_beside_the_status(pag
         assert title is not None and "P0313 = 0" in title
         assert await page.locator(status.format("d2", "local")).count() == 0
         await screenshot(page, "safety-badges")
+
+
+async def test_the_header_counts_faulted_drives_and_a_canopen_code_is_hex(page: Page) -> None:
+    async with small_gateway(web_section(), drives=("d1", "d2", "d3")) as gw:
+        gw.hub.add_drive(DriveState(id="co", device=Device.CIA402, bus="can", address=5))
+        gw.hub.update("co", comm=CommState.ONLINE, status=DriveStatus.FAULTED, fault_code=0x8130)
+        gw.hub.update("d3", comm=CommState.OFFLINE)
+        await open_page(page, gw.url, 4)
+        await page.wait_for_function(
+            "document.querySelector('#summary').textContent"
+            ".startsWith('4 drives: 2 ok, 1 faulted, 1 offline')",
+            timeout=WAIT_MS,
+        )
+        fault = page.locator('#drives-body tr[data-drive="co"] td[data-col="fault"]')
+        assert await fault.text_content() == "0x8130"
+        gw.hub.update("d2", status=DriveStatus.TRIPPED, fault_code=26)  # a later update
+        await page.wait_for_function(
+            "document.querySelector('#summary').textContent"
+            ".startsWith('4 drives: 1 ok, 2 faulted, 1 offline')",
+            timeout=WAIT_MS,
+        )
+        row = page.locator('#drives-body tr[data-drive="d2"] td[data-col="fault"]')
+        assert await row.text_content() == "26"
+        await screenshot(page, "counts")

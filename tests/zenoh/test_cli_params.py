@@ -230,6 +230,8 @@ def test_diff_and_restore_a_weg_drive(gw: GatewayProcess, tmp_path: Path) -> Non
     assert diff.returncode == 1, diff.stderr
     rows = {line.split()[0]: line for line in diff.stdout.splitlines()[1:-1]}
     assert set(rows) == {"P0100", "P0134"} and "differs" in rows["P0100"]
+    file_side, drive_side = f"{p100 / 10} s", f"{(p100 + 7) / 10} s"  # both in the unit
+    assert rows["P0100"].split()[3:8] == [*file_side.split(), *drive_side.split(), "differs"]
     assert diff.stdout.splitlines()[-1] == "2 of 3 parameter(s) differ"
 
     dry = tool(gw, "params", "restore", str(file), "cfw11", "--dry-run", "--json")

@@ -77,9 +77,7 @@ function renderDrive(d) {
     ? num(d.current_a, 2) + " A"
     : (d.current_pct_flc !== null && d.current_pct_flc !== undefined ? num(d.current_pct_flc, 0) + " %FLC" : "–");
   const fault = cell(tr, "fault"); fault.className = "fault";
-  fault.textContent = d.fault_code === null || d.fault_code === undefined
-    ? (d.alarm ? `alarm ${d.alarm_code ?? ""}` : "")
-    : `${d.fault_code}${d.fault_text ? ": " + d.fault_text : ""}`;
+  fault.textContent = faultText(d);
   const control = cell(tr, "control");
   control.textContent = d.control_source === "none"
     ? "–" : `${d.control_source}${d.control_client ? " " + d.control_client : ""}`;
@@ -87,6 +85,14 @@ function renderDrive(d) {
   cell(tr, "age").dataset.ts = d.ts;
   cell(tr, "age").textContent = ageText(d.ts);
   if (S.commands) renderCommands(tr, d);
+}
+
+// The codes as the device's documents write them (0x8130 for a CANopen EMCY code).
+function faultText(d) {
+  if (d.fault_code === null || d.fault_code === undefined) {
+    return d.alarm ? `alarm ${d.alarm_code_text ?? d.alarm_code ?? ""}`.trimEnd() : "";
+  }
+  return `${d.fault_code_text ?? d.fault_code}${d.fault_text ? ": " + d.fault_text : ""}`;
 }
 
 // Issue 32: what limits the gateway's command of a drive, said beside its status.
@@ -234,11 +240,30 @@ function addEvents(events, replace) {
   $("events").replaceChildren(...S.events.slice().reverse().map(eventItem));
 }
 
+// The header's counts, from the drives' own states (gateway/web/page.py says the same in
+// the first HTML): a faulted drive is online but not ok.
+function summaryText() {
+  const c = {drives: 0, ok: 0, faulted: 0, offline: 0};
+  for (const d of S.drives.values()) {
+    c.drives++;
+    if (d.comm !== "online") c.offline++;
+    else if (d.status === "faulted" || d.status === "tripped") c.faulted++;
+    else c.ok++;
+  }
+  return `${c.drives} drives: ${c.ok} ok, ${c.faulted} faulted, ${c.offline} offline`;
+}
+
+function renderSummary() {
+  const up = S.startedAt === undefined ? "" : ` · up ${ageText(S.startedAt)}`;
+  $("summary").textContent = summaryText() + up;
+}
+
 function renderHealth(h) {
   if (!h || !h.name) return;
-  $("summary").textContent = `${h.online} of ${h.drives} drives online · up ${ageText(serverNow() - h.uptime_s)}`;
+  S.startedAt = serverNow() - h.uptime_s;
+  renderSummary();
   const rows = [["name", h.name], ["version", h.version], ["uptime", `${num(h.uptime_s, 0)} s`],
-    ["drives", h.drives], ["online", h.online]];
+    ["drives", h.drives], ["online", h.online], ["of them faulted", h.faulted]];
   for (const [bus, b] of Object.entries(h.buses || {})) {
     rows.push([`bus ${bus}`, `${b.adapter}, live: ${(b.live || []).join(", ") || "none"}, restarts ${b.restarts}`]);
   }
@@ -371,6 +396,7 @@ function onSnapshot(m) {
   renderHead();
   renderCommandBar();
   $("drives-body").replaceChildren();
+  $("drives-body").dataset.rendered = "feed";  // the server's first rows replaced
   S.drives.clear();
   for (const d of m.drives) {
     S.drives.set(d.id, d); renderDrive(d);
@@ -379,11 +405,13 @@ function onSnapshot(m) {
   addEvents(m.events, true);
   renderBuses(m.buses);
   renderHealth(m.health);
+  renderSummary();
   loadHistory();
 }
 
 function onUpdate(m) {
   for (const d of m.drives || []) { S.drives.set(d.id, d); renderDrive(d); trendFor(d.id).unit = d.current_unit; }
+  if (m.drives && m.drives.length) renderSummary();
   for (const [id, p] of Object.entries(m.points || {})) addPoint(id, p);
   if (m.events) addEvents(m.events, false);
   if (m.buses) renderBuses(m.buses);
