@@ -4,7 +4,9 @@ moved aside.
 The recorder (gateway/history/recorder.py, on the daemon's loop) hands samples and events
 over with :meth:`HistoryWriter.offer`, which never waits: when :data:`QUEUE_LIMIT` items
 wait, the item is dropped and counted (``dropped``). The thread writes what waited, in
-one transaction, every ``batch_interval`` seconds: a power cut loses at most that batch.
+one transaction, every ``batch_interval`` seconds, and checkpoints the WAL after it (in WAL
+mode ``synchronous=NORMAL`` syncs at checkpoints only): a power cut loses at most that
+batch.
 Every :data:`PRUNE_EVERY` seconds (and once at start) it deletes what is older than
 ``max_age`` and, while the file uses more than ``max_size_mb``, the oldest tenth.
 
@@ -214,6 +216,7 @@ class HistoryWriter:
             return
         try:
             self._db.write(samples, events)
+            self._db.checkpoint()  # synchronous=NORMAL syncs the WAL at checkpoints only
         except sqlite3.Error as exc:
             self.counters.failed += len(samples) + len(events)
             if _is_corrupt(exc):
