@@ -33,7 +33,7 @@ def add_history(sub: Any) -> None:
     p.add_argument("--end", default="", help="until (default: now)")
     p.add_argument("--step", default="", help="average per bucket of this duration (15m, 60)")
     p.add_argument("--events", action="store_true", help="the events instead of the readings")
-    p.add_argument("--format", choices=("csv", "json"), default="csv")
+    p.add_argument("--format", choices=("csv", "json"), default="csv", help="output format")
     p.set_defaults(handler=cmd_history)
 
 

@@ -13,16 +13,19 @@ it takes, and nothing is read.
 
 from __future__ import annotations
 
+import asyncio
 import math
 import re
-from collections.abc import Mapping, Sequence
+import threading
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 from gateway.errors import HistoryError
 from gateway.history.store import READINGS, HistoryRow, check_range
 
+T = TypeVar("T")
 DEFAULT_SPAN = 3600.0  # s of a query without start
 PARAMETERS = ("start", "end", "step")
 _UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
@@ -106,3 +109,29 @@ def columns_json(drive_id: str, asked: HistoryRange, rows: Sequence[HistoryRow])
         "t": [r.t for r in rows],
         "values": {n: [r.values.get(n) for r in rows] for n in names},
     }
+
+
+async def off_loop(fn: Callable[[], T]) -> T:
+    """``fn()`` (a query of the file) on a thread of its own, awaited from the loop: the
+    loop never waits on the file, and no pool of threads outlives the front end."""
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[T] = loop.create_future()
+
+    def settle(result: T | None, error: BaseException | None) -> None:
+        if done.done():
+            return
+        if error is not None:
+            done.set_exception(error)
+        else:
+            done.set_result(result)  # type: ignore[arg-type]
+
+    def work() -> None:
+        try:
+            result = fn()
+        except Exception as exc:
+            loop.call_soon_threadsafe(settle, None, exc)
+        else:
+            loop.call_soon_threadsafe(settle, result, None)
+
+    threading.Thread(target=work, name="history-query", daemon=True).start()
+    return await done

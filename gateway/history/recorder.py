@@ -14,10 +14,12 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from gateway.adapter import Event, EventKind
 from gateway.config import HistorySection
+from gateway.history.query import off_loop
 from gateway.history.store import HistoryEvent, HistoryStore, samples_of
 from gateway.history.writer import HistoryWriter, Retention
 from gateway.hub import EventSubscription, Hub
@@ -69,7 +71,7 @@ class HistoryRecorder:
         finally:
             self._take_events(events)
             events.close()
-            await asyncio.to_thread(self.writer.stop, STOP_TIMEOUT)
+            await off_loop(partial(self.writer.stop, STOP_TIMEOUT))
 
     async def _record(self, events: EventSubscription) -> None:
         period = self.section.period

@@ -36,6 +36,7 @@ import re
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from functools import partial
 from importlib import resources
 from typing import Any
 
@@ -47,7 +48,7 @@ from gateway import jsontext
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, HistoryError, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
-from gateway.history.query import columns_json, parse_range
+from gateway.history.query import columns_json, off_loop, parse_range
 from gateway.model import DriveCommand, Source, client_label
 from gateway.web.admission import (
     AdmissionSite,
@@ -482,8 +483,8 @@ class WebFrontEnd:
             store = self.runtime.history
             if store is None:
                 return _json(ring_json(self.feed.history, state.id, asked))
-            rows = await asyncio.to_thread(
-                store.readings, state.id, asked.start, asked.end, asked.step
+            rows = await off_loop(
+                partial(store.readings, state.id, asked.start, asked.end, asked.step)
             )
         except HistoryError as exc:
             return _json({"error": str(exc)}, 400)

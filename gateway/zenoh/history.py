@@ -2,7 +2,7 @@
 end=...;step=...`` (docs/zenoh-keys.md), answered from the gateway's history store.
 
 The parameters are checked on the loop (a bad one is answered at once with an error reply
-naming it); the file is read on a thread of the default executor, never on the loop; at
+naming it); the file is read on a thread of its own, never on the loop; at
 most :data:`HISTORY_REQUEST_LIMIT` are under way at once, one more is refused as busy.
 """
 
@@ -11,10 +11,17 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from functools import partial
 
 from gateway.errors import HistoryError
 from gateway.frontend import RuntimeView
-from gateway.history.query import HistoryRange, columns_json, parse_range, split_parameters
+from gateway.history.query import (
+    HistoryRange,
+    columns_json,
+    off_loop,
+    parse_range,
+    split_parameters,
+)
 from gateway.history.store import HistoryStore
 from gateway.zenoh.keys import KeySpace, is_concrete
 from gateway.zenoh.replies import Pending, Replies
@@ -74,8 +81,8 @@ class HistoryQueries:
         self, pending: Pending, store: HistoryStore, drive_id: str, asked: HistoryRange
     ) -> None:
         try:
-            rows = await asyncio.to_thread(
-                store.readings, drive_id, asked.start, asked.end, asked.step
+            rows = await off_loop(
+                partial(store.readings, drive_id, asked.start, asked.end, asked.step)
             )
         except asyncio.CancelledError:
             self._replies.refuse(pending, "the gateway is shutting down")
