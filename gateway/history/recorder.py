@@ -42,12 +42,12 @@ class HistoryRecorder:
         self.hub = hub
         self.section = section
         self.clock = clock
-        self.store = HistoryStore(section.path)
         self.writer = HistoryWriter(
             section.path,
             Retention(section.max_age, int(section.max_size_mb * 1024 * 1024)),
             batch_interval=section.batch_interval,
         )
+        self.store = HistoryStore(section.path, counters=self.writer.counters)
         self._loop: asyncio.AbstractEventLoop | None = None
 
     async def run(self) -> None:

@@ -128,6 +128,21 @@ class Sample:
     values: Values
 
 
+@dataclass
+class WriterCounters:
+    """What the writer thread (gateway/history/writer.py) has counted since it started."""
+
+    batches: int = 0
+    samples: int = 0
+    events: int = 0
+    samples_dropped: int = 0  # refused by the full queue
+    events_dropped: int = 0
+    samples_failed: int = 0  # in batches that could not be written
+    events_failed: int = 0
+    moved_aside: int = 0
+    pruned: int = 0  # rows deleted by retention
+
+
 # ---------------------------------------------------------------- the writer's connection
 
 
@@ -337,13 +352,26 @@ class HistoryStore:
     A file not there yet has no rows. Each query opens the file read-only for itself.
     """
 
-    def __init__(self, path: Path | str, max_rows: int = MAX_ROWS) -> None:
+    def __init__(
+        self, path: Path | str, max_rows: int = MAX_ROWS, counters: WriterCounters | None = None
+    ) -> None:
         self.path = Path(path)
         self.max_rows = max_rows
+        self.counters = counters
+        """The writer's counters in a running gateway (``/metrics``), else None."""
 
     def _reader(self) -> sqlite3.Connection | None:
+        """A read-only connection, or None while there is no file or no schema yet (the
+        writer creates both when it starts)."""
         if not self.path.exists():
             return None
+        conn = self._connect()
+        if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'events'").fetchone() is None:
+            conn.close()
+            return None
+        return conn
+
+    def _connect(self) -> sqlite3.Connection:
         conn = sqlite3.connect(
             f"{self.path.resolve().as_uri()}?mode=ro",
             uri=True,

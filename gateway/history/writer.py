@@ -28,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from gateway.history.store import HistoryDb, HistoryEvent, Sample, move_aside
+from gateway.history.store import HistoryDb, HistoryEvent, Sample, WriterCounters, move_aside
 
 log = logging.getLogger(__name__)
 
@@ -45,17 +45,6 @@ OnMoved = Callable[[Path, Path, str], None]
 class Retention:
     max_age: float  # s
     max_bytes: int
-
-
-@dataclass
-class WriterCounters:
-    batches: int = 0
-    samples: int = 0
-    events: int = 0
-    dropped: int = 0  # items the full queue refused
-    failed: int = 0  # items of batches that could not be written
-    moved_aside: int = 0
-    pruned: int = 0  # rows deleted by retention
 
 
 _CORRUPT_CODES = (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB)
@@ -106,7 +95,10 @@ class HistoryWriter:
         try:
             self._queue.put_nowait(item)
         except queue.Full:
-            self.counters.dropped += 1
+            if isinstance(item, HistoryEvent):
+                self.counters.events_dropped += 1
+            else:
+                self.counters.samples_dropped += len(item)
             return False
         return True
 
@@ -211,14 +203,13 @@ class HistoryWriter:
 
     def _write(self, samples: list[Sample], events: list[HistoryEvent]) -> None:
         if (not samples and not events) or self._db is None:
-            if samples or events:
-                self.counters.failed += len(samples) + len(events)
+            self._failed(samples, events)
             return
         try:
             self._db.write(samples, events)
             self._db.checkpoint()  # synchronous=NORMAL syncs the WAL at checkpoints only
         except sqlite3.Error as exc:
-            self.counters.failed += len(samples) + len(events)
+            self._failed(samples, events)
             if _is_corrupt(exc):
                 self._move_aside(str(exc))
             else:
@@ -227,6 +218,10 @@ class HistoryWriter:
         self.counters.batches += 1
         self.counters.samples += len(samples)
         self.counters.events += len(events)
+
+    def _failed(self, samples: list[Sample], events: list[HistoryEvent]) -> None:
+        self.counters.samples_failed += len(samples)
+        self.counters.events_failed += len(events)
 
     def _maybe_prune(self) -> None:
         now = self.clock()

@@ -67,6 +67,19 @@ def running(tmp_path: Path) -> Iterator[Callable[[], GatewayProcess]]:
         gw.stop()
 
 
+def connected(endpoint: str) -> Client:
+    """A client session that sees the gateway (its liveliness token): its queries and puts
+    reach the gateway's queryables and subscriber."""
+    client = Client(endpoint)
+    try:
+        with client.liveliness(f"{PREFIX}/gateway") as live:
+            live.until(lambda got: got.put, TIMEOUT)
+    except BaseException:
+        client.close()
+        raise
+    return client
+
+
 def until(condition: Callable[[], bool], what: str, within: float = TIMEOUT) -> None:
     """Until ``condition()`` holds (the writer's commits, seen in the file), bounded."""
     deadline = time.monotonic() + within
@@ -91,7 +104,7 @@ def test_history_survives_a_restart_and_is_served_on_zenoh(
     assert any("gateway shutting down" in text for text in shut), shut  # the last events too
     gw = running()
     until(lambda: len(samples(store)) >= len(before) + 10, "10 more samples after a restart")
-    client = Client(gw.endpoint)
+    client = connected(gw.endpoint)
     try:
         reply = client.query(f"{PREFIX}/drives/d1/history?start=0", timeout=scaled(10))
         assert len(reply) == 1 and reply[0].ok, reply
@@ -120,7 +133,7 @@ def test_history_survives_a_restart_and_is_served_on_zenoh(
 def test_bad_history_queries_get_an_error_reply_naming_the_problem(
     history_gateway: Running, selector: str, error: str
 ) -> None:
-    client = Client(history_gateway.process.endpoint)
+    client = connected(history_gateway.process.endpoint)
     try:
         replies = client.query(f"{PREFIX}/drives/{selector}", timeout=scaled(10))
     finally:
@@ -165,7 +178,7 @@ def advanced(session: zenoh.Session, key: str, inbox: Inbox[str]) -> object:
 
 def refuse(endpoint: str, texts: list[str]) -> None:
     """One refused command per text (each its own event: no two fold into one)."""
-    commander = Client(endpoint)
+    commander = connected(endpoint)
     try:
         for text in texts:
             commander.put(f"{PREFIX}/drives/d2/command", {text: 1})

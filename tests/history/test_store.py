@@ -132,7 +132,7 @@ def test_the_writer_commits_in_batches_and_counts_what_the_full_queue_refused(
     writer = HistoryWriter(path, KEEP, batch_interval=0.05, limit=3)
     for i in range(5):  # not started: the queue fills
         writer.offer([speed("a", T0 + i, float(i))])
-    assert writer.counters.dropped == 2
+    assert writer.counters.samples_dropped == 2
     writer.start()
     assert writer.opened.wait(scaled(10))
     writer.stop(scaled(10))  # what waited is written before the thread ends

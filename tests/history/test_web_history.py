@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from gateway.history.store import READINGS, HistoryDb, HistoryStore, Sample
+from gateway.history.store import READINGS, HistoryDb, HistoryStore, Sample, WriterCounters
 from tests.web.harness import small_gateway, web_section
 
 NOW = time.time()
@@ -51,3 +51,15 @@ async def test_without_history_the_ring_answers() -> None:
             assert r.status == 200
             body = await r.json()
         assert body["values"]["speed_rpm"] == [120.0]
+
+
+async def test_the_writers_counters_in_metrics(tmp_path: Path) -> None:
+    async with small_gateway(web_section()) as gw:
+        counters = WriterCounters(samples=7, samples_dropped=2, events=3, moved_aside=1)
+        gw.runtime.history = HistoryStore(tmp_path / "h.sqlite", counters=counters)
+        async with gw.http.get(f"{gw.url}metrics") as r:
+            text = await r.text()
+    assert 'drive_gateway_history_samples_total{result="written"} 7.0' in text
+    assert 'drive_gateway_history_samples_total{result="dropped"} 2.0' in text
+    assert 'drive_gateway_history_events_total{result="written"} 3.0' in text
+    assert "drive_gateway_history_moved_aside_total 1.0" in text
