@@ -51,6 +51,7 @@ READINGS: tuple[str, ...] = (
 SCHEMA_VERSION = 1
 MAX_ROWS = 100_000
 """Rows one query may answer; beyond it the query is refused with the step that fits."""
+WAL_LIMIT = 8 << 20  # bytes the WAL file is cut back to after a checkpoint
 BUSY_TIMEOUT = 5.0  # s a connection waits for a lock (a checkpoint) before it fails
 
 _COLUMNS = ", ".join(f"{name} REAL" for name in READINGS)
@@ -184,6 +185,7 @@ class HistoryDb:
         if mode is None or str(mode[0]).lower() != "wal":
             raise sqlite3.DatabaseError(f"journal mode {mode!r}, not WAL")
         conn.execute("PRAGMA synchronous = NORMAL")
+        conn.execute(f"PRAGMA journal_size_limit = {WAL_LIMIT}")  # the WAL shrinks back to it
         version = conn.execute("PRAGMA user_version").fetchone()[0]
         if version not in (0, SCHEMA_VERSION):
             raise sqlite3.DatabaseError(

@@ -102,6 +102,11 @@ class HistoryWriter:
             return False
         return True
 
+    @property
+    def waiting(self) -> int:
+        """Items handed over and not yet taken by the thread."""
+        return self._queue.qsize()
+
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="history-writer", daemon=True)
         self._thread.start()
