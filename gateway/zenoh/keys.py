@@ -436,6 +436,12 @@ def render_markdown() -> str:
         "database. The key expressions are Zenoh's own, so a plant router with a storage "
         "on `<prefix>/**` in front of the gateway keeps and answers them the same way.",
         "",
+        "The advanced publishers' own keys are under `@adv` (`<prefix>/drives/<id>/events/"
+        "@adv/pub/...`: their liveliness tokens, heartbeats and caches), which `**` does "
+        "not match: with access control, allow `<prefix>/drives/*/*/@adv/**` for "
+        "subscribers, queries and liveliness, and replies on the events and state keys, "
+        "as config/zenoh-secure.json5 does for both of its identities.",
+        "",
     ]
     return "\n".join(out)
 
