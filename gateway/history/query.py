@@ -5,7 +5,8 @@ A time is seconds since the epoch (``1767225600``, ``1767225600.5``), an ISO 860
 time (``2026-01-01T00:00:00Z``, ``2026-01-01T01:00+01:00``; one without an offset is UTC),
 ``now``, or ``now-<duration>``. A duration (``step``, and after ``now-``) is seconds
 (``60``, ``0.5``) or a number with a unit: ``s``, ``m``, ``h``, ``d`` (``15m``, ``1d``).
-Without ``end`` the range ends now; without ``start`` it begins :data:`DEFAULT_SPAN`
+``events`` (no value) asks for the range's events instead of the readings. Without
+``end`` the range ends now; without ``start`` it begins :data:`DEFAULT_SPAN`
 before its end; without ``step`` every sample is answered. Anything else is refused with a
 :class:`~gateway.errors.HistoryError` that names the parameter, what it got and the forms
 it takes, and nothing is read.
@@ -23,11 +24,11 @@ from datetime import UTC, datetime
 from typing import Any, TypeVar
 
 from gateway.errors import HistoryError
-from gateway.history.store import READINGS, HistoryRow, check_range
+from gateway.history.store import READINGS, HistoryEvent, HistoryRow, HistoryStore, check_range
 
 T = TypeVar("T")
 DEFAULT_SPAN = 3600.0  # s of a query without start
-PARAMETERS = ("start", "end", "step")
+PARAMETERS = ("start", "end", "step", "events")
 _UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
 _DURATION = re.compile(r"(\d+(?:\.\d*)?|\.\d+)\s*([smhd]?)")
 _NUMBER = re.compile(r"[+-]?(\d+(?:\.\d*)?|\.\d+)")
@@ -43,6 +44,8 @@ class HistoryRange:
     start: float
     end: float
     step: float | None = None
+    events: bool = False
+    """The events of the range instead of the readings (``events`` without a value)."""
 
 
 def parse_duration(text: str, name: str) -> float:
@@ -88,13 +91,29 @@ def parse_range(params: Mapping[str, str], now: float) -> HistoryRange:
     unknown = sorted(set(params) - set(PARAMETERS))
     if unknown:
         raise HistoryError(
-            f"unknown parameter(s) {', '.join(unknown)}: a history query takes start, end and step"
+            f"unknown parameter(s) {', '.join(unknown)}: a history query takes start, end, "
+            "step and events"
         )
+    events = "events" in params
+    if events and (params["events"] or params.get("step")):
+        raise HistoryError("events takes no value and no step: the events of a range, each one")
     end = parse_time(params["end"], "end", now) if params.get("end") else now
     start = parse_time(params["start"], "start", now) if params.get("start") else end - DEFAULT_SPAN
     step = parse_duration(params["step"], "step") if params.get("step") else None
     check_range(start, end, step)
-    return HistoryRange(start, end, step)
+    return HistoryRange(start, end, step, events)
+
+
+def events_json(
+    drive_id: str, asked: HistoryRange, events: Sequence[HistoryEvent]
+) -> dict[str, Any]:
+    """The answer to an events query: each event as the events key published it."""
+    return {
+        "drive": drive_id,
+        "start": asked.start,
+        "end": asked.end,
+        "events": [e.to_json() for e in events],
+    }
 
 
 def columns_json(drive_id: str, asked: HistoryRange, rows: Sequence[HistoryRow]) -> dict[str, Any]:
@@ -135,3 +154,11 @@ async def off_loop(fn: Callable[[], T]) -> T:
 
     threading.Thread(target=work, name="history-query", daemon=True).start()
     return await done
+
+
+def answer(store: HistoryStore, drive_id: str, asked: HistoryRange) -> dict[str, Any]:
+    """The JSON answer to a history query of one drive (on a thread: it reads the file)."""
+    if asked.events:
+        return events_json(drive_id, asked, store.events(drive_id, asked.start, asked.end))
+    rows = store.readings(drive_id, asked.start, asked.end, asked.step)
+    return columns_json(drive_id, asked, rows)

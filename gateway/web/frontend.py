@@ -48,7 +48,7 @@ from gateway import jsontext
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, HistoryError, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
-from gateway.history.query import columns_json, off_loop, parse_range
+from gateway.history.query import answer, off_loop, parse_range
 from gateway.model import DriveCommand, Source, client_label
 from gateway.web.admission import (
     AdmissionSite,
@@ -481,14 +481,14 @@ class WebFrontEnd:
         try:
             asked = parse_range(dict(request.query), time.time())
             store = self.runtime.history
+            if store is None and asked.events:
+                raise HistoryError("this gateway keeps no history of events ([history] is off)")
             if store is None:
                 return _json(ring_json(self.feed.history, state.id, asked))
-            rows = await off_loop(
-                partial(store.readings, state.id, asked.start, asked.end, asked.step)
-            )
+            body = await off_loop(partial(answer, store, state.id, asked))
         except HistoryError as exc:
             return _json({"error": str(exc)}, 400)
-        return _json(columns_json(state.id, asked, rows))
+        return _json(body)
 
     # ------------------------------------------------------------ commands
 

@@ -17,7 +17,7 @@ from gateway.errors import HistoryError
 from gateway.frontend import RuntimeView
 from gateway.history.query import (
     HistoryRange,
-    columns_json,
+    answer,
     off_loop,
     parse_range,
     split_parameters,
@@ -81,9 +81,7 @@ class HistoryQueries:
         self, pending: Pending, store: HistoryStore, drive_id: str, asked: HistoryRange
     ) -> None:
         try:
-            rows = await off_loop(
-                partial(store.readings, drive_id, asked.start, asked.end, asked.step)
-            )
+            body = await off_loop(partial(answer, store, drive_id, asked))
         except asyncio.CancelledError:
             self._replies.refuse(pending, "the gateway is shutting down")
             raise
@@ -93,5 +91,4 @@ class HistoryQueries:
             log.exception("history query of %s failed", drive_id)
             self._replies.answer(pending, [Answer.error(error_body(exc))])
         else:
-            body = columns_json(drive_id, asked, rows)
             self._replies.answer(pending, [Answer.reply(pending.incoming.key, body)])

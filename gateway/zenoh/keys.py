@@ -147,7 +147,7 @@ KEYS: tuple[KeySpec, ...] = (
         KeyKind.HISTORY,
         "{prefix}/drives/{id}/history",
         (Role.QUERYABLE,),
-        "selector parameters `start`, `end`, `step` (below); no payload",
+        "selector parameters `start`, `end`, `step`, `events` (below); no payload",
         'reply: `{"drive", "start", "end", "step", "t": [...], "values": {"speed_rpm": '
         '[...], ...}}`; error reply: `{"error": "..."}`',
         "The drive's readings kept in the gateway's history (`[history]` in the config): "
@@ -161,7 +161,11 @@ KEYS: tuple[KeySpec, ...] = (
         "each reading's average over the bucket. A reading no sample gives is left out; "
         "`null` where a bucket or sample has none. A bad parameter, an unknown drive, a "
         "key with wildcards or a gateway without history is answered with an error reply "
-        "naming it. Readings are sampled every `history.period` seconds.",
+        "naming it. Readings are sampled every `history.period` seconds. With `events` "
+        "(no value, no step) the answer is the drive's events of the range instead, each "
+        'as the events key published it: `{"drive", "start", "end", "events": [...]}` '
+        "(`history?events;start=now-1d`): what an advanced subscriber missed beyond the "
+        'cache (below, "Recovery").',
     ),
 )
 
@@ -409,7 +413,8 @@ def render_markdown() -> str:
         "published with Zenoh's advanced publisher (`zenoh.ext`): each keeps the last "
         "`zenoh.recovery_cache` samples of its key (events; the newest state for states), "
         "puts a sequence number on each sample, announces itself with a liveliness token "
-        "and sends a heartbeat of its last sequence number every second. An advanced "
+        "and sends its last sequence number once a second when it changed (a sporadic "
+        "heartbeat: a subscriber that missed the last sample learns of it). An advanced "
         "subscriber that comes back after a cut (or starts late) asks for what it missed "
         "and gets it, in order, up to the cache's size; a plain subscriber gets the live "
         "samples as before. A client doing it (Python, eclipse-zenoh 1.10):",
@@ -427,14 +432,17 @@ def render_markdown() -> str:
         "    recovery=RecoveryConfig(heartbeat=True),",
         "    subscriber_detection=True,",
         ")",
-        'sub.sample_miss_listener(lambda miss: print("missed", miss.nb, "beyond the cache"))',
+        "misses = sub.sample_miss_listener(",
+        '    lambda miss: print("missed", miss.nb, "samples: ask the history key for them")',
+        ")",
         "```",
         "",
         "Closed and opened again (a new session), the subscriber first gets the events "
         "kept in the cache it had not seen, then the live ones. Events lost beyond the "
-        "cache are told by the miss listener; the history key answers them from the "
-        "database. The key expressions are Zenoh's own, so a plant router with a storage "
-        "on `<prefix>/**` in front of the gateway keeps and answers them the same way.",
+        "cache are told by the miss listener; `<prefix>/drives/<id>/history?events` answers "
+        "them from the gateway's history. The key expressions are Zenoh's own, so a plant "
+        "router with a storage on `<prefix>/**` in front of the gateway keeps and answers "
+        "them the same way.",
         "",
         "The advanced publishers' own keys are under `@adv` (`<prefix>/drives/<id>/events/"
         "@adv/pub/...`: their liveliness tokens, heartbeats and caches), which `**` does "

@@ -112,6 +112,10 @@ def test_history_survives_a_restart_and_is_served_on_zenoh(
         assert body["t"][: len(before)] == before  # the first run's samples, as they were
         assert len(body["t"]) > len(before)
         assert set(body["values"]) >= {"speed_rpm"}
+        events = client.query(f"{PREFIX}/drives/d1/history?events;start=0", timeout=scaled(10))
+        assert events[0].ok, events
+        texts = [e["text"] for e in events[0].json()["events"]]
+        assert any("gateway shutting down" in t for t in texts), texts  # the first run's
         step = client.query(f"{PREFIX}/drives/d1/history?start=now-1d;step=1h", timeout=scaled(10))
         assert step[0].ok and len(step[0].json()["t"]) in (1, 2)
     finally:

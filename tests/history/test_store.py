@@ -216,6 +216,8 @@ def test_every_row_comes_back_as_it_went_in(
         ("step=nan", "step='nan' is not a duration"),
         ("start=now-x", "start='x' is not a duration"),
         ("limit=5", "unknown parameter(s) limit"),
+        ("events;step=60", "events takes no value and no step"),
+        ("events=yes", "events takes no value and no step"),
     ],
 )
 def test_bad_parameters_are_refused_by_name(text: str, error: str) -> None:
@@ -232,4 +234,5 @@ def test_the_forms_of_a_time() -> None:
     asked = parse_range(split_parameters("start=now-1d;step=60"), T0)
     assert (asked.start, asked.end, asked.step) == (T0 - 86400, T0, 60)
     assert parse_range({}, T0).start == T0 - 3600
+    assert parse_range(split_parameters("events;start=now-1h"), T0).events
     assert parse_range(split_parameters(f"start={T0}&end=2026-01-01T00:00:10"), 0).end == T0 + 10

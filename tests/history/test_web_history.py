@@ -42,6 +42,8 @@ async def test_bad_parameters_are_a_400_naming_them(tmp_path: Path) -> None:
             assert "start='soon' is not a time" in (await r.json())["error"]
         async with gw.http.get(f"{gw.url}api/drives/nope/history") as r:
             assert r.status == 404
+        async with gw.http.get(f"{gw.url}api/drives/d1/history?events&step=1") as r:
+            assert r.status == 400
 
 
 async def test_without_history_the_ring_answers() -> None:
