@@ -246,28 +246,26 @@ class HistoryDb:
         conn = self.conn
         deleted = self._delete_before(now - max_age)
         for _ in range(20):  # each pass deletes a tenth of the span: bounded work
-            if self.used_bytes() <= max_bytes:
+            oldest = self._oldest()
+            if oldest is None or self.used_bytes() <= max_bytes:
                 break
-            span = conn.execute(
-                "SELECT MIN(t), MAX(t) FROM (SELECT (SELECT MIN(t) FROM readings r "
-                "WHERE r.drive = d.id) AS t FROM drives d UNION ALL SELECT (SELECT MAX(t) "
-                "FROM readings r WHERE r.drive = d.id) FROM drives d)"
-            ).fetchone()
-            first_event = conn.execute("SELECT MIN(t) FROM events").fetchone()[0]
-            low = (
-                min(x for x in (span[0], first_event) if x is not None)
-                if (span[0] is not None or first_event is not None)
-                else None
-            )
-            high = span[1] if span[1] is not None else now
-            if low is None:
-                break
-            removed = self._delete_before(low + max((high - low) / 10, 1.0))
+            removed = self._delete_before(oldest + max((now - oldest) / 10, 1.0))
             deleted += removed
             if not removed:
                 break
         conn.execute("PRAGMA incremental_vacuum")
         return deleted
+
+    def _oldest(self) -> float | None:
+        """The time of the oldest row (each drive's first sample, the first event)."""
+        conn = self.conn
+        firsts = [
+            conn.execute("SELECT MIN(t) FROM readings WHERE drive = ?", (drive,)).fetchone()[0]
+            for (drive,) in conn.execute("SELECT id FROM drives").fetchall()
+        ]
+        firsts.append(conn.execute("SELECT MIN(t) FROM events").fetchone()[0])
+        known = [t for t in firsts if t is not None]
+        return min(known) if known else None
 
     def _delete_before(self, t: float) -> int:
         conn = self.conn
