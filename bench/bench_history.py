@@ -1,8 +1,8 @@
 """History: the write cost per reading and the query of a day of one drive.
 
 A day of synthetic 1 Hz samples of one drive (every reading given) is written as the
-writer thread writes it (gateway/history/store.py ``HistoryDb.write``, batches of one
-second of 220 drives), then queried: every sample, and downsampled with a step of 60 s
+writer thread writes it (gateway/history/store.py ``HistoryDb.write`` and a checkpoint,
+batches of one second of 220 drives), then queried: every sample, and downsampled with a step of 60 s
 (the page's trend over a day). The references, in the same run: the same rows inserted
 with a bare ``executemany`` into a table of the same shape in memory (SQLite's floor, no
 file, no minute sums), and the day's rows read with bare SQL.
@@ -34,6 +34,7 @@ def _write(db: HistoryDb, samples: list[Sample]) -> float:
     started = time.perf_counter()
     for at in range(0, len(samples), DRIVES_PER_BATCH):
         db.write(samples[at : at + DRIVES_PER_BATCH], [])
+        db.checkpoint()  # as the writer thread does after each batch
     return time.perf_counter() - started
 
 
