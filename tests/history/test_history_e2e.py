@@ -19,7 +19,7 @@ from gateway.history.store import HistoryDb, HistoryStore
 from tests.support.net import zenoh_endpoint
 from tests.support.timing import scaled
 from tests.zenoh.client import Client, Inbox, client_config
-from tests.zenoh.conftest import READY_LINE, GatewayProcess, gateway_config
+from tests.zenoh.conftest import HEARTBEAT, READY_LINE, GatewayProcess, gateway_config
 
 PREFIX = "demo"
 TIMEOUT = scaled(30.0)
@@ -32,8 +32,8 @@ class Running:
     path: Path
 
 
-def history_config(path: Path, cache: int = 100) -> str:
-    config = gateway_config().replace(
+def history_config(path: Path, cache: int = 100, heartbeat: float = HEARTBEAT) -> str:
+    config = gateway_config(heartbeat).replace(
         "multicast_scouting = false", f"multicast_scouting = false\nrecovery_cache = {cache}"
     )
     return config + (
@@ -41,9 +41,9 @@ def history_config(path: Path, cache: int = 100) -> str:
     )
 
 
-def start(tmp: Path, path: Path) -> GatewayProcess:
+def start(tmp: Path, path: Path, heartbeat: float = HEARTBEAT) -> GatewayProcess:
     cfg = tmp / "gateway.toml"
-    cfg.write_text(history_config(path))
+    cfg.write_text(history_config(path, heartbeat=heartbeat))
     gw = GatewayProcess(cfg, zenoh_endpoint())
     try:
         gw.wait_for_line(READY_LINE, TIMEOUT)
