@@ -236,3 +236,19 @@ def test_the_forms_of_a_time() -> None:
     assert parse_range({}, T0).start == T0 - 3600
     assert parse_range(split_parameters("events;start=now-1h"), T0).events
     assert parse_range(split_parameters(f"start={T0}&end=2026-01-01T00:00:10"), 0).end == T0 + 10
+
+
+def test_the_writer_prunes_by_age_as_it_goes(tmp_path: Path) -> None:
+    path = tmp_path / "h.sqlite"
+    now = T0 + 10 * 86400
+    writer = HistoryWriter(
+        path, Retention(max_age=86400, max_bytes=1 << 30), batch_interval=0.05, clock=lambda: now
+    )
+    writer.offer([speed("a", T0, 1.0), speed("a", now - 60, 2.0)])
+    writer.offer(HistoryEvent(T0, "a", "comm", "online"))
+    writer.start()
+    writer.stop(scaled(10))
+    store = HistoryStore(path)
+    assert [r.t for r in store.readings("a", 0, now)] == [now - 60]
+    assert store.events(None, 0, now) == []
+    assert writer.counters.pruned == 2
