@@ -7,6 +7,7 @@ Layout (see config/site.example.toml for every key)::
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          max_connections_per_peer, idle_timeout
     [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
+    [history]            enabled, path, period, batch_interval, max_age, max_size_mb
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -109,9 +110,27 @@ class ZenohSection:
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
     heartbeat: float = 1.0
+    recovery_cache: int = 100
+    """Events (and states) kept per drive key for subscribers that come back (0: none)."""
     config_file: Path | None = None
     config_text: str | None = field(default=None, repr=False, compare=False)
     """The text of ``config_file`` as checked at load: what Zenoh is given."""
+
+
+DEFAULT_HISTORY_PATH = Path("/var/lib/drive-gateway/history.sqlite")
+
+
+@dataclass(frozen=True, slots=True)
+class HistorySection:
+    """``[history]``: every drive's readings and every event in SQLite on the box
+    (docs/decisions/0083-history-store.md)."""
+
+    enabled: bool = False
+    path: Path = DEFAULT_HISTORY_PATH
+    period: float = 1.0  # s between two samples of every drive
+    batch_interval: float = 1.0  # s between two writes (what a power cut may lose)
+    max_age: float = 30 * 86400.0  # s a row is kept
+    max_size_mb: float = 1024.0  # MiB the file may use; beyond it the oldest rows go
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,6 +185,7 @@ class Config:
     modbus: ModbusSection = field(default_factory=ModbusSection)
     buses: tuple[BusConfig, ...] = ()
     web: WebSection = field(default_factory=WebSection)
+    history: HistorySection = field(default_factory=HistorySection)
 
     @property
     def drives(self) -> tuple[DriveConfig, ...]:
@@ -271,6 +291,7 @@ def _zenoh_section(t: Table, base: Path) -> ZenohSection:
         connect=_endpoint_list(t, "connect", d.connect),
         multicast_scouting=t.boolean("multicast_scouting", d.multicast_scouting),
         heartbeat=t.number("heartbeat", d.heartbeat, minimum=0.05, maximum=3600.0),
+        recovery_cache=t.integer("recovery_cache", d.recovery_cache, minimum=0, maximum=100_000),
         config_file=path,
         config_text=text,
     )
@@ -283,6 +304,22 @@ def _prefix(t: Table) -> str:
     if not prefix or prefix.startswith("/") or prefix.endswith("/") or "//" in prefix or bad:
         t.errors.append(t.error("prefix", f"{prefix!r} is not a valid Zenoh key prefix"))
     return prefix
+
+
+def _history_section(t: Table, base: Path) -> HistorySection:
+    d = HistorySection()
+    path_text = t.string("path", str(d.path))
+    if not path_text or "\0" in path_text:
+        t.errors.append(t.error("path", f"{path_text!r} is not a file path"))
+        path_text = str(d.path)
+    return HistorySection(
+        enabled=t.boolean("enabled", d.enabled),
+        path=Path(os.path.abspath(base / os.path.expanduser(path_text))),
+        period=t.number("period", d.period, minimum=0.05, maximum=3600.0),
+        batch_interval=t.number("batch_interval", d.batch_interval, minimum=0.05, maximum=60.0),
+        max_age=t.number("max_age", d.max_age, minimum=60.0, maximum=10 * 366 * 86400.0),
+        max_size_mb=t.number("max_size_mb", d.max_size_mb, minimum=1.0, maximum=1024.0 * 1024),
+    )
 
 
 def _modbus_section(t: Table) -> ModbusSection:
@@ -640,6 +677,7 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
     modbus = _section(root, "modbus", _modbus_section)
     web = _section(root, "web", read_web_section)
+    history = _section(root, "history", lambda t: _history_section(t, base))
     buses: list[BusConfig] = []
     for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
         bus = _read(table, partial(_bus, name), finish=False)
@@ -662,7 +700,13 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     if root.errors or gateway is None or zenoh is None or modbus is None or web is None:
         raise ConfigErrors(root.errors)
     return Config(
-        file=file, gateway=gateway, zenoh=zenoh, modbus=modbus, buses=tuple(buses), web=web
+        file=file,
+        gateway=gateway,
+        zenoh=zenoh,
+        modbus=modbus,
+        buses=tuple(buses),
+        web=web,
+        history=history or HistorySection(),
     )
 
 

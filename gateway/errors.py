@@ -111,3 +111,8 @@ class DriveOffline(GatewayError):
 
 class UnknownDrive(GatewayError, KeyError):
     """A drive id that the gateway does not have."""
+
+
+class HistoryError(GatewayError):
+    """The history store cannot serve a request (a bad time range, too many rows); the
+    text says why and what to ask instead."""

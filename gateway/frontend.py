@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from gateway.config import Config
+from gateway.history.store import HistoryStore
 from gateway.hub import Hub
 
 
@@ -97,6 +98,11 @@ class RuntimeView(Protocol):
     @property
     def front_ends(self) -> Mapping[str, FrontEnd]:
         """The running instance of each front end, by name (the web's metrics read them)."""
+        ...
+
+    @property
+    def history(self) -> HistoryStore | None:
+        """The history's queries (``[history]`` on), else None (gateway/history/store.py)."""
         ...
 
     def bus_of(self, drive_id: str) -> str: ...

@@ -206,6 +206,26 @@ def test_the_core_imports_no_subfolder_no_adapter_and_no_fieldbus_library() -> N
     assert violations(core_rule) == []
 
 
+HISTORY = "gateway.history"
+"""The core's history service (docs/decisions/0083-history-store.md): a folder of the core,
+not of CORE_SUBFOLDERS, so the front ends and the runtime read it as they read the hub."""
+
+
+def test_the_history_is_a_core_service_and_the_only_user_of_sqlite() -> None:
+    """gateway/history/ follows the core's rule (no front end, runtime, cli or adapter), and
+    nothing outside it opens the history file: sqlite3 is imported there only."""
+
+    def rule(mod: str, imp: str) -> str | None:
+        if under(imp, "sqlite3") and not under(mod, HISTORY):
+            return "the history file is opened by gateway.history only"
+        if under(mod, HISTORY) and under(imp, *CORE_SUBFOLDERS, "adapters"):
+            return "the history service imports the core only"
+        return None
+
+    assert is_core(f"{HISTORY}.store")
+    assert violations(rule) == []
+
+
 def front_end_rule(mod: str, imp: str) -> str | None:
     if not under(mod, *FRONT_ENDS):
         return None

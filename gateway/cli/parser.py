@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "param": "gateway.cli.tools:add_param",
     "params": "gateway.cli.params:add_params",
     "health": "gateway.cli.tools:add_health",
+    "history": "gateway.cli.history:add_history",
     "profibus": "adapters.profibus.cli:add_profibus",
     "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.cli.sim:add_sim",

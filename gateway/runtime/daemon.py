@@ -38,6 +38,8 @@ from gateway.adapter import EventKind
 from gateway.config import BusConfig, Config, load, load_adapter
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
 from gateway.frontend import FrontEnd, RuntimeView
+from gateway.history.recorder import HistoryRecorder
+from gateway.history.store import HistoryStore
 from gateway.hub import DrivePolicy, Hub
 from gateway.loader import load as load_target
 from gateway.loader import load_optional
@@ -109,6 +111,8 @@ class Runtime:
     restarts: dict[str, int] = field(default_factory=dict)
     front_ends: dict[str, FrontEnd] = field(default_factory=dict)
     """The running instance of each front end (the web front end's metrics read the others)."""
+    history: HistoryStore | None = None
+    """The history's queries while ``[history]`` is on (gateway/history/store.py)."""
     _diag: dict[str, tuple[float, LineThread, dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False
     )
@@ -210,6 +214,11 @@ class Daemon:
         self._started_front_ends: list[str] = []
         self.ready = asyncio.Event()
         """Set when the daemon has reported READY (its front ends serve)."""
+        self.recorder: HistoryRecorder | None = None
+        if config.history.enabled:
+            self.recorder = HistoryRecorder(self.hub, config.history)
+            self.runtime.history = self.recorder.store
+        self._history_task: asyncio.Task[None] | None = None
         self.exit_status = 0
         self.fatal: StartupError | ConfigError | None = None
         """Why the gateway could not start (then it exits with EXIT_STARTUP)."""
@@ -398,6 +407,8 @@ class Daemon:
             )
         for problem in descriptor_problems(self.config):
             log.warning("%s", problem)
+        if self.recorder is not None:  # before the front ends: it records their events too
+            self._history_task = self._spawn(self.recorder.run(), "history")
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
@@ -486,7 +497,9 @@ class Daemon:
             self._left_turning(bound)
         # Adapters first (they leave their buses cleanly on cancellation), then the rest.
         await self._cancel(self._adapter_tasks)
-        await self._cancel([t for t in self._tasks if t not in self._adapter_tasks])
+        last = [t for t in (self._history_task,) if t is not None]  # records the shutdown
+        await self._cancel([t for t in self._tasks if t not in self._adapter_tasks + last])
+        await self._cancel(last)
         log.info("drive-gateway stopped")
 
     def _left_turning(self, bound: float) -> None:

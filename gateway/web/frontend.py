@@ -36,6 +36,7 @@ import re
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from functools import partial
 from importlib import resources
 from typing import Any
 
@@ -45,8 +46,9 @@ from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
 from gateway.adapter import EventKind
-from gateway.errors import CommandRejected, StartupError, UnknownDrive
+from gateway.errors import CommandRejected, HistoryError, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
+from gateway.history.query import answer, off_loop, parse_range
 from gateway.model import DriveCommand, Source, client_label
 from gateway.web.admission import (
     AdmissionSite,
@@ -58,6 +60,7 @@ from gateway.web.admission import (
     peer_of,
 )
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
+from gateway.web.history import ring_json
 from gateway.web.hosts import host_admitted, origin_admitted, shown
 from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
 from gateway.web.page import check_template
@@ -190,6 +193,7 @@ class WebFrontEnd:
         app.router.add_get("/api/health", self._health)
         app.router.add_get("/api/drives", self._drives)
         app.router.add_get("/api/drives/{drive}", self._drive)
+        app.router.add_get("/api/drives/{drive}/history", self._drive_history)
         app.router.add_post("/api/drives/{drive}/command", self._command)
         app.router.add_get("/api/buses", self._buses)
         app.router.add_get("/api/events", self._events)
@@ -473,6 +477,23 @@ class WebFrontEnd:
         state = self._state(request)
         history = self.feed.history
         return _json({"period": history.period, "span": history.span, **history.to_json(state.id)})
+
+    async def _drive_history(self, request: web.Request) -> web.Response:
+        """``/api/drives/<id>/history?start=&end=&step=``: any time range, from the history
+        store (the forms of the Zenoh history key); without ``[history]``, the trend's
+        ring of the last 10 minutes."""
+        state = self._state(request)
+        try:
+            asked = parse_range(dict(request.query), time.time())
+            store = self.runtime.history
+            if store is None and asked.events:
+                raise HistoryError("this gateway keeps no history of events ([history] is off)")
+            if store is None:
+                return _json(ring_json(self.feed.history, state.id, asked))
+            body = await off_loop(partial(answer, store, state.id, asked))
+        except HistoryError as exc:
+            return _json({"error": str(exc)}, 400)
+        return _json(body)
 
     # ------------------------------------------------------------ commands
 

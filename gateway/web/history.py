@@ -17,6 +17,7 @@ import collections
 from collections.abc import Iterable
 from typing import Any
 
+from gateway.history.query import HistoryRange
 from gateway.model import DriveState
 
 SAMPLE_PERIOD = 0.5  # s between samples (2 Hz)
@@ -87,3 +88,18 @@ class TrendHistory:
             "span": self.span,
             "drives": {drive_id: self.to_json(drive_id) for drive_id in self._rings},
         }
+
+
+def ring_json(history: TrendHistory, drive_id: str, asked: HistoryRange) -> dict[str, Any]:
+    """The ring's samples in ``asked`` as the history store answers (columns; no
+    downsampling: the ring holds 10 minutes), for a gateway without ``[history]``."""
+    points = [p for p in history.points(drive_id) if asked.start <= p[0] < asked.end]
+    names = ("speed_rpm", "speed_ref_rpm", "current_a")
+    return {
+        "drive": drive_id,
+        "start": asked.start,
+        "end": asked.end,
+        "step": None,
+        "t": [p[0] for p in points],
+        "values": {name: [p[i + 1] for p in points] for i, name in enumerate(names)},
+    }

@@ -80,6 +80,9 @@ METRICS: dict[str, str] = {
     f"{NS}_zenoh_requests": "Zenoh requests taken, by kind (put, query).",
     f"{NS}_zenoh_commands": "Zenoh commands, by result (accepted, refused).",
     f"{NS}_zenoh_dropped": "Zenoh puts and queries dropped: the hand-over to the loop was full.",
+    f"{NS}_history_samples": "History samples by result (written, dropped, failed).",
+    f"{NS}_history_events": "History events by result (written, dropped, failed).",
+    f"{NS}_history_moved_aside": "History files moved aside as corrupt (a new one started).",
     f"{NS}_web_clients": "Web pages connected now (WebSocket).",
     f"{NS}_web_messages_dropped": "Push messages slow pages lost (each replaced by a snapshot).",
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
@@ -184,6 +187,7 @@ class GatewayCollector(Collector):
         yield from self._buses()
         yield from self._modbus()
         yield from self._zenoh()
+        yield from self._history()
         yield from self._web()
 
     def describe(self) -> Iterator[Metric]:
@@ -314,6 +318,20 @@ class GatewayCollector(Collector):
             commands.add_metric(["refused"], counted.commands_refused)
             dropped.add_metric([], counted.dropped)
         yield from (requests, commands, dropped)
+
+    def _history(self) -> Iterator[Metric]:
+        store = self.runtime.history
+        counted = None if store is None else store.counters
+        samples = _counter(f"{NS}_history_samples", ["result"])
+        events = _counter(f"{NS}_history_events", ["result"])
+        moved = _counter(f"{NS}_history_moved_aside")
+        if counted is not None:
+            for result in ("", "_dropped", "_failed"):
+                label = result.lstrip("_") or "written"
+                samples.add_metric([label], getattr(counted, f"samples{result}"))
+                events.add_metric([label], getattr(counted, f"events{result}"))
+            moved.add_metric([], counted.moved_aside)
+        yield from (samples, events, moved)
 
     def _web(self) -> Iterator[Metric]:
         clients = _gauge(f"{NS}_web_clients")

@@ -64,6 +64,7 @@ from gateway.errors import CommandRejected, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
+from gateway.zenoh.history import HistoryQueries
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
 from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
 from gateway.zenoh.params import ParamQueries
@@ -169,11 +170,13 @@ class ZenohFrontEnd:
         self.counters = ZenohCounters()
         self._replies = Replies(self._worker)
         self._params = ParamQueries(runtime, self.keys, self._drive_ids, self._replies)
+        self._history = HistoryQueries(runtime, self.keys, self._drive_ids, self._replies)
         self._handlers: dict[KeyKind, Callable[[Pending], None]] = {
             KeyKind.STATE: self._query_state,
             KeyKind.COMMAND: self._query_command,
             KeyKind.PARAM: self._params.query,
             KeyKind.HEALTH: self._query_health,
+            KeyKind.HISTORY: self._history.query,
         }
 
     @property
@@ -231,7 +234,7 @@ class ZenohFrontEnd:
         self._serving = False
         self.ready.clear()
         self._changes = {}
-        pending_tasks = [*tasks, *self._params.tasks]
+        pending_tasks = [*tasks, *self._params.tasks, *self._history.tasks]
         for task in pending_tasks:
             task.cancel()
         await asyncio.gather(*pending_tasks, return_exceptions=True)
@@ -256,7 +259,12 @@ class ZenohFrontEnd:
 
     def _io_open(self, config: Any) -> dict[str, Any]:
         self._link = ZenohLink.open(
-            config, self.keys, self._drive_ids, self._command_from_zenoh, self._query_from_zenoh
+            config,
+            self.keys,
+            self._drive_ids,
+            self._command_from_zenoh,
+            self._query_from_zenoh,
+            recovery_cache=self.section.recovery_cache,
         )
         return dict(self._link.change_publishers)
 

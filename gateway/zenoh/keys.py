@@ -28,6 +28,7 @@ class KeyKind(Enum):
     DRIVE_TOKEN = "drive token"
     GATEWAY_TOKEN = "gateway token"
     HEALTH = "health"
+    HISTORY = "history"
 
 
 class Role(Enum):
@@ -104,7 +105,9 @@ KEYS: tuple[KeySpec, ...] = (
         "event JSON: `drive`, `kind`, `text`, `ts` and kind-specific fields",
         "CongestionControl.BLOCK, in order",
         "Comm changes, faults and trips with the device's text, refused commands, "
-        "safety actions, control changes, parameter writes.",
+        "safety actions, control changes, parameter writes. Published with Zenoh's advanced "
+        "publisher: the last `zenoh.recovery_cache` events of each drive are kept, so an "
+        'advanced subscriber that was away gets what it missed (below, "Recovery").',
     ),
     KeySpec(
         KeyKind.DIAG,
@@ -140,6 +143,30 @@ KEYS: tuple[KeySpec, ...] = (
         "tripped), per bus live list and cycle figures",
         "reply",
         "The gateway's health (`Runtime.health()`).",
+    ),
+    KeySpec(
+        KeyKind.HISTORY,
+        "{prefix}/drives/{id}/history",
+        (Role.QUERYABLE,),
+        "selector parameters `start`, `end`, `step`, `events` (below); no payload",
+        'reply: `{"drive", "start", "end", "step", "t": [...], "values": {"speed_rpm": '
+        '[...], ...}}`; error reply: `{"error": "..."}`',
+        "The drive's readings kept in the gateway's history (`[history]` in the config): "
+        "`{prefix}/drives/cfw11/history?start=now-1d;step=15m`. `start` and `end` are "
+        "seconds since the epoch, ISO 8601 (`2026-01-01T00:00:00Z`; without an offset: "
+        "UTC), `now` or `now-<duration>`; `step` a duration, seconds or with a unit "
+        "(`60`, `15m`, `1h`, `1d`). Without `end` the range ends now, without `start` it "
+        "is the hour before `end`, without `step` every sample is answered (at most "
+        "100000; more is refused with the step that fits). With `step`, one row per "
+        "bucket of `step` seconds of the epoch that holds samples: its start in `t` and "
+        "each reading's average over the bucket. A reading no sample gives is left out; "
+        "`null` where a bucket or sample has none. A bad parameter, an unknown drive, a "
+        "key with wildcards or a gateway without history is answered with an error reply "
+        "naming it. Readings are sampled every `history.period` seconds. With `events` "
+        "(no value, no step) the answer is the drive's events of the range instead, each "
+        'as the events key published it: `{"drive", "start", "end", "events": [...]}` '
+        "(`history?events;start=now-1d`): what an advanced subscriber missed beyond the "
+        'cache (below, "Recovery").',
     ),
 )
 
@@ -465,9 +492,55 @@ def render_markdown() -> str:
         "or parsed (`payload of N bytes is over the limit of 4096 bytes`); JSON nested "
         "too deeply to parse is refused like any other bad command. At most 64 parameter "
         "requests are under way at once; one more is refused as busy.",
+        "- Readings and events outlive a restart in the gateway's own history (SQLite on "
+        "the box, `[history]`): `<prefix>/drives/<id>/history` above, `drive-gateway "
+        "history` on the box (docs/operations.md).",
         "- Shared memory is off in the gateway's session (Zenoh turns it on by default, and "
         "then same-host clients' large payloads map 16 MB segments in the gateway that "
         "are never given back), unless `zenoh.config_file` sets `transport.shared_memory`.",
+        "",
+        "## Recovery",
+        "",
+        "Events, and the settled states (the BLOCK puts of each drive's newest state), are "
+        "published with Zenoh's advanced publisher (`zenoh.ext`): each keeps the last "
+        "`zenoh.recovery_cache` samples of its key (events; the newest state for states), "
+        "puts a sequence number on each sample, announces itself with a liveliness token "
+        "and sends its last sequence number once a second when it changed (a sporadic "
+        "heartbeat: a subscriber that missed the last sample learns of it). An advanced "
+        "subscriber that comes back after a cut (or starts late) asks for what it missed "
+        "and gets it, in order, up to the cache's size; a plain subscriber gets the live "
+        "samples as before. A client doing it (Python, eclipse-zenoh 1.10):",
+        "",
+        "```python",
+        "import zenoh",
+        "from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber",
+        "",
+        "session = zenoh.open(config)  # connected to the gateway or to the plant's router",
+        "sub = declare_advanced_subscriber(",
+        "    session,",
+        '    "demo/drives/*/events",',
+        "    lambda sample: print(sample.payload.to_string()),",
+        "    history=HistoryConfig(detect_late_publishers=True, max_samples=100),",
+        "    recovery=RecoveryConfig(heartbeat=True),",
+        "    subscriber_detection=True,",
+        ")",
+        "misses = sub.sample_miss_listener(",
+        '    lambda miss: print("missed", miss.nb, "samples: ask the history key for them")',
+        ")",
+        "```",
+        "",
+        "Closed and opened again (a new session), the subscriber first gets the events "
+        "kept in the cache it had not seen, then the live ones. Events lost beyond the "
+        "cache are told by the miss listener; `<prefix>/drives/<id>/history?events` answers "
+        "them from the gateway's history. The key expressions are Zenoh's own, so a plant "
+        "router with a storage on `<prefix>/**` in front of the gateway keeps and answers "
+        "them the same way.",
+        "",
+        "The advanced publishers' own keys are under `@adv` (`<prefix>/drives/<id>/events/"
+        "@adv/pub/...`: their liveliness tokens, heartbeats and caches), which `**` does "
+        "not match: with access control, allow `<prefix>/drives/*/*/@adv/**` for "
+        "subscribers, queries and liveliness, and replies on the events and state keys, "
+        "as config/zenoh-secure.json5 does for both of its identities.",
         "",
     ]
     return "\n".join(out)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
+from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
 from gateway.model import client_label
 from gateway.zenoh.keys import KeyKind, KeySpace
@@ -27,6 +28,9 @@ log = logging.getLogger(__name__)
 JSON = zenoh.Encoding.APPLICATION_JSON
 BLOCK = zenoh.CongestionControl.BLOCK
 DROP = zenoh.CongestionControl.DROP
+RECOVERY_HEARTBEAT = 1.0
+"""s between two heartbeats of an advanced publisher's last sequence number (sent only when
+it changed): a subscriber that missed a drive's last sample asks for it within this."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +100,8 @@ class ZenohLink:
         drive_ids: Sequence[str],
         on_command: CommandSink,
         on_query: QuerySink,
+        *,
+        recovery_cache: int = 0,
     ) -> None:
         self.session = session
         self.keys = keys
@@ -106,10 +112,11 @@ class ZenohLink:
         self._tokens: dict[str, Any] = {}
         self._gateway_token: Any = None
         self._publishers: dict[tuple[KeyKind, str], Any] = {}
+        caches = {KeyKind.EVENTS: recovery_cache, KeyKind.STATE: min(recovery_cache, 1)}
         for drive_id in drive_ids:
             for kind in (KeyKind.STATE, KeyKind.EVENTS, KeyKind.DIAG):
-                self._publishers[kind, drive_id] = session.declare_publisher(
-                    keys.key(kind, drive_id), encoding=JSON, congestion_control=BLOCK
+                self._publishers[kind, drive_id] = self._publisher(
+                    keys.key(kind, drive_id), caches.get(kind, 0)
                 )
         self.change_publishers: dict[str, Any] = {
             drive_id: session.declare_publisher(
@@ -121,9 +128,26 @@ class ZenohLink:
         self._entities: list[Any] = [
             session.declare_subscriber(keys.all_drives(KeyKind.COMMAND), self._command_sample)
         ]
-        for kind in (KeyKind.STATE, KeyKind.COMMAND, KeyKind.PARAM):
+        for kind in (KeyKind.STATE, KeyKind.COMMAND, KeyKind.PARAM, KeyKind.HISTORY):
             self._entities.append(self._queryable(keys.all_drives(kind), kind))
         self._entities.append(self._queryable(keys.key(KeyKind.HEALTH), KeyKind.HEALTH))
+
+    def _publisher(self, key: str, cache: int) -> Any:
+        """A BLOCK publisher; with ``cache``, Zenoh's advanced publisher keeping the last
+        ``cache`` samples for subscribers that come back (docs/zenoh-keys.md, "Recovery")."""
+        if cache <= 0:
+            return self.session.declare_publisher(key, encoding=JSON, congestion_control=BLOCK)
+        return declare_advanced_publisher(
+            self.session,
+            key,
+            encoding=JSON,
+            congestion_control=BLOCK,
+            cache=CacheConfig(cache),
+            sample_miss_detection=MissDetectionConfig(
+                heartbeat=None, sporadic_heartbeat=RECOVERY_HEARTBEAT
+            ),
+            publisher_detection=True,
+        )
 
     @classmethod
     def open(
@@ -133,10 +157,14 @@ class ZenohLink:
         drive_ids: Sequence[str],
         on_command: CommandSink,
         on_query: QuerySink,
+        *,
+        recovery_cache: int = 0,
     ) -> ZenohLink:
         session = open_session(config)  # StartupError names the cause and the fix
         try:
-            return cls(session, keys, drive_ids, on_command, on_query)
+            return cls(
+                session, keys, drive_ids, on_command, on_query, recovery_cache=recovery_cache
+            )
         except BaseException:
             session.close()
             raise

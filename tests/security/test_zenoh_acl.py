@@ -20,6 +20,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +28,12 @@ from typing import Any
 
 import pytest
 import zenoh
+from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from tests.security.pki import Identity, TestCA
 from tests.support.net import free_port
 from tests.support.plugins import pythonpath
+from tests.support.timing import scaled
 from tests.zenoh.client import Client, Got, Inbox
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,6 +45,7 @@ PLACEHOLDER_LISTEN = "tls/0.0.0.0:7447"
 HEARTBEAT = 0.2
 READY_LINE = "zenoh front end serving"
 RUN_900 = {"run": True, "speed_rpm": 900}
+TIMEOUT = scaled(30.0)
 DRIVES = ("d1", "d2", "d3", "d4")
 READONLY_DRIVE = {"client": "d1", "peer": "d4"}  # a drive per session mode
 
@@ -87,6 +91,11 @@ heartbeat = {HEARTBEAT}
 config_file = "zenoh-secure.json5"
 [modbus]
 enabled = false
+[history]
+enabled = true
+path = "history.sqlite"
+period = 0.1
+batch_interval = 0.1
 [buses.line1]
 adapter = "{FAKE}"
 cycle = 0.01
@@ -358,6 +367,41 @@ def test_operator_identity_writes_allowed_parameters_and_events_reach_read_only(
     assert not refused.ok
     assert refused.json() == {"error": "parameter 2 is not in writable_params of drive d2"}
     assert operator.one(key("d2", "params/2")).json()["value"] == 0
+
+
+def test_read_only_identity_recovers_missed_events_and_reads_the_history(
+    site: Site, readonly: Scada, operator: Scada
+) -> None:
+    """Events the read-only identity was away for come back to its advanced subscriber
+    from the gateway's cache (the @adv keys the example allows), and it may query the
+    history key."""
+    marker = f"acl{time.monotonic_ns()}"
+    texts = [f"{marker}_{i}" for i in range(5)]
+    with operator.subscribe(key("d2", "events")) as published:
+        round_trip(operator)
+        for text in texts:  # each refused with its own text: an event each
+            operator.put(key("d2", "command"), {text: 1})
+        seen: list[str] = []  # published while the read-only identity had no subscriber
+        while sum(marker in t for t in seen) < len(texts):
+            seen.append(published.get(timeout=TIMEOUT).json()["text"])
+    back: Inbox[str] = Inbox()
+    sub = declare_advanced_subscriber(
+        readonly.session,
+        key("d2", "events"),
+        lambda sample: back.push(json.loads(sample.payload.to_string())["text"]),
+        history=HistoryConfig(detect_late_publishers=True, max_samples=100),
+        recovery=RecoveryConfig(periodic_queries=None, heartbeat=True),
+        subscriber_detection=True,
+    )
+    try:
+        got: list[str] = []
+        while sum(marker in t for t in got) < len(texts):
+            got.append(back.get(timeout=TIMEOUT))
+    finally:
+        sub.undeclare()
+    assert [t.split(": ")[-1] for t in got if marker in t] == texts
+    history = readonly.one(f"{key('d1', 'history')}?start=now-1h")
+    assert history.ok and history.json()["drive"] == "d1", history
 
 
 def test_an_identity_the_config_does_not_name_gets_nothing(site: Site, operator: Scada) -> None:

@@ -375,6 +375,7 @@ function drawTrends() {
 }
 
 async function loadHistory() {
+  if (S.range) { loadRange(); return; }
   try {
     const r = await fetch("/api/history");
     const h = await r.json();
@@ -383,6 +384,39 @@ async function loadHistory() {
     for (const [id, hist] of Object.entries(h.drives)) setHistory(id, hist);
     requestAnimationFrame(drawTrends);
   } catch (e) { /* the next snapshot asks again */ }
+}
+
+// The trend over a longer range (the select beside the heading): the gateway's history,
+// averaged per bucket (/api/drives/<id>/history); the live points are added as they come.
+S.range = 0;  // s chosen beyond the 10-minute ring; 0: the ring
+
+function column(h, name) { return (h.values && h.values[name]) || h.t.map(() => null); }
+
+async function loadRange() {
+  const range = S.range;
+  const step = Math.max(1, Math.round(range / 600));
+  S.span = range;
+  for (const id of S.drives.keys()) {
+    try {
+      const r = await fetch(`/api/drives/${encodeURIComponent(id)}/history?start=now-${range}&step=${step}`);
+      if (!r.ok || S.range !== range) continue;
+      const h = await r.json();
+      const amps = Boolean(h.values.current_a);
+      setHistory(id, {
+        t: h.t, speed: column(h, "speed_rpm"), ref: column(h, "speed_ref_rpm"),
+        current: column(h, amps ? "current_a" : "current_pct_flc"),
+        current_unit: amps || !h.values.current_pct_flc ? trendFor(id).unit : "%FLC",
+      });
+    } catch (e) { /* the next refresh asks again */ }
+  }
+  $("trend-span").textContent = `averages per ${step} s from the gateway's history`;
+  requestAnimationFrame(drawTrends);
+}
+
+function chooseRange() {
+  S.range = Number($("trend-range").value) || 0;
+  for (const t of S.trends.values()) for (const k of ["t", "speed", "ref", "current"]) t[k] = [];
+  loadHistory();
 }
 
 // ---------------------------------------------------------------- the feed
@@ -438,6 +472,8 @@ function connect() {
 }
 
 connect();
+$("trend-range").addEventListener("change", chooseRange);
+setInterval(() => { if (S.range) loadRange(); }, 60000);
 setInterval(renderAges, 1000);
 setInterval(keepAlive, 1000);
 setInterval(() => { for (const id of S.trends.keys()) S.dirty.add(id); requestAnimationFrame(drawTrends); }, 5000);
