@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	@echo "drive-gateway demo: the status page will be at http://127.0.0.1:8080/ ([web] bind of config/demo.toml)"
+	@echo "drive-gateway demo: the OPC UA server will be at opc.tcp://127.0.0.1:4840/drive-gateway ([opcua] bind, security none on loopback)"
 	$(BIN)/drive-gateway run --config config/demo.toml
 
 lint: $(STAMP)

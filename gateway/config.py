@@ -7,6 +7,8 @@ Layout (see config/site.example.toml for every key)::
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          max_connections_per_peer, idle_timeout
     [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
+    [opcua]              enabled, bind, security, certificate, private_key, publish_interval,
+                         max_sessions (gateway/opcuaconfig.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -53,6 +55,7 @@ from gateway.json5check import Json5Error, check_json5
 from gateway.loader import NotLoadable
 from gateway.loader import load as load_target
 from gateway.model import ControlMode, Device, StopAction
+from gateway.opcuaconfig import OpcuaSection, read_opcua_section
 from gateway.schema import Table
 from gateway.webconfig import WebSection, read_web_section
 from gateway.webconfig import web_bind as _web_bind
@@ -163,6 +166,7 @@ class Config:
     modbus: ModbusSection = field(default_factory=ModbusSection)
     buses: tuple[BusConfig, ...] = ()
     web: WebSection = field(default_factory=WebSection)
+    opcua: OpcuaSection = field(default_factory=OpcuaSection)
 
     @property
     def drives(self) -> tuple[DriveConfig, ...]:
@@ -636,6 +640,7 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
     modbus = _section(root, "modbus", _modbus_section)
     web = _section(root, "web", read_web_section)
+    opcua = _section(root, "opcua", lambda t: read_opcua_section(t, base))
     buses: list[BusConfig] = []
     for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
         bus = _read(table, partial(_bus, name), finish=False)
@@ -657,8 +662,16 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
                 )
     if root.errors or gateway is None or zenoh is None or modbus is None or web is None:
         raise ConfigErrors(root.errors)
+    if opcua is None:
+        raise ConfigErrors(root.errors)
     return Config(
-        file=file, gateway=gateway, zenoh=zenoh, modbus=modbus, buses=tuple(buses), web=web
+        file=file,
+        gateway=gateway,
+        zenoh=zenoh,
+        modbus=modbus,
+        buses=tuple(buses),
+        web=web,
+        opcua=opcua,
     )
 
 
