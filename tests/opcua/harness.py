@@ -9,6 +9,7 @@ import contextlib
 from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from gateway.config import load
 from gateway.model import DriveState
@@ -46,7 +47,9 @@ class FakeHistory:
         return [r for r in rows if start <= r.t <= end]
 
 
-def config_text(port: int, *, command_timeout: float = 0.0, extra: str = "") -> str:
+def config_text(
+    port: int, *, command_timeout: float = 0.0, security: str = '["none"]', extra: str = ""
+) -> str:
     timeout = f"command_timeout = {command_timeout}\n" if command_timeout else ""
     return f"""
 [gateway]
@@ -58,7 +61,7 @@ enabled = false
 enabled = false
 [opcua]
 bind = "127.0.0.1:{port}"
-security = ["none"]
+security = {security}
 publish_interval = 0.05
 {extra}
 [buses.line1]
@@ -101,10 +104,10 @@ class Gateway:
 
 
 @contextlib.asynccontextmanager
-async def running_gateway(tmp_path: Path, **kwargs: object) -> AsyncIterator[Gateway]:
+async def running_gateway(tmp_path: Path, **kwargs: Any) -> AsyncIterator[Gateway]:
     port = free_port()
     cfg = tmp_path / "gateway.toml"
-    cfg.write_text(config_text(port, **kwargs))  # type: ignore[arg-type]
+    cfg.write_text(config_text(port, **kwargs))
     config = load(cfg)
     daemon = Daemon(config, notifier=Notifier({}))
     history = FakeHistory()
