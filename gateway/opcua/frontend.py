@@ -12,11 +12,13 @@ not with the clients, and nothing on a line's thread ever waits for it (the line
 to the hub; the hub runs on this loop and only marks a drive pending). What the batches
 cost is counted (:meth:`OpcuaFrontEnd.figures`).
 
-Every second the lines' figures are copied to Objects/Buses, the firmware of a drive that
-came online is read once (a parameter read through the hub), the EURange of the speed
-readings follows the drive's scale, and the command watchdog of a drive controlled by an
-OPC UA session is fed while that session is making requests (safety rule 3: a client that
-vanishes stops feeding it and its ``command_timeout`` applies).
+Every second the lines' figures are copied to Objects/Buses and the firmware of a drive
+that came online is read once (a parameter read through the hub); the EURange of the
+speed readings follows the drive's scale. The command watchdog of a drive controlled by an
+OPC UA session is fed (four times per ``command_timeout``) while that session's client
+makes requests within the timeout: its subscription's publish requests, reads or calls
+(safety rule 3: a client that vanishes or hangs stops feeding it, and ``on_command_timeout``
+applies; a session that closes stops feeding it at once).
 """
 
 from __future__ import annotations
@@ -222,21 +224,32 @@ class OpcuaFrontEnd:
 
     async def _serve(self) -> None:
         period = self.section.publish_interval
+        feed = self._feed_period()
         loop = asyncio.get_running_loop()
         with self.hub.subscribe_states(on_ready=self._wake.set) as sub:
             await self._batch(self.hub.states())
-            next_slow = loop.time()
+            next_slow = next_feed = loop.time()
             while True:
                 with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(max(0.0, next_slow - loop.time())):
+                    async with asyncio.timeout(max(0.0, min(next_slow, next_feed) - loop.time())):
                         await self._wake.wait()
                 self._wake.clear()
                 await self._batch(sub.drain())
                 now = loop.time()
+                if now >= next_feed:
+                    next_feed = now + feed
+                    self._feed_watchdogs()
                 if now >= next_slow:
                     next_slow = now + SLOW_PERIOD
                     await self._slow()
                 await asyncio.sleep(period)
+
+    def _feed_period(self) -> float:
+        """How often the watchdogs of drives controlled by a session are fed: a quarter of
+        the shortest ``command_timeout``, at most once a second."""
+        timeouts = [self.hub.policy(d).command_timeout for d in self.hub.drive_ids()]
+        shortest = min((t for t in timeouts if t), default=4 * SLOW_PERIOD)
+        return max(self.section.publish_interval, min(SLOW_PERIOD, shortest / 4))
 
     async def _batch(self, states: list[DriveState]) -> None:
         """Write the variables that changed, and step the alarms."""
@@ -295,7 +308,6 @@ class OpcuaFrontEnd:
         started = time.perf_counter()
         await self._bus_figures()
         self._read_firmware()
-        self._feed_watchdogs()
         self.busy += time.perf_counter() - started
         self.slow_pass.set()
 

@@ -225,3 +225,29 @@ async def test_history_read_serves_the_history_store(gateway: Gateway, client: C
         numvalues=0,
     )
     assert len(everything) == HISTORY_ROWS
+
+
+async def test_a_session_in_control_feeds_the_watchdog_while_its_client_is_there(
+    tmp_path: Path,
+) -> None:
+    async with running_gateway(tmp_path, command_timeout=2.0) as gw:
+        front_end = gw.daemon.front_ends["opcua"]
+        assert isinstance(front_end, OpcuaFrontEnd)
+        with gw.daemon.hub.subscribe_events() as events:
+            async with Client(gw.endpoint, timeout=TIMEOUT) as client:
+                await client.create_subscription(100, Changes())  # its publish requests
+                assert (await call(client, "m1", "SetSpeed", 600.0)).StatusCode.is_good()
+                assert (await call(client, "m1", "Run")).StatusCode.is_good()
+                await gw.wait_for("m1", lambda s: s.running)
+                for _ in range(4):  # twice the command_timeout with the client there
+                    front_end.slow_pass.clear()
+                    await asyncio.wait_for(front_end.slow_pass.wait(), TIMEOUT)
+                assert gw.daemon.hub.desired("m1").run
+                assert not [e for e in events.drain() if e.kind.value == "safety"]
+            # the client went: nothing feeds the watchdog, the drive is stopped
+            state = await gw.wait_for("m1", lambda s: not s.running)
+            assert state.control_source is Source.GATEWAY
+            texts = [e.text for e in events.drain() if e.kind.value == "safety"]
+            assert any(
+                "no command from opcua session" in t and "ramp_stop applied" in t for t in texts
+            )
