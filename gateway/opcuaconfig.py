@@ -14,6 +14,9 @@ never imports the front end), read whether or not the front end is part of the b
 - ``certificate`` / ``private_key``: the server's certificate (DER) and key (PEM), needed
   by the signed modes; written at first start (self-signed) when both are absent. Paths
   are relative to the config file.
+- ``trusted_clients``: a folder of client application certificates (DER or PEM, or the
+  CAs that signed them): given, a client of a signed mode whose certificate is not trusted
+  there is refused (BadCertificateUntrusted); absent, every client certificate is admitted.
 - ``publish_interval``: s between the batches in which drive values reach the server (and
   the fastest a subscription sees them change).
 - ``max_sessions``: OPC UA sessions open at once.
@@ -50,6 +53,7 @@ class OpcuaSection:
     security: tuple[OpcuaSecurity, ...] = (OpcuaSecurity.NONE,)
     certificate: Path | None = None
     private_key: Path | None = None
+    trusted_clients: Path | None = None
     publish_interval: float = 0.1
     max_sessions: int = 32
 
@@ -131,6 +135,7 @@ def read_opcua_section(t: Table, base: Path) -> OpcuaSection:
     security = _security(t)
     certificate = _path(t, "certificate", base)
     private_key = _path(t, "private_key", base)
+    trusted = _path(t, "trusted_clients", base)
     section = OpcuaSection(
         enabled=enabled,
         host=host,
@@ -138,6 +143,7 @@ def read_opcua_section(t: Table, base: Path) -> OpcuaSection:
         security=security,
         certificate=certificate,
         private_key=private_key,
+        trusted_clients=trusted,
         publish_interval=t.number(
             "publish_interval", d.publish_interval, minimum=0.02, maximum=60.0
         ),
@@ -167,6 +173,10 @@ def section_problems(section: OpcuaSection) -> list[tuple[str, str]]:
                 "the signed modes need the server's certificate: give certificate and "
                 "private_key (both are written at first start when absent)",
             )
+        )
+    if section.trusted_clients is not None and not section.signed:
+        problems.append(
+            ("trusted_clients", 'a trust list needs a signed mode ("sign", "sign_and_encrypt")')
         )
     if (section.certificate is None) != (section.private_key is None):
         problems.append(("private_key", "give certificate and private_key together"))

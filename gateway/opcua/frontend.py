@@ -9,8 +9,10 @@ Values reach the server in batches: the hub's conflating state subscription (the
 state of each drive that changed) is drained every ``opcua.publish_interval`` and only the
 variables whose value changed are written, so the server's work grows with the changes,
 not with the clients, and nothing on a line's thread ever waits for it (the lines report
-to the hub; the hub runs on this loop and only marks a drive pending). What the batches
-cost is counted (:meth:`OpcuaFrontEnd.figures`).
+to the hub; the hub runs on this loop and only marks a drive pending). A batch and the
+notifications it makes may take at most :data:`LOOP_SHARE` of the loop: under more changes
+than that, the period stretches and each drive's newest state is written, never a backlog.
+What the batches cost is counted (:meth:`OpcuaFrontEnd.figures`).
 
 Every second the lines' figures are copied to Objects/Buses and the firmware of a drive
 that came online is read once (a parameter read through the hub); the EURange of the
@@ -41,7 +43,7 @@ from gateway.model import CommState, DriveState, Source
 from gateway.opcua.alarms import Alarms
 from gateway.opcua.commands import Commands
 from gateway.opcua.history import DriveHistory, ReadingHistory
-from gateway.opcua.security import ensure_certificate, policies, thumbprint
+from gateway.opcua.security import ensure_certificate, policies, thumbprint, trust_clients
 from gateway.opcua.sessions import CALLER, RoleMap, Sessions, default_roles
 from gateway.opcua.space import (
     LAST_RESULT,
@@ -61,6 +63,9 @@ from gateway.paramsbackup import firmware_of
 log = logging.getLogger(__name__)
 
 SLOW_PERIOD = 1.0  # s between bus figures, firmware reads, ranges and watchdog feeds
+LOOP_SHARE = 0.25
+"""The share of the daemon's loop the value batches may take; beyond, their period stretches."""
+SLICE = 0.005  # s of a batch's work between two turns of the loop
 STOP_TIMEOUT = 2.0  # s the server gets to close its connections when the gateway stops
 _BIND_FIXES = {
     errno.EADDRINUSE: ("the address is in use", "stop what uses it, or set [opcua] bind"),
@@ -105,6 +110,7 @@ class OpcuaFrontEnd:
         self.batches = 0
         self.writes = 0
         self.busy = 0.0  # s spent in batches
+        self.stretched = 0  # batches after which the period stretched (LOOP_SHARE)
         self.calls = 0
 
     # ------------------------------------------------------------ life cycle
@@ -125,6 +131,13 @@ class OpcuaFrontEnd:
         if pair is not None:
             await server.load_certificate(str(pair[0]))
             await server.load_private_key(str(pair[1]))
+        trusted = await trust_clients(server, self.section)
+        if trusted is not None:
+            log.info(
+                "OPC UA: %d trusted client certificate(s) in %s",
+                trusted,
+                self.section.trusted_clients,
+            )
         self.sessions = Sessions(server.iserver, self.section.max_sessions)
         ns = await server.register_namespace(NAMESPACE)
         await self._build(server, ns)
@@ -157,6 +170,7 @@ class OpcuaFrontEnd:
             nodes = self.drives[state.id] = await add_drive(b, drives, state, caps, history)
             self._ranges[state.id] = {r.name: r.range_of(caps) for r in READINGS}
             self._link_methods(server, nodes)
+            await asyncio.sleep(0)  # about 60 nodes a drive: the loop's other work goes on
         for bus in self.runtime.config.buses:
             self.buses[bus.name] = await add_bus(b, buses, bus.name)
         self.alarms = Alarms(
@@ -234,7 +248,7 @@ class OpcuaFrontEnd:
                     async with asyncio.timeout(max(0.0, min(next_slow, next_feed) - loop.time())):
                         await self._wake.wait()
                 self._wake.clear()
-                await self._batch(sub.drain())
+                spent = await self._batch(sub.drain())
                 now = loop.time()
                 if now >= next_feed:
                     next_feed = now + feed
@@ -242,7 +256,13 @@ class OpcuaFrontEnd:
                 if now >= next_slow:
                     next_slow = now + SLOW_PERIOD
                     await self._slow()
-                await asyncio.sleep(period)
+                # the batches (and the notifications they make) take at most LOOP_SHARE of
+                # the loop: under more changes than that, the period stretches and each
+                # drive's newest state is written, never a backlog
+                pause = max(period, spent * (1 - LOOP_SHARE) / LOOP_SHARE)
+                if pause > period:
+                    self.stretched += 1
+                await asyncio.sleep(pause)
 
     def _feed_period(self) -> float:
         """How often the watchdogs of drives controlled by a session are fed: a quarter of
@@ -251,12 +271,14 @@ class OpcuaFrontEnd:
         shortest = min((t for t in timeouts if t), default=4 * SLOW_PERIOD)
         return max(self.section.publish_interval, min(SLOW_PERIOD, shortest / 4))
 
-    async def _batch(self, states: list[DriveState]) -> None:
-        """Write the variables that changed, and step the alarms."""
-        started = time.perf_counter()
+    async def _batch(self, states: list[DriveState]) -> float:
+        """Write the variables that changed, and step the alarms; the seconds of work it
+        took. The loop gets a turn after every :data:`SLICE` s of it."""
         assert self.server is not None and self.alarms is not None
         write = self.server.iserver.aspace.write_attribute_value
         now = datetime.now(UTC)
+        work = 0.0
+        began = time.perf_counter()
         for state in states:
             nodes = self.drives.get(state.id)
             if nodes is None:
@@ -274,8 +296,14 @@ class OpcuaFrontEnd:
             self.writes += len(changes)
             await self.alarms.on_state(state)
             await self._update_ranges(state.id, nodes)
+            if time.perf_counter() - began >= SLICE:
+                work += time.perf_counter() - began
+                await asyncio.sleep(0)
+                began = time.perf_counter()
+        work += time.perf_counter() - began
         self.batches += 1
-        self.busy += time.perf_counter() - started
+        self.busy += work
+        return work
 
     @staticmethod
     def _datavalue(
@@ -417,4 +445,9 @@ class OpcuaFrontEnd:
 
     def figures(self) -> Mapping[str, float]:
         """What the value batches cost: batches, variable writes, seconds spent."""
-        return {"batches": self.batches, "writes": self.writes, "busy_s": self.busy}
+        return {
+            "batches": self.batches,
+            "writes": self.writes,
+            "busy_s": self.busy,
+            "stretched": self.stretched,
+        }

@@ -6,6 +6,7 @@ the server's application instance certificate: when neither ``certificate`` nor
 ``private_key`` exists, a self-signed pair is written (RSA 2048, SHA-256, ten years, the
 application URI and the host's name in its subject alternative names; the key readable by
 the gateway's user only). A client trusts it once (docs/operations.md, "OPC UA server");
+with ``trusted_clients`` the server trusts only the client certificates of that folder;
 a pair with one half missing is refused rather than silently replaced, since a new
 certificate would make every client that trusted the old one refuse the server.
 """
@@ -17,12 +18,14 @@ import os
 import socket
 from pathlib import Path
 
-from asyncua import ua
+from asyncua import Server, ua
 from asyncua.crypto.cert_gen import (
     dump_private_key_as_pem,
     generate_private_key,
     generate_self_signed_app_certificate,
 )
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes
 from cryptography.hazmat.primitives.serialization import Encoding
@@ -104,3 +107,26 @@ def thumbprint(cert: Path) -> str:
     """The certificate's SHA-1 thumbprint, as OPC UA clients show it."""
     loaded = x509.load_der_x509_certificate(cert.read_bytes())
     return loaded.fingerprint(hashes.SHA1()).hex()
+
+
+async def trust_clients(server: Server, section: OpcuaSection) -> int | None:
+    """With ``trusted_clients``: only the client certificates of that folder (or signed by a
+    CA in it), in their validity, with the OPC UA key usages, are admitted; returns how many
+    certificates the folder holds (None without a trust list). StartupError when the folder
+    is not one."""
+    folder = section.trusted_clients
+    if folder is None:
+        return None
+    if not folder.is_dir():
+        raise StartupError(
+            "opcua",
+            f"trusted_clients {folder} is not a folder",
+            "create it and put the trusted client certificates in it, or remove the key",
+        )
+    store = TrustStore([folder], [])
+    await store.load()
+    options = (
+        CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
+    )
+    server.set_certificate_validator(CertificateValidator(options, store).validate)
+    return sum(1 for p in folder.iterdir() if p.is_file())

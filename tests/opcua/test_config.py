@@ -88,6 +88,11 @@ def test_security_none_is_refused_off_loopback(tmp_path: Path) -> None:
             "site.toml: opcua.publish_interval: 0.001 is below the minimum 0.02",
         ),
         ("bind = '127.0.0.1:4840'\nport = 4840\n", "site.toml: opcua.port: unknown key"),
+        (
+            "bind = '127.0.0.1:4840'\ntrusted_clients = 'trusted'\n",
+            'site.toml: opcua.trusted_clients: a trust list needs a signed mode ("sign", '
+            '"sign_and_encrypt")',
+        ),
     ],
 )
 def test_a_bad_opcua_table_says_what_is_wrong(tmp_path: Path, table: str, message: str) -> None:

@@ -85,3 +85,27 @@ async def test_a_certificate_without_its_key_stops_the_start(tmp_path: Path) -> 
     assert isinstance(daemon.fatal, StartupError)
     assert "server.pem is missing while its other half exists" in str(daemon.fatal)
     assert (tmp_path / "pki" / "server.der").read_bytes() == b"left alone"
+
+
+async def test_a_trust_list_admits_its_clients_only(tmp_path: Path) -> None:
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    known = (tmp_path / "known.der", tmp_path / "known.pem")
+    stranger = (tmp_path / "stranger.der", tmp_path / "stranger.pem")
+    write_certificate(*known, "urn:drive-gateway:known")
+    write_certificate(*stranger, "urn:drive-gateway:stranger")
+    (trusted / "known.der").write_bytes(known[0].read_bytes())
+    extra = PKI + 'trusted_clients = "trusted"\n'
+    async with running_gateway(tmp_path, security=SIGNED, extra=extra) as gw:
+
+        async def device(pair: tuple[Path, Path], uri: str) -> str:
+            client = Client(gw.endpoint, timeout=TIMEOUT)
+            client.application_uri = uri
+            await client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{pair[0]},{pair[1]}")
+            async with client:
+                value: str = await client.get_node(ua.NodeId("m1.Device", 2)).read_value()
+                return value
+
+        assert await device(known, "urn:drive-gateway:known") == "test"
+        with pytest.raises((ua.UaError, ConnectionError, TimeoutError)):
+            await device(stranger, "urn:drive-gateway:stranger")
