@@ -7,8 +7,8 @@ Layout (see config/site.example.toml for every key)::
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          max_connections_per_peer, idle_timeout
     [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
-    [opcua]              enabled, bind, security, certificate, private_key, publish_interval,
-                         max_sessions (gateway/opcuaconfig.py)
+    [opcua]              enabled, bind, security, certificate, private_key, trusted_clients,
+                         publish_interval, max_sessions (gateway/opcuaconfig.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
