@@ -66,6 +66,7 @@ SLOW_PERIOD = 1.0  # s between bus figures, firmware reads, ranges and watchdog 
 LOOP_SHARE = 0.25
 """The share of the daemon's loop the value batches may take; beyond, their period stretches."""
 SLICE = 0.005  # s of a batch's work between two turns of the loop
+MAX_PAUSE = 2.0  # s: the longest the batches' period stretches to
 STOP_TIMEOUT = 2.0  # s the server gets to close its connections when the gateway stops
 _BIND_FIXES = {
     errno.EADDRINUSE: ("the address is in use", "stop what uses it, or set [opcua] bind"),
@@ -111,6 +112,7 @@ class OpcuaFrontEnd:
         self.writes = 0
         self.busy = 0.0  # s spent in batches
         self.stretched = 0  # batches after which the period stretched (LOOP_SHARE)
+        self._stretch = 1.0
         self.calls = 0
 
     # ------------------------------------------------------------ life cycle
@@ -256,13 +258,26 @@ class OpcuaFrontEnd:
                 if now >= next_slow:
                     next_slow = now + SLOW_PERIOD
                     await self._slow()
-                # the batches (and the notifications they make) take at most LOOP_SHARE of
-                # the loop: under more changes than that, the period stretches and each
-                # drive's newest state is written, never a backlog
-                pause = max(period, spent * (1 - LOOP_SHARE) / LOOP_SHARE)
-                if pause > period:
-                    self.stretched += 1
-                await asyncio.sleep(pause)
+                await self._pause(period, spent)
+
+    async def _pause(self, period: float, spent: float) -> None:
+        """The pause before the next batch. The batches take at most LOOP_SHARE of the
+        loop; and while the loop comes back late from the pause (asyncua's publishing to
+        the sessions, which the batches' changes cause, holds it), the pause doubles, up
+        to MAX_PAUSE, and shrinks again once the loop is on time. Under more changes than
+        the loop can carry, each drive's newest state is written, never a backlog."""
+        loop = asyncio.get_running_loop()
+        pause = max(period, spent * (1 - LOOP_SHARE) / LOOP_SHARE) * self._stretch
+        pause = min(pause, MAX_PAUSE)
+        if pause > period:
+            self.stretched += 1
+        wake = loop.time() + pause
+        await asyncio.sleep(pause)
+        late = loop.time() - wake
+        if late > period:
+            self._stretch = min(self._stretch * 2, MAX_PAUSE / period)
+        else:
+            self._stretch = max(1.0, self._stretch * 0.8)
 
     def _feed_period(self) -> float:
         """How often the watchdogs of drives controlled by a session are fed: a quarter of
