@@ -298,7 +298,8 @@ class OpcuaFrontEnd:
             nodes = self.drives.get(state.id)
             if nodes is None:
                 continue
-            values = values_of(state)
+            missing = _NO_DATA[state.comm is CommState.ONLINE]
+            values = {k: missing if v is None else v for k, v in values_of(state).items()}
             old = self._written.get(state.id)
             changes = changed_values(old, values)
             self._written[state.id] = {**(old or {}), **values}
@@ -325,10 +326,10 @@ class OpcuaFrontEnd:
         nodes: DriveNodes, name: str, value: Any, state: DriveState, now: datetime
     ) -> ua.DataValue:
         when = datetime.fromtimestamp(state.ts, UTC) if state.ts else now
-        if value is None:
+        if isinstance(value, ua.StatusCode):  # no value: the status says why
             return ua.DataValue(
                 ua.Variant(None, ua.VariantType.Null),
-                StatusCode=_NO_DATA[state.comm is CommState.ONLINE],
+                StatusCode=value,
                 SourceTimestamp=when,
                 ServerTimestamp=now,
             )

@@ -45,11 +45,14 @@ class Changes:
 
     def __init__(self) -> None:
         self.values: dict[str, list[Any]] = {}
+        self.statuses: dict[str, list[int]] = {}
         self.events: list[Any] = []
         self.changed = asyncio.Event()
 
     def datachange_notification(self, node: Node, val: Any, data: Any) -> None:
         self.values.setdefault(node.nodeid.Identifier, []).append(val)
+        status = data.monitored_item.Value.StatusCode
+        self.statuses.setdefault(node.nodeid.Identifier, []).append(status.value)
         self.changed.set()
 
     def event_notification(self, event: Any) -> None:
@@ -105,6 +108,13 @@ async def test_browse_the_drive_model(gateway: Gateway, client: Client) -> None:
         )
     )
     assert await node(client, "m1", "Comm").read_value() == "online"
+    # a reading the drive does not give (a soft starter's speed): no value, never 0; its
+    # status says why: no communication while the drive was offline, no data once online
+    await sub.subscribe_data_change(node(client, "soft", "SpeedRpm"))
+    await changes.until(
+        lambda: ua.StatusCodes.BadNoData in changes.statuses.get("soft.SpeedRpm", [])
+    )
+    assert changes.values["soft.SpeedRpm"][-1] is None
     front_end = gateway.daemon.front_ends["opcua"]
     assert isinstance(front_end, OpcuaFrontEnd)
     for _ in range(2):  # a whole pass of the once-a-second work since the line runs
