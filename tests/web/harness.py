@@ -94,6 +94,7 @@ def demo_config(client_endpoint: str, web: WebSection | None = None) -> Config:
         config,
         zenoh=replace(config.zenoh, connect=(client_endpoint,)),
         web=web or replace(config.web, host="127.0.0.1", port=0),
+        opcua=replace(config.opcua, enabled=False),  # tests/opcua has its own daemon tests
     )
 
 
