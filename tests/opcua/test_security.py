@@ -109,3 +109,18 @@ async def test_a_trust_list_admits_its_clients_only(tmp_path: Path) -> None:
         assert await device(known, "urn:drive-gateway:known") == "test"
         with pytest.raises((ua.UaError, ConnectionError, TimeoutError)):
             await device(stranger, "urn:drive-gateway:stranger")
+
+
+async def test_sessions_beyond_max_sessions_are_refused(tmp_path: Path) -> None:
+    async with running_gateway(tmp_path, extra="max_sessions = 1\n") as gw:
+        async with Client(gw.endpoint, timeout=TIMEOUT) as first:
+            with pytest.raises(ua.UaError):
+                async with Client(gw.endpoint, timeout=TIMEOUT) as second:
+                    await second.get_node(ua.NodeId("m1.Device", 2)).read_value()
+            assert await first.get_node(ua.NodeId("m1.Device", 2)).read_value() == "test"
+        front_end = gw.daemon.front_ends["opcua"]
+        counted = front_end.counted()
+        assert counted.connections_over_limit == 1
+        # the first session closed: a new one is admitted
+        async with Client(gw.endpoint, timeout=TIMEOUT) as third:
+            assert await third.get_node(ua.NodeId("m1.Device", 2)).read_value() == "test"
