@@ -44,7 +44,7 @@ from gateway.opcua.alarms import Alarms
 from gateway.opcua.commands import Commands
 from gateway.opcua.history import DriveHistory, ReadingHistory
 from gateway.opcua.security import ensure_certificate, policies, thumbprint, trust_clients
-from gateway.opcua.sessions import CALLER, RoleMap, Sessions, default_roles
+from gateway.opcua.sessions import CALLER, Role, RoleMap, Sessions, default_roles
 from gateway.opcua.space import (
     LAST_RESULT,
     NAMESPACE,
@@ -209,7 +209,7 @@ class OpcuaFrontEnd:
         values = [a.Value if isinstance(a, ua.Variant) else a for a in args]
         session = CALLER.get()
         client = session.client if session is not None else "internal"
-        if session is not None and self.roles(session.user_of()).value != "operate":
+        if session is not None and self.roles(session.user_of()) is not Role.OPERATE:
             res.StatusCode = ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
             return res
         if len(values) != 2 or not isinstance(values[0], bytes):
