@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test test-web test-vcan lint typecheck pytest bench soak clean venv install dist
+.PHONY: run test test-web test-opcua test-vcan lint typecheck pytest bench soak clean venv install dist
 
 venv: $(STAMP)
 
@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	@echo "drive-gateway demo: the status page will be at http://127.0.0.1:8080/ ([web] bind of config/demo.toml)"
+	@echo "drive-gateway demo: the OPC UA server will be at opc.tcp://127.0.0.1:4840/drive-gateway ([opcua] bind, security none on loopback)"
 	$(BIN)/drive-gateway run --config config/demo.toml
 
 lint: $(STAMP)
@@ -44,6 +45,23 @@ test-web: $(STAMP)
 		fi; \
 	fi
 	DRIVE_GATEWAY_CHROMIUM=$(CHROMIUM) $(BIN)/python -m pytest -q -m browser tests/web
+
+# The OPC UA server with a client of another stack: node-opcua's client (npm, the versions of
+# tests/opcua_client/package-lock.json) run by Node.js as its own process. Installs Debian's
+# nodejs when node is missing (as root); node-opcua goes to tests/opcua_client/node_modules.
+NODE ?= node
+OPCUA_CLIENT := tests/opcua_client
+test-opcua: $(STAMP)
+	@if ! command -v $(NODE) >/dev/null 2>&1; then \
+		if [ "$$(id -u)" = 0 ]; then \
+			apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends nodejs npm; \
+		else \
+			echo "make test-opcua needs Node.js: run 'sudo apt-get install --no-install-recommends nodejs npm' (or make test-opcua as root), or set NODE=..." >&2; \
+			exit 1; \
+		fi; \
+	fi
+	cd $(OPCUA_CLIENT) && npm ci --no-audit --no-fund --loglevel=error
+	DRIVE_GATEWAY_OPCUA_NODE=required $(BIN)/python -m pytest -q tests/opcua
 
 # The `vcan` tests in a kernel with SocketCAN: this one's, else a qemu VM (tests/vcan_vm).
 test-vcan: $(STAMP)

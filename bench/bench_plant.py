@@ -106,8 +106,15 @@ class Plant:
     # DeviceNet, Modbus late, in a run beside the unpinned ones of
     # docs/decisions/0054-full-plant-benchmark.md)
     pin: bool = False
+    opcua_sessions: int = 0
+    """OPC UA client sessions subscribed to every drive (bench/bench_opcua.py); 0: the
+    gateway serves no OPC UA."""
+    opcua_interval: float = 0.1  # s, their subscriptions' publishing interval
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     logs: list[Any] = field(default_factory=list)
+    raw: dict[str, Any] = field(default_factory=dict)
+    """What :func:`measure` measured, for another benchmark to compare runs: the window,
+    the gateway's CPU share, the lines' cycles and the clients' figures."""
 
 
 # ---------------------------------------------------------------------- the physics
@@ -147,7 +154,9 @@ def felser_cycle(slaves: int, bus: BusParams | None = None) -> float:
 # ---------------------------------------------------------------------- the config
 
 
-def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> str:
+def config_text(
+    plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int, opcua_port: int = 0
+) -> str:
     lines = [
         "[gateway]",
         'name = "plant"',
@@ -162,6 +171,12 @@ def config_text(plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int) -> s
         f'bind = "127.0.0.1:{modbus_port}"',
         'allow = ["127.0.0.0/8"]',
     ]
+    if plant.opcua_sessions:
+        lines += [
+            "[opcua]",
+            f'bind = "127.0.0.1:{opcua_port}"',
+            f"publish_interval = {plant.opcua_interval:g}",
+        ]
     unit = 1
     if plant.profibus:
         lines += [
@@ -518,12 +533,54 @@ def _line_figures(
     ]
 
 
+def _start_clients(plant: Plant, tmp: Path, drives: int, ports: tuple[int, int, int]) -> None:
+    """The northbound load: Modbus clients, the Zenoh subscriber, OPC UA sessions."""
+    modbus_port, zenoh_port, opcua_port = ports
+    client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
+    if plant.modbus_clients:
+        _start(
+            plant,
+            "modbus-clients",
+            [
+                *(PY, "-m", "bench.plant.clients", "modbus", "--port", str(modbus_port)),
+                *("--units", f"1-{drives}", "--clients", str(plant.modbus_clients)),
+                *("--rate", str(plant.modbus_rate), *client_args),
+            ],
+            tmp,
+            stdout=subprocess.PIPE,
+        )
+    _start(
+        plant,
+        "zenoh-subscriber",
+        [
+            *(PY, "-m", "bench.plant.clients", "zenoh"),
+            *("--connect", f"tcp/127.0.0.1:{zenoh_port}", "--key", "plant/drives/*/state"),
+            *client_args,
+        ],
+        tmp,
+        stdout=subprocess.PIPE,
+    )
+    if plant.opcua_sessions:
+        _start(
+            plant,
+            "opcua-clients",
+            [
+                *(PY, "-m", "bench.plant.opcua_clients"),
+                *("--endpoint", f"opc.tcp://127.0.0.1:{opcua_port}/drive-gateway"),
+                *("--sessions", str(plant.opcua_sessions)),
+                *("--interval", str(plant.opcua_interval), *client_args),
+            ],
+            tmp,
+            stdout=subprocess.PIPE,
+        )
+
+
 def measure(plant: Plant) -> list[Figure]:
     """Run the plant; the figures (module docstring)."""
     with _plant(plant) as tmp:
-        modbus_port, zenoh_port = free_port(), free_port()
+        modbus_port, zenoh_port, opcua_port = free_port(), free_port(), free_port()
         config = tmp / "plant.toml"
-        config.write_text(config_text(plant, tmp, modbus_port, zenoh_port))
+        config.write_text(config_text(plant, tmp, modbus_port, zenoh_port, opcua_port))
         _start_lines(plant, tmp, config)
         record = tmp / "gateway.json"
         gateway = [PY, "-m", "bench.plant.launch", "--record", str(record)]
@@ -536,30 +593,7 @@ def measure(plant: Plant) -> list[Figure]:
         _wait_online(plant, tmp, record, drives)
         online_at = time.monotonic()
         load_before = os.getloadavg()
-        client_args = ["--settle", str(plant.settle), "--seconds", str(plant.seconds)]
-        if plant.modbus_clients:
-            _start(
-                plant,
-                "modbus-clients",
-                [
-                    *(PY, "-m", "bench.plant.clients", "modbus", "--port", str(modbus_port)),
-                    *("--units", f"1-{drives}", "--clients", str(plant.modbus_clients)),
-                    *("--rate", str(plant.modbus_rate), *client_args),
-                ],
-                tmp,
-                stdout=subprocess.PIPE,
-            )
-        _start(
-            plant,
-            "zenoh-subscriber",
-            [
-                *(PY, "-m", "bench.plant.clients", "zenoh"),
-                *("--connect", f"tcp/127.0.0.1:{zenoh_port}", "--key", "plant/drives/*/state"),
-                *client_args,
-            ],
-            tmp,
-            stdout=subprocess.PIPE,
-        )
+        _start_clients(plant, tmp, drives, (modbus_port, zenoh_port, opcua_port))
         pid = plant.procs["gateway"].pid
         time.sleep(plant.settle)
         t0, cpu0 = time.monotonic(), _cpu_seconds(pid)
@@ -579,7 +613,7 @@ def measure(plant: Plant) -> list[Figure]:
         rss = _rss_mb(pid)
         load_after = os.getloadavg()
         clients: dict[str, Any] = {}
-        for name in ("modbus-clients", "zenoh-subscriber"):
+        for name in ("modbus-clients", "zenoh-subscriber", "opcua-clients"):
             if name not in plant.procs:
                 continue
             out, _ = plant.procs[name].communicate(timeout=plant.settle + 30)
@@ -597,6 +631,9 @@ def measure(plant: Plant) -> list[Figure]:
         pbsim = _read_json(tmp / "profibus-sim.json")
         canlog, broker = _broker_log(tmp, "canbus")
         colog, cobroker = _broker_log(tmp, "canopen-bus")
+    plant.raw.update(
+        t0=t0, t1=t1, cpu_share=(cpu1 - cpu0) / (t1 - t0), cycles=cycles, clients=clients
+    )
     return _figures(
         plant,
         t0=t0,

@@ -8,6 +8,8 @@ Layout (see config/site.example.toml for every key)::
                          max_connections_per_peer, idle_timeout
     [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
     [history]            enabled, path, period, batch_interval, max_age, max_size_mb
+    [opcua]              enabled, bind, security, certificate, private_key, trusted_clients,
+                         publish_interval, max_sessions (gateway/opcuaconfig.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -54,6 +56,7 @@ from gateway.json5check import Json5Error, check_json5
 from gateway.loader import NotLoadable
 from gateway.loader import load as load_target
 from gateway.model import ControlMode, Device, StopAction
+from gateway.opcuaconfig import OpcuaSection, read_opcua_section
 from gateway.schema import Table
 from gateway.webconfig import WebSection, read_web_section
 from gateway.webconfig import web_bind as _web_bind
@@ -186,6 +189,7 @@ class Config:
     buses: tuple[BusConfig, ...] = ()
     web: WebSection = field(default_factory=WebSection)
     history: HistorySection = field(default_factory=HistorySection)
+    opcua: OpcuaSection = field(default_factory=OpcuaSection)
 
     @property
     def drives(self) -> tuple[DriveConfig, ...]:
@@ -678,6 +682,7 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     modbus = _section(root, "modbus", _modbus_section)
     web = _section(root, "web", read_web_section)
     history = _section(root, "history", lambda t: _history_section(t, base))
+    opcua = _section(root, "opcua", lambda t: read_opcua_section(t, base))
     buses: list[BusConfig] = []
     for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
         bus = _read(table, partial(_bus, name), finish=False)
@@ -699,6 +704,8 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
                 )
     if root.errors or gateway is None or zenoh is None or modbus is None or web is None:
         raise ConfigErrors(root.errors)
+    if opcua is None:
+        raise ConfigErrors(root.errors)
     return Config(
         file=file,
         gateway=gateway,
@@ -707,6 +714,7 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
         buses=tuple(buses),
         web=web,
         history=history or HistorySection(),
+        opcua=opcua,
     )
 
 

@@ -73,7 +73,7 @@ log = logging.getLogger(__name__)
 
 Clock = Callable[[], float]
 EVENT_QUEUE_LIMIT = 1000
-_WATCHED = (Source.ZENOH, Source.MODBUS, Source.WEB)
+_WATCHED = (Source.ZENOH, Source.MODBUS, Source.WEB, Source.OPCUA)
 """The client sources whose command in force the watchdog watches (rule 3)."""
 
 

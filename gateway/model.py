@@ -60,6 +60,7 @@ class Source(Enum):
     MODBUS = "modbus"
     GATEWAY = "gateway"  # a safety action of the gateway itself
     WEB = "web"  # a user of the web status page (web.commands, gateway/web)
+    OPCUA = "opcua"  # an OPC UA session (gateway/opcua)
 
 
 def client_label(raw: str) -> str:
@@ -78,10 +79,11 @@ class ControlMode(Enum):
     ZENOH = "zenoh"
     MODBUS = "modbus"
     WEB = "web"
+    OPCUA = "opcua"
 
     def admits(self, source: Source) -> bool:
         if self is ControlMode.ANY:
-            return source in (Source.ZENOH, Source.MODBUS, Source.WEB)
+            return source in (Source.ZENOH, Source.MODBUS, Source.WEB, Source.OPCUA)
         return bool(source.value == self.value)
 
 

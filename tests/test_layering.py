@@ -61,9 +61,9 @@ CORE_SUBFOLDERS = (
     "gateway.runtime",
     "gateway.cli",
     "gateway.sim",
-    *(f"gateway.{f}" for f in ("zenoh", "modbus", "web")),
+    *(f"gateway.{f}" for f in ("zenoh", "modbus", "web", "opcua")),
 )
-FRONT_ENDS = ("gateway.zenoh", "gateway.modbus", "gateway.web")
+FRONT_ENDS = ("gateway.zenoh", "gateway.modbus", "gateway.web", "gateway.opcua")
 SHARED_LINK_MAY_IMPORT = (*FIELDBUS_LIBS, "gateway.errors")
 ADAPTER_MAY_IMPORT = (
     "gateway.model",
@@ -479,3 +479,7 @@ def test_the_rules_read_the_layer_from_the_path() -> None:
     assert front_end_rule("gateway.web.metrics", "gateway.runtime.daemon")
     assert front_end_rule("gateway.zenoh.frontend", "gateway.modbus.map")
     assert front_end_rule("gateway.web.metrics", "gateway.frontend") is None
+    assert front_end_rule("gateway.opcua.frontend", "gateway.web.views")
+    assert front_end_rule("gateway.opcua.frontend", "gateway.runtime.daemon")
+    assert front_end_rule("gateway.opcua.commands", "gateway.hub") is None
+    assert core_rule("gateway.opcuaconfig", "gateway.opcua.space")

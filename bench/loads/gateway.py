@@ -25,7 +25,7 @@ import shutil
 import time
 from collections import Counter
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -115,11 +115,14 @@ class Demo:
 
         self.web, self.modbus, self.zenoh = free_port(), free_port(), free_port()
         self.path = demo_copy(tmp, hashlib.sha256(secrets.token_bytes(32)).hexdigest())
-        self.config = load(self.path).with_overrides(
+        config = load(self.path).with_overrides(
             zenoh_endpoint=f"tcp/127.0.0.1:{self.zenoh}",
             modbus_bind=f"127.0.0.1:{self.modbus}",
             web_bind=f"127.0.0.1:{self.web}",
         )
+        # the loads are the web's, Modbus', Zenoh's and the buses'; the OPC UA server has
+        # its own benchmark (bench/bench_opcua.py) and would hold the demo's fixed port
+        self.config = replace(config, opcua=replace(config.opcua, enabled=False))
         self.daemon: Any = None
         self._task: asyncio.Task[int] | None = None
 

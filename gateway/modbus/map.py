@@ -58,12 +58,14 @@ SOURCE_CODES: dict[Source, int] = {
     Source.MODBUS: 2,
     Source.GATEWAY: 3,
     Source.WEB: 4,
+    Source.OPCUA: 5,
 }
 CONTROL_CODES: dict[ControlMode, int] = {
     ControlMode.ANY: 0,
     ControlMode.ZENOH: 1,
     ControlMode.MODBUS: 2,
     ControlMode.WEB: 3,
+    ControlMode.OPCUA: 4,
 }
 DEVICE_CODES: dict[Device, int] = {device: device.spec.code for device in Device}
 """From the device registry (gateway/devices.py)."""

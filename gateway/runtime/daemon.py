@@ -55,6 +55,7 @@ FRONT_ENDS: dict[str, str] = {
     "zenoh": "gateway.zenoh.frontend:ZenohFrontEnd",
     "modbus": "gateway.modbus.frontend:ModbusFrontEnd",
     "web": "gateway.web.frontend:WebFrontEnd",
+    "opcua": "gateway.opcua.frontend:OpcuaFrontEnd",
 }
 """Front-end name (its config section) -> "module:Class"."""
 
@@ -365,6 +366,7 @@ class Daemon:
             "zenoh": self.config.zenoh.enabled,
             "modbus": self.config.modbus.enabled,
             "web": self.config.web.enabled,
+            "opcua": self.config.opcua.enabled,
         }
         for name, on in enabled.items():
             if not on:

@@ -212,7 +212,7 @@ STATE_FIELD_DOC: dict[str, str] = {
     "alarm_code": "the device's alarm code, or null",
     "seq": "monotonic sequence number (a heartbeat repeat keeps it)",
     "ts": "wall-clock time of the reading, seconds since the epoch",
-    "control_source": '"none", "zenoh", "modbus", "gateway", "web"',
+    "control_source": '"none", "zenoh", "modbus", "gateway", "web", "opcua"',
     "speed_base": "what 100 % speed is, or null",
     "values": "named raw values the profile does not model",
     "control_client": "the client in control within `control_source` (a Modbus peer address, "

@@ -92,7 +92,7 @@ BROKEN = [
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a b'\ndevice = 'test'\naddress = 1\n",
      "site.toml: buses.l.drives[0].id: 'a b' must be letters, digits, '-' or '_' (it is a key)"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\ncontrol = 'plc'\n",
-     "site.toml: buses.l.drives[a].control: 'plc' is not one of 'any', 'zenoh', 'modbus', 'web'"),
+     "site.toml: buses.l.drives[a].control: 'plc' is not one of 'any', 'zenoh', 'modbus', 'web', 'opcua'"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\non_command_timeout = 'brake'\n",
      "site.toml: buses.l.drives[a].on_command_timeout: 'brake' is not one of 'ramp_stop', 'coast', 'hold'"),
     (f"[buses.l]\nadapter = '{FAKE}'\n[[buses.l.drives]]\nid = 'a'\ndevice = 'test'\naddress = 1\nwritable_params = [100, 'P1x1']\n",

@@ -65,7 +65,7 @@ def test_every_bad_key_of_a_drive_and_of_the_sections_is_reported(tmp_path: Path
             "site.toml: zenoh.listen[0]: 'nowhere' is not a Zenoh endpoint (like tcp/127.0.0.1:7447)",
             "site.toml: modbus.bind: 'localhost' is not HOST:PORT",
             "site.toml: modbus.allow[0]: '300.1.1.1' is not an address or CIDR network",
-            "site.toml: buses.l.drives[d1].control: 'plc' is not one of 'any', 'zenoh', 'modbus', 'web'",
+            "site.toml: buses.l.drives[d1].control: 'plc' is not one of 'any', 'zenoh', 'modbus', 'web', 'opcua'",
             "site.toml: buses.l.drives[d1].modbus_unit: 0 is below the minimum 1",
             "site.toml: buses.l.drives[d1].adress: unknown key (did you mean 'address'?)",
         ]

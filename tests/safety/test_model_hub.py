@@ -44,7 +44,12 @@ from gateway.model import (
 
 SOAK = bool(os.environ.get("DRIVE_GATEWAY_SOAK"))
 TIMEOUT = 1.0
-CLIENTS = ((Source.ZENOH, "scada"), (Source.MODBUS, "10.0.0.5"), (Source.WEB, "10.0.0.9 p"))
+CLIENTS = (
+    (Source.ZENOH, "scada"),
+    (Source.MODBUS, "10.0.0.5"),
+    (Source.WEB, "10.0.0.9 p"),
+    (Source.OPCUA, "session 11"),
+)
 STOP_FIELDS = {"run": False, "jog": False, "quick_stop": True, "coast_stop": True}
 
 commands = st.builds(

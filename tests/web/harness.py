@@ -96,6 +96,7 @@ def demo_config(client_endpoint: str, web: WebSection | None = None) -> Config:
         web=web or replace(config.web, host="127.0.0.1", port=0),
         # the demo's history is the user's file: the web tests keep none (tests/history)
         history=replace(config.history, enabled=False),
+        opcua=replace(config.opcua, enabled=False),  # tests/opcua has its own daemon tests
     )
 
 

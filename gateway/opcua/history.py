@@ -1,0 +1,158 @@
+"""HistoryRead of the drives' readings, from the gateway's history store.
+
+The store is whatever gives :class:`ReadingHistory` (the SQLite history of the box): rows
+of a drive's readings by field name between two wall-clock times. This module answers
+OPC UA's ReadRawModified requests on the reading variables from it (asyncua's
+HistoryStorageInterface): it never stores anything itself (the store is written by the
+history writer, off the fieldbus path), and it reads at most ``max_values`` rows per
+request, giving a continuation point for the rest.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime, timedelta
+from typing import Any, Protocol
+
+from asyncua import ua
+from asyncua.server.history import HistoryStorageInterface
+
+log = logging.getLogger(__name__)
+
+MAX_VALUES = 10_000
+"""Values per node per HistoryRead response; a longer span continues."""
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+_NEVER = datetime(1601, 1, 1, tzinfo=UTC)  # OPC UA's null DateTime
+
+
+class HistoryRowLike(Protocol):
+    """One row of a drive's readings: wall-clock seconds and values by field name."""
+
+    @property
+    def t(self) -> float: ...
+
+    @property
+    def values(self) -> Mapping[str, float | None]: ...
+
+
+class ReadingHistory(Protocol):
+    """What HistoryRead needs of the history store."""
+
+    def readings(
+        self, drive_id: str, start: float, end: float, step: float | None = None
+    ) -> Sequence[HistoryRowLike]: ...
+
+
+def _seconds(when: datetime | None) -> float | None:
+    if when is None:
+        return None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=UTC)
+    if when <= _NEVER:
+        return None
+    return (when - _EPOCH).total_seconds()
+
+
+def _time(seconds: float) -> datetime:
+    return _EPOCH + timedelta(seconds=seconds)
+
+
+class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
+    """asyncua's history back end over a :class:`ReadingHistory` (read only)."""
+
+    def __init__(
+        self,
+        store: ReadingHistory,
+        fields: Mapping[ua.NodeId, tuple[str, str]],
+        clock: Any = None,
+        max_values: int = MAX_VALUES,
+    ) -> None:
+        super().__init__(max_values)
+        self.store = store
+        self.fields = dict(fields)
+        """Reading variable -> (drive id, drive model field)."""
+        self._now = clock or (lambda: datetime.now(UTC).timestamp())
+        self.reads = 0
+        self.failures = 0
+
+    async def init(self) -> None:
+        return None
+
+    async def new_historized_node(
+        self, node_id: ua.NodeId, period: timedelta | None, count: int = 0
+    ) -> None:
+        return None
+
+    async def save_node_value(self, node_id: ua.NodeId, datavalue: ua.DataValue) -> None:
+        return None
+
+    async def new_historized_event(
+        self, source_id: ua.NodeId, evtypes: list[Any], period: timedelta | None, count: int = 0
+    ) -> None:
+        return None
+
+    async def save_event(self, event: Any) -> None:
+        return None
+
+    async def read_event_history(
+        self,
+        source_id: ua.NodeId,
+        start: datetime | None,
+        end: datetime | None,
+        nb_values: int,
+        evfilter: Any,
+    ) -> tuple[list[Any], datetime | None]:
+        return [], None
+
+    async def stop(self) -> None:
+        return None
+
+    async def read_node_history(
+        self, node_id: ua.NodeId, start: datetime | None, end: datetime | None, nb_values: int
+    ) -> tuple[list[ua.DataValue], datetime | None]:
+        where = self.fields.get(node_id)
+        if where is None:
+            return [], None
+        drive_id, name = where
+        begin, finish = _seconds(start), _seconds(end)
+        backwards = begin is not None and finish is not None and finish < begin
+        if backwards:
+            begin, finish = finish, begin
+        limit = min(
+            nb_values or self.max_history_data_response_size, self.max_history_data_response_size
+        )
+        try:
+            rows = self.store.readings(
+                drive_id,
+                0.0 if begin is None else begin,
+                self._now() if finish is None else finish,
+            )
+        except Exception:
+            self.failures += 1
+            log.exception("OPC UA HistoryRead of %s %s: the history store failed", drive_id, name)
+            raise ua.UaStatusCodeError(ua.StatusCodes.BadHistoryOperationUnsupported) from None
+        self.reads += 1
+        values = [_datavalue(row.t, row.values.get(name)) for row in rows]
+        if backwards:
+            values.reverse()
+        more: datetime | None = None
+        if len(values) > limit:
+            more = values[limit].SourceTimestamp
+            values = values[:limit]
+        return values, more
+
+
+def _datavalue(t: float, value: float | None) -> ua.DataValue:
+    when = _time(t)
+    if value is None or not math.isfinite(value):
+        return ua.DataValue(
+            ua.Variant(None, ua.VariantType.Null),
+            StatusCode=ua.StatusCode(ua.StatusCodes.BadNoData),
+            SourceTimestamp=when,
+            ServerTimestamp=when,
+        )
+    return ua.DataValue(
+        ua.Variant(float(value), ua.VariantType.Double), SourceTimestamp=when, ServerTimestamp=when
+    )

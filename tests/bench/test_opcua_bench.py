@@ -1,0 +1,22 @@
+"""The OPC UA benchmark on a tiny plant: both runs happen, the sessions subscribe to every
+drive, and every figure is there (the figures themselves are make bench's)."""
+
+from __future__ import annotations
+
+import math
+
+from bench import bench_opcua
+
+
+def test_a_tiny_plant_with_and_without_opcua() -> None:
+    without, with_opcua = bench_opcua.plants(2.0, 2, profibus=2, devicenet=0, canopen=0)
+    without.modbus_clients = with_opcua.modbus_clients = 1
+    without.settle = with_opcua.settle = 3.0
+    figures = {f.name: f for f in bench_opcua.compare(without, with_opcua)}
+    rate = figures["opcua_profibus_cycle_rate"]
+    assert rate.value > 0 and rate.reference is not None and rate.reference > 0
+    assert "opcua_devicenet_cycle_rate" not in figures  # no such line in this plant
+    assert figures["opcua_sessions_up"].value == 2
+    assert "16 monitored items" in figures["opcua_notifications"].note  # 2 x 2 drives x 4
+    assert not math.isnan(figures["opcua_server_cpu_share"].value)
+    assert "opcua-clients" not in without.raw["clients"]
