@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from gateway.access.audit import AuditTrail
 from gateway.config import Config
 from gateway.hub import Hub
 
@@ -97,6 +98,11 @@ class RuntimeView(Protocol):
     @property
     def front_ends(self) -> Mapping[str, FrontEnd]:
         """The running instance of each front end, by name (the web's metrics read them)."""
+        ...
+
+    @property
+    def audit(self) -> AuditTrail:
+        """Where the front end records its access decisions (gateway/access/audit.py)."""
         ...
 
     def bus_of(self, drive_id: str) -> str: ...

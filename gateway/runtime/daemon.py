@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gateway import __version__
+from gateway.access.audit import AuditTrail, Kind, Result
 from gateway.adapter import EventKind
 from gateway.config import BusConfig, Config, load, load_adapter
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
@@ -109,6 +110,8 @@ class Runtime:
     restarts: dict[str, int] = field(default_factory=dict)
     front_ends: dict[str, FrontEnd] = field(default_factory=dict)
     """The running instance of each front end (the web front end's metrics read the others)."""
+    audit: AuditTrail = field(default_factory=AuditTrail)
+    """The audit trail (memory only until the daemon opens the configured one)."""
     _diag: dict[str, tuple[float, LineThread, dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False
     )
@@ -227,6 +230,13 @@ class Daemon:
                 raise ConfigErrors(problems)
         except (ConfigErrors, ConfigError) as exc:
             errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
+            self.runtime.audit.record(
+                Kind.CONFIG_RELOAD,
+                Result.FAILURE,
+                interface="signal",
+                identity="SIGHUP",
+                detail=f"{file}: {len(errors)} error(s); not reloaded",
+            )
             log.error(
                 "SIGHUP: configuration is not reloaded; %s has %d error(s), a restart would "
                 "fail; the running configuration stays: %s",
@@ -238,6 +248,13 @@ class Daemon:
         except Exception:
             log.exception("SIGHUP: configuration is not reloaded; checking %s failed", file)
             return
+        self.runtime.audit.record(
+            Kind.CONFIG_RELOAD,
+            Result.FAILURE,
+            interface="signal",
+            identity="SIGHUP",
+            detail=f"{file} checks ok; not reloaded (a restart applies it)",
+        )
         log.warning(
             "SIGHUP: configuration is not reloaded; the running configuration stays "
             "(%s checks ok: %d drive(s); restart the gateway to apply it)",
@@ -307,6 +324,31 @@ class Daemon:
         )
         self.exit_status = EXIT_LINE_HELD
         self._stop.set()
+
+    def _open_audit(self) -> bool:
+        """The configured audit trail, its first record the configuration loaded."""
+        section = self.config.audit
+        try:
+            trail = AuditTrail(section)
+        except OSError as exc:
+            where = f"[audit] file {section.file}"
+            reason = (exc.strerror or str(exc)).lower()
+            self._cannot_start(
+                StartupError("audit", f"cannot open {where}: {reason}", "fix [audit] file")
+            )
+            return False
+        self.runtime.audit = trail
+        journal = "on" if trail.journal_open else "off (no journald socket)"
+        log.info("audit trail: file %s, journal %s", section.file or "(none)", journal)
+        trail.record(
+            Kind.CONFIG_LOAD,
+            Result.SUCCESS,
+            interface="config",
+            identity="drive-gateway",
+            detail=f"{self.config.file}: {len(self.config.drives)} drive(s), "
+            f"{len(self.config.users)} user(s)",
+        )
+        return True
 
     def _cannot_start(self, error: StartupError | ConfigError) -> None:
         """Fatal at start-up: one line with the cause and the fix, then stop."""
@@ -397,6 +439,8 @@ class Daemon:
             )
         for problem in descriptor_problems(self.config):
             log.warning("%s", problem)
+        if not self._open_audit():
+            return EXIT_STARTUP
         self._start_front_ends()
         self._spawn(self._ticker(), "hub-ticker")
         if self.notifier.watchdog_interval:
@@ -486,6 +530,7 @@ class Daemon:
         # Adapters first (they leave their buses cleanly on cancellation), then the rest.
         await self._cancel(self._adapter_tasks)
         await self._cancel([t for t in self._tasks if t not in self._adapter_tasks])
+        self.runtime.audit.close()
         log.info("drive-gateway stopped")
 
     def _left_turning(self, bound: float) -> None:

@@ -33,6 +33,7 @@ import asyncio
 import collections
 import ipaddress
 import logging
+import ssl
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -146,6 +147,27 @@ REFUSALS: dict[str, Refusal] = {
         "web commands from %s refused (429) unchecked: web.token_failures wrong tokens"
         " within web.token_window; %s s to wait",
         "commands refused unchecked (too many wrong tokens)",
+    ),
+    "login": Refusal(
+        logging.WARNING,
+        "web login from %s failed (%s wrong within web.token_window)",
+        "logins failed",
+    ),
+    "login_limit": Refusal(
+        logging.WARNING,
+        "web logins from %s refused (429) unchecked: web.token_failures failed logins"
+        " within web.token_window; %s s to wait",
+        "logins refused unchecked (too many failed logins)",
+    ),
+    "role": Refusal(
+        logging.INFO,
+        "web request from %s refused (403): %s",
+        "requests refused (the role does not allow them)",
+    ),
+    "csrf": Refusal(
+        logging.WARNING,
+        "web request from %s refused (403): no valid CSRF token (%s)",
+        "requests refused (no valid CSRF token)",
     ),
     "request_rate": Refusal(
         logging.INFO,
@@ -487,8 +509,15 @@ class AdmissionSite(web.BaseSite):
 
     __slots__ = ("_gate", "_host", "_port")
 
-    def __init__(self, runner: web.BaseRunner, host: str, port: int, gate: Gate) -> None:
-        super().__init__(runner, backlog=BACKLOG)
+    def __init__(
+        self,
+        runner: web.BaseRunner,
+        host: str,
+        port: int,
+        gate: Gate,
+        ssl_context: ssl.SSLContext | None = None,
+    ) -> None:
+        super().__init__(runner, backlog=BACKLOG, ssl_context=ssl_context)
         self._gate = gate
         self._host = host
         self._port = port
@@ -496,7 +525,8 @@ class AdmissionSite(web.BaseSite):
     @property
     def name(self) -> str:
         host = f"[{self._host}]" if ":" in self._host else self._host
-        return f"http://{host}:{self._port}"
+        scheme = "https" if self._ssl_context is not None else "http"
+        return f"{scheme}://{host}:{self._port}"
 
     @property
     def bound(self) -> tuple[str, int] | None:
@@ -524,4 +554,9 @@ class AdmissionSite(web.BaseSite):
             self._port,
             backlog=self._backlog,
             reuse_address=True,
+            ssl=self._ssl_context,
+            # a TLS handshake is part of a request's head: the same deadline
+            ssl_handshake_timeout=self._gate.limits.header_timeout
+            if self._ssl_context is not None
+            else None,
         )

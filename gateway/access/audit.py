@@ -1,0 +1,305 @@
+"""The audit trail: one record per access decision that refuses, per accepted command,
+parameter write, backup and restore, config load and reload, user change and login.
+
+A record has the fields IEC 62443-3-3/4-2 CR 2.8 lists: when (UTC), where (interface and
+peer), who (identity and role), the category, the type and its event id, and the result;
+a short detail says what. Records go to three places:
+
+- a file of bounded size, JSON lines, rotated by ``logging.handlers.RotatingFileHandler``
+  (``[audit] file``, ``max_kib``, ``backups``): never more than (backups + 1) x max_kib;
+- the systemd journal, each field a journal field (``AUDIT_*``, ``MESSAGE``), over
+  journald's datagram socket (:mod:`gateway.access.journal`); skipped where the socket is
+  absent, never waited for (a full socket drops the datagram and counts it);
+- the newest :data:`KEEP` in memory, for engineers on the page (``/api/audit``) and on
+  Zenoh (``<prefix>/audit``).
+
+The trail never raises into its caller: a sink that fails is counted, logged once, and
+the decision it records stands.
+"""
+
+from __future__ import annotations
+
+import collections
+import datetime
+import enum
+import itertools
+import json
+import logging
+import logging.handlers
+import os
+import socket
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gateway.access import journal
+from gateway.access.roles import Identity
+from gateway.schema import Table
+
+log = logging.getLogger(__name__)
+
+KEEP = 1000  # records kept in memory for the readers
+DETAIL_MAX = 300  # characters of a record's detail
+FIELD_MAX = 120  # characters of a peer or identity
+
+
+class Category(enum.Enum):
+    ACCESS = "access"  # authentication and authorisation decisions
+    CONTROL = "control"  # drive commands
+    PARAMETER = "parameter"  # parameter writes, backups, restores
+    CONFIG = "config"  # configuration loaded, reload asked
+    USERS = "users"  # user changes
+
+
+class Result(enum.Enum):
+    SUCCESS = "success"
+    FAILURE = "failure"
+
+
+class Kind(enum.Enum):
+    """A record's type: its category and its event id (ids are stable, documented)."""
+
+    LOGIN = ("login", Category.ACCESS, 1001)
+    LOGOUT = ("logout", Category.ACCESS, 1002)
+    LOGIN_LIMITED = ("login_limited", Category.ACCESS, 1003)
+    TOKEN = ("token", Category.ACCESS, 1004)
+    REFUSED = ("refused", Category.ACCESS, 1010)  # the role does not allow it
+    CSRF = ("csrf", Category.ACCESS, 1011)
+    COMMAND = ("command", Category.CONTROL, 2001)
+    PARAM_WRITE = ("param_write", Category.PARAMETER, 3001)
+    BACKUP = ("backup", Category.PARAMETER, 3002)
+    RESTORE = ("restore", Category.PARAMETER, 3003)
+    CONFIG_LOAD = ("config_load", Category.CONFIG, 4001)
+    CONFIG_RELOAD = ("config_reload", Category.CONFIG, 4002)
+    USER_CHANGE = ("user_change", Category.USERS, 5001)
+
+    @property
+    def type(self) -> str:
+        return str(self.value[0])
+
+    @property
+    def category(self) -> Category:
+        category: Category = self.value[1]
+        return category
+
+    @property
+    def event_id(self) -> int:
+        event_id: int = self.value[2]
+        return event_id
+
+
+def _cut(text: str, size: int) -> str:
+    text = text.replace("\n", " ").replace("\r", " ")
+    return text if len(text) <= size else text[: size - 3] + "..."
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    seq: int
+    timestamp: str  # ISO 8601, UTC, milliseconds
+    interface: str  # web, modbus, zenoh, config, cli
+    peer: str  # a client's address, a certificate's name, "-" for the gateway itself
+    identity: str  # a user's name, "anonymous", an address
+    role: str  # the role the identity was given ("-": none)
+    kind: Kind
+    result: Result
+    detail: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "seq": self.seq,
+            "timestamp": self.timestamp,
+            "interface": self.interface,
+            "peer": self.peer,
+            "identity": self.identity,
+            "role": self.role,
+            "category": self.kind.category.value,
+            "type": self.kind.type,
+            "event_id": self.kind.event_id,
+            "result": self.result.value,
+            "detail": self.detail,
+        }
+
+    def journal_fields(self) -> dict[str, str]:
+        fields = {f"AUDIT_{k.upper()}": str(v) for k, v in self.to_json().items()}
+        message = (
+            f"audit {self.kind.type} {self.result.value}: {self.interface} {self.peer} "
+            f"{self.identity}: {self.detail}"
+        )
+        return {
+            "MESSAGE": message,
+            "PRIORITY": "5" if self.result is Result.SUCCESS else "4",
+            "SYSLOG_IDENTIFIER": "drive-gateway",
+            "MESSAGE_ID": "8e0b5a6c3f1d4e2a9b7c6d5e4f3a2b1c",
+            **fields,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class AuditSection:
+    """The ``[audit]`` table."""
+
+    file: Path | None = None  # absent: no file (the journal and memory only)
+    max_kib: int = 10240
+    backups: int = 5
+    journal: bool = True
+
+
+def read_audit_section(t: Table, base: Path) -> AuditSection:
+    d = AuditSection()
+    text: str | None = t.string("file", None)
+    path = None if text is None else (base / text if not Path(text).is_absolute() else Path(text))
+    return AuditSection(
+        file=path,
+        max_kib=t.integer("max_kib", d.max_kib, minimum=16, maximum=1 << 20),
+        backups=t.integer("backups", d.backups, minimum=1, maximum=100),
+        journal=t.boolean("journal", d.journal),
+    )
+
+
+def _utc(now: float) -> str:
+    moment = datetime.datetime.fromtimestamp(now, datetime.UTC)
+    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+class JournalSocket:
+    """journald's socket, connected once; a datagram it cannot take now is dropped."""
+
+    def __init__(self, path: str = journal.SOCKET_PATH) -> None:
+        self.path = path
+        self.dropped = 0
+        self._sock: socket.socket | None = None
+        if not os.path.exists(path):
+            return
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        try:
+            sock.connect(path)
+        except OSError:
+            sock.close()
+            return
+        sock.setblocking(False)
+        self._sock = sock
+
+    @property
+    def open(self) -> bool:
+        return self._sock is not None
+
+    def send(self, datagram: bytes) -> None:
+        if self._sock is None:
+            return
+        try:
+            self._sock.send(datagram)
+        except OSError:
+            self.dropped += 1
+
+    def close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+
+class AuditTrail:
+    """Where every front end records its decisions (:meth:`record`)."""
+
+    def __init__(
+        self,
+        section: AuditSection | None = None,
+        clock: Callable[[], float] | None = None,
+        journal_path: str = journal.SOCKET_PATH,
+    ) -> None:
+        import time
+
+        self.section = section or AuditSection(journal=False)
+        self.clock = clock or time.time
+        self.records: collections.deque[Record] = collections.deque(maxlen=KEEP)
+        self.counts: dict[str, int] = collections.Counter()
+        self.failures = 0
+        self._seq = itertools.count(1)
+        self._listeners: list[Callable[[Record], None]] = []
+        self._file: logging.Logger | None = None
+        self._handler: logging.Handler | None = None
+        self._journal: JournalSocket | None = None
+        if self.section.file is not None:
+            self._open_file(self.section.file)
+        if self.section.journal:
+            self._journal = JournalSocket(journal_path)
+
+    def _open_file(self, path: Path) -> None:
+        handler = logging.handlers.RotatingFileHandler(
+            path,
+            maxBytes=self.section.max_kib * 1024,
+            backupCount=self.section.backups,
+            encoding="utf-8",
+            delay=False,
+        )
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger = logging.getLogger(f"{__name__}.file.{id(self)}")
+        logger.propagate = False
+        logger.setLevel(logging.INFO)
+        logger.addHandler(handler)
+        self._file, self._handler = logger, handler
+
+    @property
+    def journal_open(self) -> bool:
+        return self._journal is not None and self._journal.open
+
+    def listen(self, listener: Callable[[Record], None]) -> None:
+        """Call ``listener`` with each new record (on the caller's thread)."""
+        self._listeners.append(listener)
+
+    def record(
+        self,
+        kind: Kind,
+        result: Result,
+        *,
+        interface: str,
+        peer: str = "-",
+        identity: Identity | str | None = None,
+        detail: str = "",
+    ) -> Record:
+        if isinstance(identity, Identity):
+            who, role = identity.name, identity.role.label
+        else:
+            who, role = identity or "anonymous", "-"
+        rec = Record(
+            seq=next(self._seq),
+            timestamp=_utc(self.clock()),
+            interface=interface,
+            peer=_cut(peer or "-", FIELD_MAX),
+            identity=_cut(who, FIELD_MAX),
+            role=role,
+            kind=kind,
+            result=result,
+            detail=_cut(detail, DETAIL_MAX),
+        )
+        self.records.append(rec)
+        self.counts[f"{kind.type}:{result.value}"] += 1
+        self._write(rec)
+        return rec
+
+    def _write(self, rec: Record) -> None:
+        try:
+            if self._file is not None:
+                self._file.info(json.dumps(rec.to_json(), ensure_ascii=False))
+            if self._journal is not None:
+                self._journal.send(journal.encode(rec.journal_fields()))
+            for listener in self._listeners:
+                listener(rec)
+        except Exception:
+            self.failures += 1
+            if self.failures == 1:
+                log.exception("audit: a record could not be written (logged once)")
+
+    def newest(self, limit: int = KEEP, since: int = 0) -> list[dict[str, Any]]:
+        """The newest records (at most ``limit``, after sequence ``since``), oldest first."""
+        out = [r.to_json() for r in self.records if r.seq > since]
+        return out[-limit:] if limit > 0 else []
+
+    def close(self) -> None:
+        if self._handler is not None and self._file is not None:
+            self._file.removeHandler(self._handler)
+            self._handler.close()
+            self._handler = None
+        if self._journal is not None:
+            self._journal.close()

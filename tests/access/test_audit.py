@@ -1,0 +1,101 @@
+"""The audit trail: CR 2.8's fields, a file of bounded size, the journal's datagrams."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+from gateway.access.audit import AuditSection, AuditTrail, Category, Kind, Result
+from gateway.access.journal import decode
+from gateway.access.roles import Identity, Role
+
+ANA = Identity("ana", Role.OPERATOR)
+
+
+def test_a_record_has_the_fields_cr_2_8_lists() -> None:
+    trail = AuditTrail(clock=lambda: 1_700_000_000.25)
+    rec = trail.record(
+        Kind.COMMAND, Result.SUCCESS, interface="web", peer="10.0.0.9", identity=ANA, detail="run"
+    )
+    assert rec.to_json() == {
+        "seq": 1,
+        "timestamp": "2023-11-14T22:13:20.250Z",
+        "interface": "web",
+        "peer": "10.0.0.9",
+        "identity": "ana",
+        "role": "operator",
+        "category": "control",
+        "type": "command",
+        "event_id": 2001,
+        "result": "success",
+        "detail": "run",
+    }
+    assert trail.newest() == [rec.to_json()]
+    assert trail.counts == {"command:success": 1}
+
+
+def test_event_ids_are_unique_and_each_kind_has_a_category() -> None:
+    ids = [k.event_id for k in Kind]
+    assert len(ids) == len(set(ids))
+    assert {k.category for k in Kind} == set(Category)
+
+
+def test_an_outsiders_text_cannot_forge_a_line_or_grow_a_record() -> None:
+    trail = AuditTrail()
+    rec = trail.record(
+        Kind.LOGIN,
+        Result.FAILURE,
+        interface="web",
+        peer="p" * 500,
+        identity='evil\n{"result": "success"}',
+        detail="x" * 5000,
+    )
+    assert "\n" not in rec.identity and len(rec.peer) <= 120 and len(rec.detail) <= 300
+
+
+def test_the_newest_since_a_sequence_number() -> None:
+    trail = AuditTrail()
+    for _ in range(5):
+        trail.record(Kind.LOGOUT, Result.SUCCESS, interface="web")
+    assert [r["seq"] for r in trail.newest(limit=2)] == [4, 5]
+    assert [r["seq"] for r in trail.newest(since=3)] == [4, 5]
+
+
+def test_the_file_is_json_lines_and_its_size_bounded(tmp_path: Path) -> None:
+    path = tmp_path / "audit.log"
+    trail = AuditTrail(AuditSection(file=path, max_kib=16, backups=2, journal=False))
+    for i in range(1000):
+        trail.record(Kind.REFUSED, Result.FAILURE, interface="modbus", detail=f"write {i}")
+    trail.close()
+    files = sorted(tmp_path.iterdir())
+    assert [f.name for f in files] == ["audit.log", "audit.log.1", "audit.log.2"]
+    assert all(f.stat().st_size <= 16 * 1024 for f in files)
+    last = json.loads(path.read_text().splitlines()[-1])
+    assert last["detail"] == "write 999" and last["event_id"] == 1010
+
+
+def test_records_go_to_the_journal_as_fields(tmp_path: Path) -> None:
+    where = tmp_path / "journal.sock"
+    journald = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    journald.bind(str(where))
+    try:
+        trail = AuditTrail(AuditSection(journal=True), journal_path=str(where))
+        assert trail.journal_open
+        trail.record(Kind.LOGIN, Result.FAILURE, interface="web", peer="10.0.0.9", identity="x")
+        journald.settimeout(5)
+        fields = decode(journald.recv(65536))
+        trail.close()
+    finally:
+        journald.close()
+    assert fields["AUDIT_TYPE"] == "login" and fields["AUDIT_RESULT"] == "failure"
+    assert fields["AUDIT_EVENT_ID"] == "1001" and fields["AUDIT_PEER"] == "10.0.0.9"
+    assert fields["SYSLOG_IDENTIFIER"] == "drive-gateway" and fields["PRIORITY"] == "4"
+    assert fields["MESSAGE"].startswith("audit login failure: web 10.0.0.9 x")
+
+
+def test_no_journal_socket_no_journal(tmp_path: Path) -> None:
+    trail = AuditTrail(AuditSection(journal=True), journal_path=str(tmp_path / "none"))
+    assert not trail.journal_open
+    trail.record(Kind.LOGOUT, Result.SUCCESS, interface="web")  # no error
+    assert len(trail.records) == 1
