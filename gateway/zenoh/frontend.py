@@ -59,6 +59,7 @@ from typing import Any
 
 import zenoh
 
+from gateway.access.audit import Kind, Result
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -174,6 +175,7 @@ class ZenohFrontEnd:
             KeyKind.COMMAND: self._query_command,
             KeyKind.PARAM: self._params.query,
             KeyKind.HEALTH: self._query_health,
+            KeyKind.AUDIT: self._query_audit,
         }
 
     @property
@@ -554,10 +556,19 @@ class ZenohFrontEnd:
         try:
             self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
+            self._audit_command(client, f"drive {drive_id}: {cmd}: {exc.reason}", Result.FAILURE)
             return command_refused(exc.reason)
         except UnknownDrive:
             return command_refused(f"no drive {drive_id!r}")
+        self._audit_command(client, f"drive {drive_id}: {cmd}", Result.SUCCESS)
         return command_accepted()
+
+    def _audit_command(self, client: str, detail: str, result: Result) -> None:
+        """A command on the audit trail: the session's label is who; its role is what the
+        router's access control let it put (docs/operations.md, "Users and roles")."""
+        self.runtime.audit.record(
+            Kind.COMMAND, result, interface="zenoh", peer=client, identity=client, detail=detail
+        )
 
     # ------------------------------------------------------------ queries (loop)
 
@@ -593,6 +604,19 @@ class ZenohFrontEnd:
             return
         body = self._apply_command(parsed.drive_id, incoming.payload, incoming.client)
         self._replies.answer(pending, [Answer.reply(incoming.key, body)])
+
+    def _query_audit(self, pending: Pending) -> None:
+        """``<prefix>/gateway/audit[?since=N]``: the newest audit records (engineers: the
+        router's access control says who may ask, config/zenoh-secure.json5)."""
+        since = 0
+        for part in filter(None, pending.incoming.parameters.split(";")):
+            name, _, value = part.partition("=")
+            if name != "since" or not (value.isascii() and value.isdigit() and len(value) < 13):
+                self._replies.refuse(pending, "the audit key takes since=N only")
+                return
+            since = int(value)
+        body = {"records": self.runtime.audit.newest(since=since)}
+        self._replies.answer(pending, [Answer.reply(self.keys.key(KeyKind.AUDIT), body)])
 
     def _query_health(self, pending: Pending) -> None:
         body = self.runtime.health()

@@ -28,6 +28,7 @@ class KeyKind(Enum):
     DRIVE_TOKEN = "drive token"
     GATEWAY_TOKEN = "gateway token"
     HEALTH = "health"
+    AUDIT = "audit"
 
 
 class Role(Enum):
@@ -139,6 +140,18 @@ KEYS: tuple[KeySpec, ...] = (
         "JSON: name, version, uptime_s, drives, online, per bus live list and cycle figures",
         "reply",
         "The gateway's health (`Runtime.health()`).",
+    ),
+    KeySpec(
+        KeyKind.AUDIT,
+        "{prefix}/gateway/audit",
+        (Role.QUERYABLE,),
+        'JSON: `{"records": [...]}`, the newest audit records (at most 1000), oldest first',
+        "reply",
+        'The audit trail (docs/operations.md, "Users, roles and the audit trail"): each '
+        "record has `seq`, `timestamp` (UTC), `interface`, `peer`, `identity`, `role`, "
+        "`category`, `type`, `event_id`, `result` and `detail`. `?since=N` answers the "
+        "records after sequence number N. For engineers: the router's access control "
+        "(config/zenoh-secure.json5) says which certificates may ask.",
     ),
 )
 

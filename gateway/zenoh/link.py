@@ -124,6 +124,7 @@ class ZenohLink:
         for kind in (KeyKind.STATE, KeyKind.COMMAND, KeyKind.PARAM):
             self._entities.append(self._queryable(keys.all_drives(kind), kind))
         self._entities.append(self._queryable(keys.key(KeyKind.HEALTH), KeyKind.HEALTH))
+        self._entities.append(self._queryable(keys.key(KeyKind.AUDIT), KeyKind.AUDIT))
 
     @classmethod
     def open(
