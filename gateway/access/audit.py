@@ -35,6 +35,7 @@ from typing import Any
 
 from gateway.access import journal
 from gateway.access.roles import Identity
+from gateway.model import DriveCommand
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
@@ -87,6 +88,11 @@ class Kind(enum.Enum):
     def event_id(self) -> int:
         event_id: int = self.value[2]
         return event_id
+
+
+def command_text(cmd: DriveCommand) -> str:
+    """A command as a record's detail shows it: its JSON, the fields it sets only."""
+    return json.dumps(cmd.to_json(), separators=(",", ":"))
 
 
 def _cut(text: str, size: int) -> str:

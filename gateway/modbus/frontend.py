@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from gateway.access.audit import AuditTrail, Kind, Result
+from gateway.access.audit import AuditTrail, Kind, Result, command_text
 from gateway.access.roles import Identity, Role
 from gateway.config import ModbusSection
 from gateway.errors import CommandRejected
@@ -188,7 +188,7 @@ class DriveUnit:
             interface=INTERFACE,
             peer=client,
             identity=Identity(client, Role.OPERATOR),
-            detail=f"drive {self.drive_id}: {cmd}" + (f": {why}" if why else ""),
+            detail=f"drive {self.drive_id}: {command_text(cmd)}" + (f": {why}" if why else ""),
         )
 
     def _apply_stop_bits(self, client: str, raw: int) -> None:

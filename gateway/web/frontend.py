@@ -44,7 +44,7 @@ from aiohttp import WSCloseCode, WSMsgType, hdrs, web
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
-from gateway.access.audit import Result
+from gateway.access.audit import Result, command_text
 from gateway.access.roles import Action, Identity
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
@@ -592,10 +592,13 @@ class WebFrontEnd:
         try:
             self.hub.submit(state.id, Source.WEB, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
-            self._audit_command(request, identity, state.id, f"{cmd}: {exc.reason}", Result.FAILURE)
+            self._audit_command(
+                request, identity, state.id, f"{command_text(cmd)}: {exc.reason}", Result.FAILURE
+            )
             self.counters.commands["refused"] += 1
             return _json({"accepted": False, "error": exc.reason}, 409)
-        self._audit_command(request, identity, state.id, str(cmd), Result.SUCCESS)
+        if not cmd.is_empty:  # a keep-alive of the page in control is no audited command
+            self._audit_command(request, identity, state.id, command_text(cmd), Result.SUCCESS)
         self.counters.commands["accepted"] += 1
         return _json({"accepted": True, "client": client})
 

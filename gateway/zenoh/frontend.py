@@ -59,7 +59,7 @@ from typing import Any
 
 import zenoh
 
-from gateway.access.audit import Kind, Result
+from gateway.access.audit import Kind, Result, command_text
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -556,11 +556,14 @@ class ZenohFrontEnd:
         try:
             self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
-            self._audit_command(client, f"drive {drive_id}: {cmd}: {exc.reason}", Result.FAILURE)
+            self._audit_command(
+                client, f"drive {drive_id}: {command_text(cmd)}: {exc.reason}", Result.FAILURE
+            )
             return command_refused(exc.reason)
         except UnknownDrive:
             return command_refused(f"no drive {drive_id!r}")
-        self._audit_command(client, f"drive {drive_id}: {cmd}", Result.SUCCESS)
+        if not cmd.is_empty:  # a keep-alive (``{}``) is no audited command
+            self._audit_command(client, f"drive {drive_id}: {command_text(cmd)}", Result.SUCCESS)
         return command_accepted()
 
     def _audit_command(self, client: str, detail: str, result: Result) -> None:

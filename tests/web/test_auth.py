@@ -118,6 +118,11 @@ async def test_an_operators_command_needs_the_csrf_token_and_is_audited() -> Non
         last = audit(gw)[-1]
         assert (last["type"], last["result"], last["identity"]) == ("command", "success", "ana")
         assert last["detail"].startswith("drive d1: ")
+        async with gw.http.post(  # the page's keep-alive: no record of its own
+            f"{gw.url}api/drives/d1/command", json={}, headers={"X-CSRF-Token": body["csrf"]}
+        ) as r:
+            assert r.status == 200
+        assert audit(gw)[-1] == last
 
 
 async def test_api_tokens_identify_their_user() -> None:
