@@ -64,6 +64,9 @@ CORE_SUBFOLDERS = (
     *(f"gateway.{f}" for f in ("zenoh", "modbus", "web")),
 )
 FRONT_ENDS = ("gateway.zenoh", "gateway.modbus", "gateway.web")
+CORE_PACKAGES = ("gateway.access",)
+"""Folders of the core itself: who may do what (roles, users, sessions, the audit trail),
+which every front end and the config read. Held to the core's rules (:func:`core_rule`)."""
 SHARED_LINK_MAY_IMPORT = (*FIELDBUS_LIBS, "gateway.errors")
 ADAPTER_MAY_IMPORT = (
     "gateway.model",
@@ -204,6 +207,16 @@ def core_rule(mod: str, imp: str) -> str | None:
 
 def test_the_core_imports_no_subfolder_no_adapter_and_no_fieldbus_library() -> None:
     assert violations(core_rule) == []
+
+
+def test_the_core_packages_are_core_and_no_other_folder_is() -> None:
+    folders = {
+        ".".join(mod.split(".")[:2])
+        for mod in MODULES
+        if mod.count(".") >= 2 and under(mod, "gateway")
+    }
+    assert folders == set(CORE_SUBFOLDERS) | set(CORE_PACKAGES)
+    assert all(is_core(mod) for mod in MODULES if under(mod, *CORE_PACKAGES))
 
 
 def front_end_rule(mod: str, imp: str) -> str | None:
