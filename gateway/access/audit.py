@@ -15,6 +15,13 @@ a short detail says what. Records go to three places:
 
 The trail never raises into its caller: a sink that fails is counted, logged once, and
 the decision it records stands.
+
+A refusal a client can repeat at its own pace (by role, CSRF, wrong token, logins refused
+unchecked, requests refused at the door) is written once per :data:`FOLD_PERIOD` for each
+interface, type, peer and identity; the ones in between are counted, and the next record of that key
+(or a summary when the period is over, :meth:`AuditTrail.flush`) says how many. A flood of
+refusals so fills neither the file's bound nor the journal's rate limit, and every refusal
+is still counted. Logins, commands, parameter writes and the rest are each written.
 """
 
 from __future__ import annotations
@@ -28,19 +35,26 @@ import logging
 import logging.handlers
 import os
 import socket
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from gateway.access import journal
 from gateway.access.roles import Identity
 from gateway.model import DriveCommand
+from gateway.ratelimit import LogRateLimit
 from gateway.schema import Table
 
 log = logging.getLogger(__name__)
 
 KEEP = 1000  # records kept in memory for the readers
+FOLD_PERIOD = 10.0  # s: refusals of one kind from one peer beyond the first are counted
+FOLD_KEYS = 4096  # (interface, type, peer, identity) whose refusals are counted
+FOLDED = frozenset(
+    {"refused", "csrf", "token", "login_limited", "request_refused"}
+)  # Kind.type of the records folded: the refusals a client can repeat at its own pace
 DETAIL_MAX = 300  # characters of a record's detail
 FIELD_MAX = 120  # characters of a peer or identity
 
@@ -67,6 +81,7 @@ class Kind(enum.Enum):
     TOKEN = ("token", Category.ACCESS, 1004)
     REFUSED = ("refused", Category.ACCESS, 1010)  # the role does not allow it
     CSRF = ("csrf", Category.ACCESS, 1011)
+    REQUEST_REFUSED = ("request_refused", Category.ACCESS, 1012)  # at the door: allow, Host
     COMMAND = ("command", Category.CONTROL, 2001)
     PARAM_WRITE = ("param_write", Category.PARAMETER, 3001)
     BACKUP = ("backup", Category.PARAMETER, 3002)
@@ -213,9 +228,8 @@ class AuditTrail:
         section: AuditSection | None = None,
         clock: Callable[[], float] | None = None,
         journal_path: str = journal.SOCKET_PATH,
+        monotonic: Callable[[], float] | None = None,
     ) -> None:
-        import time
-
         self.section = section or AuditSection(journal=False)
         self.clock = clock or time.time
         self.records: collections.deque[Record] = collections.deque(maxlen=KEEP)
@@ -226,6 +240,9 @@ class AuditTrail:
         self._file: logging.Logger | None = None
         self._handler: logging.Handler | None = None
         self._journal: JournalSocket | None = None
+        self._monotonic = monotonic or time.monotonic
+        self._folds = LogRateLimit(FOLD_PERIOD, FOLD_KEYS)
+        self._flushed = self._monotonic()
         if self.section.file is not None:
             self._open_file(self.section.file)
         if self.section.journal:
@@ -263,6 +280,29 @@ class AuditTrail:
         peer: str = "-",
         identity: Identity | str | None = None,
         detail: str = "",
+    ) -> Record | None:
+        """The record of one decision (None: folded into the next, module docstring)."""
+        self.counts[f"{kind.type}:{result.value}"] += 1
+        if kind.type in FOLDED:
+            who = identity.name if isinstance(identity, Identity) else identity or ""
+            held = self._folds.admit((interface, kind.type, peer, who), self._monotonic())
+            if held is None:
+                return None
+            if held:
+                detail = f"{detail} ({held} more since the last record)"
+        return self._new(
+            kind, result, interface=interface, peer=peer, identity=identity, detail=detail
+        )
+
+    def _new(
+        self,
+        kind: Kind,
+        result: Result,
+        *,
+        interface: str,
+        peer: str,
+        identity: Identity | str | None,
+        detail: str,
     ) -> Record:
         if isinstance(identity, Identity):
             who, role = identity.name, identity.role.label
@@ -280,9 +320,34 @@ class AuditTrail:
             detail=_cut(detail, DETAIL_MAX),
         )
         self.records.append(rec)
-        self.counts[f"{kind.type}:{result.value}"] += 1
         self._write(rec)
         return rec
+
+    def refused_request(self, interface: str, reason: str, peer: str, detail: str) -> None:
+        """A request or connection refused before anyone is identified (an address
+        outside the allow-list, a Host not in web.names, a limit): folded like any refusal."""
+        self.record(
+            Kind.REQUEST_REFUSED,
+            Result.FAILURE,
+            interface=interface,
+            peer=peer,
+            detail=f"{reason}: {detail}",
+        )
+
+    def flush(self) -> None:
+        """A summary record for each folded key whose period is over with refusals held
+        back (at most once a second; the daemon calls it on every tick)."""
+        now = self._monotonic()
+        if now - self._flushed < 1.0:
+            return
+        self._flushed = now
+        for key, held in self._folds.flush(now):
+            interface, kind_type, peer, who = cast(tuple[str, str, str, str], key)
+            kind = next(k for k in Kind if k.type == kind_type)
+            detail = f"{held} more refused since the last record"
+            self._new(
+                kind, Result.FAILURE, interface=interface, peer=peer, identity=who, detail=detail
+            )
 
     def _write(self, rec: Record) -> None:
         try:

@@ -371,6 +371,7 @@ class ModbusFrontEnd:
                 max_per_peer=self.section.max_connections_per_peer,
             ),
             on_peer=self.shared.memory.peer,
+            on_refused=self._audit_refused_connection,
             fast_reads=FastReads({u.unit: u for u in self.drives.values()}, MIRROR_OFFSET),
         )
         self.address = await server.start()
@@ -384,6 +385,11 @@ class ModbusFrontEnd:
             self._server = None
             await server.stop()
             log.info("Modbus TCP server stopped")
+
+    def _audit_refused_connection(self, setting: str, host: str) -> None:
+        self.runtime.audit.refused_request(
+            INTERFACE, setting, host, f"connection from {host} closed at accept ({setting})"
+        )
 
     def _log_serving(self) -> None:
         host, port = self.address or (self.section.host, self.section.port)

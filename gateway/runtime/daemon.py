@@ -370,6 +370,7 @@ class Daemon:
         interval = self.config.gateway.tick
         while True:
             self.hub.tick()
+            self.runtime.audit.flush()  # the counts of refusals folded (at most once a second)
             await asyncio.sleep(interval)
 
     async def _watchdog(self, interval: float) -> None:

@@ -199,12 +199,16 @@ class RefusalLog:
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self.clock = clock
         self._limit = LogRateLimit(LOG_PERIOD)
+        self.listener: Callable[[str, str, str], None] | None = None
+        """Told of every refusal, logged or not: its kind, peer and line (the audit)."""
 
     def note(
         self, kind: str, peer: str, figure: object, exc_info: BaseException | None = None
     ) -> None:
         """A refusal of ``kind`` (a key of :data:`REFUSALS`) of ``peer``; ``exc_info``: the
         failure whose traceback the line carries, if it is written."""
+        if self.listener is not None:
+            self.listener(kind, peer, REFUSALS[kind].line % (peer, figure))
         held = self._limit.admit(kind, self.clock())
         if held is None:
             return

@@ -90,6 +90,20 @@ SECURITY_HEADERS = {
     "Cache-Control": "no-store",
 }
 MAX_BODY = 4096  # bytes of a command request
+AUDITED_AT_THE_DOOR = frozenset(
+    {
+        "allow",
+        "over_limit",
+        "over_peer_limit",
+        "pages",
+        "pages_per_peer",
+        "token_limit",
+        "request_rate",
+        "host",
+        "bad_request",
+    }
+)
+"""The refusals of :class:`RefusalLog` that are access decisions: on the audit trail."""
 OPEN_PATHS = frozenset({*STATIC, "/favicon.ico", "/api/login", "/api/logout", "/api/session"})
 """Served without a login even with ``web.anonymous = "none"``: the page and the login."""
 SHUTDOWN_TIMEOUT = 2.0  # s open requests and pages get when the gateway stops
@@ -164,6 +178,7 @@ class WebFrontEnd:
             self.section, runtime.config.users, runtime.audit, self.counters, self.refusals
         )
         self.tokens = self.auth.tokens
+        self.refusals.listener = self._audit_refusal
         self.static = load_static()
         self.address: tuple[str, int] | None = None
         self.ready = asyncio.Event()  # set while the server listens
@@ -252,6 +267,12 @@ class WebFrontEnd:
                     await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway stopping")
 
         await asyncio.gather(*(close(page.ws) for page in list(self._pages)))
+
+    def _audit_refusal(self, kind: str, peer: str, line: str) -> None:
+        """A refusal at the door on the audit trail (those of an identity are audited
+        where they are decided, gateway/web/auth.py)."""
+        if kind in AUDITED_AT_THE_DOOR:
+            self.runtime.audit.refused_request("web", kind, peer, line)
 
     def _tls_context(self) -> ssl.SSLContext | None:
         """The server's TLS context from ``web.tls_cert`` and ``web.tls_key`` (None: plain
@@ -398,6 +419,8 @@ class WebFrontEnd:
             # a WebSocket is not held to the same-origin rule: a page of another site open
             # in the operator's browser could otherwise read the feed
             self.counters.refused["origin"] += 1
+            origin = request.headers.get(hdrs.ORIGIN, "")
+            self.runtime.audit.refused_request("web", "origin", _peer(request), shown(origin))
             return web.Response(status=403, text="forbidden: the feed serves this page only\n")
         peer = _peer(request)
         if self.gate.page_refusal(peer) is not None:

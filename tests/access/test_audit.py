@@ -18,6 +18,7 @@ def test_a_record_has_the_fields_cr_2_8_lists() -> None:
     rec = trail.record(
         Kind.COMMAND, Result.SUCCESS, interface="web", peer="10.0.0.9", identity=ANA, detail="run"
     )
+    assert rec is not None
     assert rec.to_json() == {
         "seq": 1,
         "timestamp": "2023-11-14T22:13:20.250Z",
@@ -31,7 +32,7 @@ def test_a_record_has_the_fields_cr_2_8_lists() -> None:
         "result": "success",
         "detail": "run",
     }
-    assert trail.newest() == [rec.to_json()]
+    assert rec is not None and trail.newest() == [rec.to_json()]
     assert trail.counts == {"command:success": 1}
 
 
@@ -51,6 +52,7 @@ def test_an_outsiders_text_cannot_forge_a_line_or_grow_a_record() -> None:
         identity='evil\n{"result": "success"}',
         detail="x" * 5000,
     )
+    assert rec is not None
     assert "\n" not in rec.identity and len(rec.peer) <= 120 and len(rec.detail) <= 300
 
 
@@ -66,13 +68,13 @@ def test_the_file_is_json_lines_and_its_size_bounded(tmp_path: Path) -> None:
     path = tmp_path / "audit.log"
     trail = AuditTrail(AuditSection(file=path, max_kib=16, backups=2, journal=False))
     for i in range(1000):
-        trail.record(Kind.REFUSED, Result.FAILURE, interface="modbus", detail=f"write {i}")
+        trail.record(Kind.COMMAND, Result.SUCCESS, interface="modbus", detail=f"write {i}")
     trail.close()
     files = sorted(tmp_path.iterdir())
     assert [f.name for f in files] == ["audit.log", "audit.log.1", "audit.log.2"]
     assert all(f.stat().st_size <= 16 * 1024 for f in files)
     last = json.loads(path.read_text().splitlines()[-1])
-    assert last["detail"] == "write 999" and last["event_id"] == 1010
+    assert last["detail"] == "write 999" and last["event_id"] == 2001
 
 
 def test_records_go_to_the_journal_as_fields(tmp_path: Path) -> None:
@@ -99,3 +101,45 @@ def test_no_journal_socket_no_journal(tmp_path: Path) -> None:
     assert not trail.journal_open
     trail.record(Kind.LOGOUT, Result.SUCCESS, interface="web")  # no error
     assert len(trail.records) == 1
+
+
+def test_a_flood_of_refusals_is_folded_per_peer_and_counted() -> None:
+    now = [0.0]
+    trail = AuditTrail(monotonic=lambda: now[0])
+
+    def refuse(peer: str, who: str = "vic") -> None:
+        trail.record(
+            Kind.REFUSED, Result.FAILURE, interface="modbus", peer=peer, identity=who, detail="w"
+        )
+
+    for _ in range(500):
+        refuse("10.0.0.9")
+    refuse("10.0.0.8")  # another peer: its own record
+    refuse("10.0.0.9", who="ana")  # another identity: its own record
+    trail.record(Kind.LOGIN, Result.FAILURE, interface="web", peer="10.0.0.9")  # never folded
+    trail.record(Kind.LOGIN, Result.FAILURE, interface="web", peer="10.0.0.9")
+    assert [(r["peer"], r["identity"]) for r in trail.newest() if r["type"] == "refused"] == [
+        ("10.0.0.9", "vic"),
+        ("10.0.0.8", "vic"),
+        ("10.0.0.9", "ana"),
+    ]
+    assert trail.counts["refused:failure"] == 502 and trail.counts["login:failure"] == 2
+    now[0] = 5.0
+    trail.flush()  # the period is not over: nothing yet
+    assert len(trail.records) == 5
+    now[0] = 10.5
+    trail.flush()
+    summary = trail.newest()[-1]
+    assert (summary["type"], summary["peer"], summary["identity"]) == ("refused", "10.0.0.9", "vic")
+    assert summary["detail"] == "499 more refused since the last record"
+    refuse("10.0.0.9")  # the summary began a period: counted
+    now[0] = 21.0
+    refuse("10.0.0.9")
+    assert trail.newest()[-1]["detail"] == "w (1 more since the last record)"
+
+
+def test_every_web_refusal_line_takes_a_peer_and_a_figure() -> None:
+    from gateway.web.admission import REFUSALS
+
+    for kind, refusal in REFUSALS.items():
+        assert (refusal.line % ("10.0.0.1", 5)).startswith("web"), kind

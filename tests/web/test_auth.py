@@ -111,7 +111,9 @@ async def test_an_operators_command_needs_the_csrf_token_and_is_audited() -> Non
         assert status == 403 and "X-CSRF-Token" in answer["error"]
         status, _ = await command(gw, csrf="not-it")
         assert status == 403 and not gw.hub.desired("d1").run
-        assert [r["type"] for r in audit(gw)[-2:]] == ["csrf", "csrf"]
+        # the second within 10 s of the first is counted, and said in the next record
+        assert [r["type"] for r in audit(gw)[-2:]] == ["login", "csrf"]
+        assert gw.runtime.audit.counts["csrf:failure"] == 2
         status, answer = await command(gw, csrf=body["csrf"])
         assert status == 200 and answer["accepted"] is True
         assert gw.hub.desired("d1").run
@@ -183,7 +185,9 @@ async def test_failed_logins_are_limited_per_address() -> None:
         assert 'drive_gateway_audit_records_total{result="failure",type="login"} 3.0' in text
         kinds = [(r["type"], r["result"], r["peer"]) for r in audit(gw)]
         assert kinds.count(("login", "failure", "127.0.0.1")) == 3
-        assert kinds.count(("login_limited", "failure", "127.0.0.1")) == 2
+        # refused unchecked: the first of 10 s written, the next counted (audit.FOLD_PERIOD)
+        assert kinds.count(("login_limited", "failure", "127.0.0.1")) == 1
+        assert gw.runtime.audit.counts["login_limited:failure"] == 2
         assert ("login", "success", "127.0.0.2") in kinds
 
 
@@ -213,6 +217,29 @@ async def test_with_anonymous_none_only_the_page_and_the_login_are_open() -> Non
         await login(gw, "vic")
         async with gw.http.get(f"{gw.url}api/drives") as r:
             assert r.status == 200
+
+
+async def test_refusals_at_the_door_are_audited() -> None:
+    import ipaddress
+
+    async with gateway() as gw:
+        async with gw.http.get(f"{gw.url}api/health", headers={"Host": "evil.example"}) as r:
+            assert r.status == 421
+        host = audit(gw)[-1]
+        assert (host["type"], host["category"], host["event_id"]) == (
+            "request_refused",
+            "access",
+            1012,
+        )
+        assert host["detail"].startswith("host: web request from 127.0.0.1 refused (421)")
+    only_other = (ipaddress.ip_network("127.0.0.2/32"),)
+    async with small_gateway(web_section(allow=only_other)) as gw:
+        with pytest.raises(aiohttp.ClientError):
+            async with gw.http.get(f"{gw.url}api/health") as r:
+                await r.read()
+        refused = audit(gw)[-1]
+        assert (refused["type"], refused["peer"]) == ("request_refused", "127.0.0.1")
+        assert refused["detail"].startswith("allow: web connection from 127.0.0.1 refused")
 
 
 # ---------------------------------------------------------------- TLS
