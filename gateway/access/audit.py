@@ -53,7 +53,7 @@ KEEP = 1000  # records kept in memory for the readers
 FOLD_PERIOD = 10.0  # s: refusals of one kind from one peer beyond the first are counted
 FOLD_KEYS = 4096  # (interface, type, peer, identity) whose refusals are counted
 FOLDED = frozenset(
-    {"refused", "csrf", "token", "login_limited", "request_refused"}
+    {"refused", "csrf", "token", "login_limited", "request_refused", "link_open", "link_close"}
 )  # Kind.type of the records folded: the refusals a client can repeat at its own pace
 DETAIL_MAX = 300  # characters of a record's detail
 FIELD_MAX = 120  # characters of a peer or identity
@@ -79,6 +79,8 @@ class Kind(enum.Enum):
     LOGOUT = ("logout", Category.ACCESS, 1002)
     LOGIN_LIMITED = ("login_limited", Category.ACCESS, 1003)
     TOKEN = ("token", Category.ACCESS, 1004)
+    LINK_OPEN = ("link_open", Category.ACCESS, 1005)  # a Zenoh link, its certificate's name
+    LINK_CLOSE = ("link_close", Category.ACCESS, 1006)
     REFUSED = ("refused", Category.ACCESS, 1010)  # the role does not allow it
     CSRF = ("csrf", Category.ACCESS, 1011)
     REQUEST_REFUSED = ("request_refused", Category.ACCESS, 1012)  # at the door: allow, Host

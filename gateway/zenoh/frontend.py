@@ -66,7 +66,7 @@ from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
-from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
+from gateway.zenoh.link import ANONYMOUS, Incoming, LinkSeen, Oversize, Payload, ZenohLink
 from gateway.zenoh.params import ParamQueries
 from gateway.zenoh.replies import Pending, Replies
 from gateway.zenoh.requests import (
@@ -258,7 +258,12 @@ class ZenohFrontEnd:
 
     def _io_open(self, config: Any) -> dict[str, Any]:
         self._link = ZenohLink.open(
-            config, self.keys, self._drive_ids, self._command_from_zenoh, self._query_from_zenoh
+            config,
+            self.keys,
+            self._drive_ids,
+            self._command_from_zenoh,
+            self._query_from_zenoh,
+            on_link=self._link_from_zenoh,
         )
         return dict(self._link.change_publishers)
 
@@ -347,6 +352,23 @@ class ZenohFrontEnd:
 
     def _command_from_zenoh(self, key: str, payload: Payload, client: str) -> None:
         self._to_loop(self._on_command_put, key, payload, client)
+
+    def _link_from_zenoh(self, seen: LinkSeen) -> None:
+        self._to_loop(self._on_link, seen)
+
+    def _on_link(self, seen: LinkSeen) -> None:
+        """A link opened or closed on the audit trail: the certificate's name, when the
+        link authenticated with one, is the identity (what the access control matches)."""
+        host = seen.remote.rpartition(":")[0] or seen.remote
+        self.runtime.audit.record(
+            Kind.LINK_OPEN if seen.opened else Kind.LINK_CLOSE,
+            Result.SUCCESS,
+            interface="zenoh",
+            peer=host,
+            identity=seen.auth or seen.client,
+            detail=f"{seen.remote}, session {seen.client}"
+            + (f", certificate {seen.auth}" if seen.auth else ", no certificate"),
+        )
 
     def _query_from_zenoh(self, incoming: Incoming) -> None:
         if not self._to_loop(self._on_query, incoming):

@@ -223,7 +223,9 @@ async def test_a_read_only_modbus_peer_is_refused_and_zenoh_is_audited(tmp_path:
         READ_ONLY_PEER,
     )
     assert "this client may read only (its [[modbus.peers]] rights)" in refusal["detail"]
-    zenoh = [r for r in records if r["interface"] == "zenoh"]
+    link = next(r for r in records if r["type"] == "link_open")
+    assert link["interface"] == "zenoh" and link["detail"].endswith(", no certificate")
+    zenoh = [r for r in records if r["interface"] == "zenoh" and r["category"] != "access"]
     assert [(r["type"], r["result"]) for r in zenoh] == [
         ("command", "success"),
         ("param_write", "success"),
