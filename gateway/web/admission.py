@@ -159,6 +159,11 @@ REFUSALS: dict[str, Refusal] = {
         " within web.token_window; %s s to wait",
         "logins refused unchecked (too many failed logins)",
     ),
+    "login_busy": Refusal(
+        logging.WARNING,
+        "web login from %s refused (503): %s logins are waiting for their check",
+        "logins refused (too many at once)",
+    ),
     "role": Refusal(
         logging.INFO,
         "web request from %s refused (403): %s",

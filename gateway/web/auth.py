@@ -43,6 +43,7 @@ from gateway.webconfig import WebSection
 INTERFACE = "web"
 SHARED_TOKEN = "token"  # the identity of web.token_sha256
 MAX_FIELD = 256  # characters of a user name or password a login may give
+MAX_LOGINS_WAITING = 8  # logins waiting for the KDF's thread; more are refused (503)
 _NO_USER = hash_password("no such user", salt=b"drive-gateway-no-user")
 """Checked for a name no user has: an unknown name takes as long as a wrong password."""
 
@@ -100,6 +101,7 @@ class WebAuth:
         # one worker thread for the KDF: a flood of logins costs one core at most, and the
         # loop runs on meanwhile
         self._kdf = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="web-kdf")
+        self._waiting = 0  # logins submitted to the KDF's thread, not yet checked
 
     def close(self) -> None:
         """The KDF's thread ends (after the login it may be checking)."""
@@ -232,10 +234,19 @@ class WebAuth:
                 (("Retry-After", str(math.ceil(wait))),),
             )
         name, password = _credentials(body)
+        if self._waiting >= MAX_LOGINS_WAITING:  # logins from many addresses at once
+            self.refusals.note("login_busy", where, MAX_LOGINS_WAITING)
+            raise Refused(
+                503, "too many logins at once: try again", "login_busy", (("Retry-After", "1"),)
+            )
         user = self.users.get(name)
         stored: ScryptHash = user.password if user and user.password else _NO_USER
         loop = asyncio.get_running_loop()
-        right = await loop.run_in_executor(self._kdf, verify_password, password, stored)
+        self._waiting += 1
+        try:
+            right = await loop.run_in_executor(self._kdf, verify_password, password, stored)
+        finally:
+            self._waiting -= 1
         if user is None or user.password is None or not right:
             self.logins.failed(where, time.monotonic())
             self.counters.logins["failure"] += 1

@@ -101,6 +101,7 @@ AUDITED_AT_THE_DOOR = frozenset(
         "request_rate",
         "host",
         "bad_request",
+        "login_busy",
     }
 )
 """The refusals of :class:`RefusalLog` that are access decisions: on the audit trail."""

@@ -86,7 +86,7 @@ METRICS: dict[str, str] = {
     f"{NS}_web_clients_over_budget": "Pages dropped: more unsent than web.page_send_budget_kib.",
     f"{NS}_web_requests_refused": (
         "Refused requests (host, origin, token, token_limit, commands_off, pages, pages_per_peer,"
-        " login, login_limit, role, csrf, login_required)."
+        " login, login_limit, login_busy, role, csrf, login_required)."
     ),
     f"{NS}_web_logins": "Web logins by result (success, failure, limited: refused unchecked).",
     f"{NS}_audit_records": "Audit records written, by type and result.",
@@ -131,6 +131,7 @@ class WebCounters:
                 "pages_per_peer",
                 "login",
                 "login_limit",
+                "login_busy",
                 "role",
                 "csrf",
                 "login_required",

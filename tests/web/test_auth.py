@@ -191,6 +191,45 @@ async def test_failed_logins_are_limited_per_address() -> None:
         assert ("login", "success", "127.0.0.2") in kinds
 
 
+async def test_logins_waiting_for_their_check_are_bounded(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import asyncio
+    import threading
+
+    from gateway.web import auth
+
+    release = threading.Event()
+
+    def held(password: str, stored: Any) -> bool:  # the KDF, held until the test says
+        release.wait(TIMEOUT)
+        return False
+
+    monkeypatch.setattr(auth, "verify_password", held)
+    async with gateway() as gw:
+        real = gw.web.auth._kdf
+        all_in = asyncio.Event()
+        submitted: list[Any] = []
+
+        class Counting:  # the KDF's executor, telling when every login is waiting
+            def submit(self, fn: Any, *args: Any) -> Any:
+                submitted.append(fn)
+                if len(submitted) == auth.MAX_LOGINS_WAITING:
+                    all_in.set()
+                return real.submit(fn, *args)
+
+        monkeypatch.setattr(gw.web.auth, "_kdf", Counting())
+        n = auth.MAX_LOGINS_WAITING
+        waiting = [asyncio.create_task(login(gw, "ana", "x")) for _ in range(n)]
+        await asyncio.wait_for(all_in.wait(), TIMEOUT)
+        status, body = await login(gw, "ana", "x")
+        assert status == 503 and body["error"] == "too many logins at once: try again"
+        release.set()
+        assert [status for status, _ in await asyncio.gather(*waiting)] == [401] * 8
+        assert gw.web.counters.refused["login_busy"] == 1
+        monkeypatch.setattr(gw.web.auth, "_kdf", real)  # shut down with the front end
+
+
 @pytest.mark.parametrize(
     "body",
     [
