@@ -27,7 +27,7 @@ import math
 import time
 from typing import Any
 
-from aiohttp import web
+from aiohttp import hdrs, web
 
 from gateway import jsontext
 from gateway.access.audit import AuditTrail, Kind, Result
@@ -36,6 +36,7 @@ from gateway.access.roles import ANONYMOUS, Action, Identity, Role, refusal
 from gateway.access.sessions import COOKIE, CSRF_HEADER, Session, Sessions, csrf_ok
 from gateway.access.users import User
 from gateway.web.admission import RefusalLog, peer_of
+from gateway.web.hosts import origin_admitted
 from gateway.web.metrics import WebCounters
 from gateway.web.tokens import TokenFailures
 from gateway.webconfig import WebSection
@@ -95,6 +96,7 @@ class WebAuth:
         self.counters = counters
         self.refusals = refusals
         self.sessions = Sessions()
+        self.names = section.host_names
         limits = section.limits
         self.tokens = TokenFailures(limits.token_failures, limits.token_window)
         self.logins = TokenFailures(limits.token_failures, limits.token_window)
@@ -127,12 +129,12 @@ class WebAuth:
         return token.strip() if scheme.lower() == "bearer" and token.strip() else None
 
     def reader(self, request: web.BaseRequest) -> Identity | None:
-        """Who reads (no counting of wrong tokens: a read costs a hash at most)."""
+        """Who reads: the session's user, a token's (a wrong token refused and counted, as
+        for a command), else anonymous (a viewer, or None with ``web.anonymous = "none"``)."""
         session = self.session(request)
         if session is not None:
             return session.identity
-        token = self._bearer(request)
-        identity = self._token_identity(token) if token is not None else None
+        identity = self._token_check(request, peer(request), required=False)
         if identity is not None:
             return identity
         return Identity(ANONYMOUS, Role.VIEWER) if self.section.anonymous else None
@@ -141,6 +143,8 @@ class WebAuth:
         """The identity of a reading request; :class:`Refused` if it may not read this."""
         identity = self.reader(request)
         if identity is None:
+            where = peer(request)
+            self.audit.refused_request(INTERFACE, "login_required", where, request.path)
             raise Refused(401, "log in first (POST /api/login) or give a token", "login_required")
         self._allow(request, identity, action)
         return identity
@@ -179,12 +183,21 @@ class WebAuth:
                 )
                 raise Refused(403, why, "csrf")
             identity = session.identity
-        else:
-            identity = self._token_check(request, where)
-        self._allow(request, identity, action)
-        return identity
+            self._allow(request, identity, action)
+            return identity
+        token_identity = self._token_check(request, where, required=True)
+        if token_identity is None:  # not reached: a required token is there or refused
+            raise Refused(401, "log in, or give a valid token (Authorization: Bearer)", "token")
+        self._allow(request, token_identity, action)
+        return token_identity
 
-    def _token_check(self, request: web.BaseRequest, where: str) -> Identity:
+    def _token_check(self, request: web.BaseRequest, where: str, required: bool) -> Identity | None:
+        """The identity of the request's API token; None when it gives none and none is
+        ``required``. :class:`Refused` for a wrong or missing one (counted against the
+        address) and, unchecked, for an address over ``web.token_failures``."""
+        token = self._bearer(request)
+        if token is None and not required:
+            return None
         now = time.monotonic()
         wait = self.tokens.wait(where, now)
         if wait > 0:
@@ -195,7 +208,6 @@ class WebAuth:
                 "token_limit",
                 (("Retry-After", str(math.ceil(wait))),),
             )
-        token = self._bearer(request)
         identity = self._token_identity(token) if token is not None else None
         if identity is None:
             self.tokens.failed(where, now)
@@ -213,7 +225,19 @@ class WebAuth:
 
     # ------------------------------------------------------------ login
 
+    def same_site(self, request: web.BaseRequest) -> None:
+        """A login or logout from a page of this gateway only: its ``Origin`` (when a
+        browser gives one) names one of ``web.names``, and a login's body is declared JSON,
+        which a form of another site cannot send (a text/plain form can forge the JSON
+        itself, and log the user's browser in as someone else)."""
+        if not origin_admitted(request.headers.get(hdrs.ORIGIN), self.names):
+            raise Refused(403, "a login from a page of another site is refused", "origin")
+        login = request.method == "POST" and request.path == "/api/login"
+        if login and request.content_type != "application/json":
+            raise Refused(415, "a login is JSON (Content-Type: application/json)", "login")
+
     async def login(self, request: web.Request, body: bytes) -> web.Response:
+        self.same_site(request)
         where = peer(request)
         now = time.monotonic()
         wait = self.logins.wait(where, now)
@@ -278,6 +302,7 @@ class WebAuth:
         return response
 
     def logout(self, request: web.Request) -> web.Response:
+        self.same_site(request)
         session = self.session(request)
         if session is not None:
             self.check_change(request, Action.READ)  # the CSRF token: no logging out by others

@@ -242,9 +242,44 @@ async def test_logins_waiting_for_their_check_are_bounded(
 )
 async def test_a_malformed_login_is_refused_unchecked(body: bytes) -> None:
     async with gateway() as gw:
-        async with gw.http.post(f"{gw.url}api/login", data=body) as r:
+        json_type = {"Content-Type": "application/json"}
+        async with gw.http.post(f"{gw.url}api/login", data=body, headers=json_type) as r:
             assert r.status == 400
         assert gw.web.counters.logins["failure"] == 0
+
+
+async def test_a_login_from_a_form_of_another_site_is_refused() -> None:
+    """A text/plain form can forge a JSON body (name ``{"user":"x","password":"p``, value
+    ``w"}``) and log the operator's browser in as someone else: refused unchecked."""
+    forged = b'{"user":"ana","password":"a good pass=word"}'
+    async with gateway() as gw:
+        async with gw.http.post(
+            f"{gw.url}api/login", data=forged, headers={"Content-Type": "text/plain"}
+        ) as r:
+            assert r.status == 415
+        async with gw.http.post(
+            f"{gw.url}api/login",
+            json={"user": "ana", "password": PASSWORD},
+            headers={"Origin": "https://evil.example"},
+        ) as r:
+            assert r.status == 403
+            assert "Set-Cookie" not in r.headers
+        assert gw.web.counters.logins == {"success": 0, "failure": 0, "limited": 0}
+
+
+async def test_a_wrong_token_on_a_read_is_refused_and_counted() -> None:
+    limits = replace(WebLimits(), token_failures=2, token_window=600.0)
+    async with gateway(limits=limits) as gw:
+        wrong = {"Authorization": "Bearer guess"}
+        for status in (401, 401, 429):
+            async with gw.http.get(f"{gw.url}api/audit", headers=wrong) as r:
+                assert r.status == status
+        async with gw.http.get(  # the right token from that address: held back too
+            f"{gw.url}api/audit", headers={"Authorization": "Bearer token-of-eng"}
+        ) as r:
+            assert r.status == 429
+        async with gw.http.get(f"{gw.url}api/drives") as r:  # no token: a viewer still
+            assert r.status == 200
 
 
 async def test_with_anonymous_none_only_the_page_and_the_login_are_open() -> None:
