@@ -736,6 +736,16 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
 def _check_web_users(root: Table, web: WebSection, users: tuple[User, ...]) -> None:
     """Commands on the page need users who log in (docs/operations.md, "Users and
     roles"); only a page on this machine alone may stand on the shared token."""
+    if web.token_sha256 is not None and not web.loopback_only:
+        root.errors.append(
+            root.error(
+                "web.token_sha256",
+                "a shared token names no one: it is for a page on this machine only (web.allow "
+                "loopback); give each user or script a [[users]] entry with its own "
+                "token_sha256 (drive-gateway users token)",
+            )
+        )
+        return
     if not web.commands or users:
         return
     if not web.loopback_only:

@@ -27,6 +27,7 @@ import math
 import time
 from typing import Any
 
+import orjson
 from aiohttp import hdrs, web
 
 from gateway import jsontext
@@ -68,8 +69,6 @@ class Refused(Exception):
         self.headers = headers
 
     def response(self) -> web.Response:
-        import orjson
-
         return web.Response(
             body=orjson.dumps({"accepted": False, "error": self.reason}),
             status=self.status,
@@ -346,8 +345,6 @@ class WebAuth:
 
 
 def _json(body: Any, status: int = 200) -> web.Response:
-    import orjson
-
     return web.Response(body=orjson.dumps(body), status=status, content_type="application/json")
 
 
