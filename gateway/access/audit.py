@@ -21,7 +21,8 @@ unchecked, requests refused at the door) is written once per :data:`FOLD_PERIOD`
 interface, type, peer and identity; the ones in between are counted, and the next record of that key
 (or a summary when the period is over, :meth:`AuditTrail.flush`) says how many. A flood of
 refusals so fills neither the file's bound nor the journal's rate limit, and every refusal
-is still counted. Logins, commands, parameter writes and the rest are each written.
+is still counted. So is a command that only moves a drive's speed setpoint, per drive and
+client. Logins, other commands, parameter writes and the rest are each written.
 """
 
 from __future__ import annotations
@@ -51,7 +52,8 @@ log = logging.getLogger(__name__)
 
 KEEP = 1000  # records kept in memory for the readers
 FOLD_PERIOD = 10.0  # s: refusals of one kind from one peer beyond the first are counted
-FOLD_KEYS = 4096  # (interface, type, peer, identity) whose refusals are counted
+FOLD_KEYS = 4096  # (interface, type, peer, identity, result[, what]) being counted
+SETPOINT_FIELDS = frozenset({"speed_rpm", "speed_pct"})
 FOLDED = frozenset(
     {"refused", "csrf", "token", "login_limited", "request_refused", "link_open", "link_close"}
 )  # Kind.type of the records folded: the refusals a client can repeat at its own pace
@@ -282,12 +284,16 @@ class AuditTrail:
         peer: str = "-",
         identity: Identity | str | None = None,
         detail: str = "",
+        fold: str | None = None,
     ) -> Record | None:
-        """The record of one decision (None: folded into the next, module docstring)."""
+        """The record of one decision (None: folded into the next, module docstring);
+        ``fold``: fold this one too, under this key (a drive's speed setpoints)."""
         self.counts[f"{kind.type}:{result.value}"] += 1
-        if kind.type in FOLDED:
+        if kind.type in FOLDED or fold is not None:
             who = identity.name if isinstance(identity, Identity) else identity or ""
-            held = self._folds.admit((interface, kind.type, peer, who), self._monotonic())
+            key: tuple[str, ...] = (interface, kind.type, peer, who, result.value)
+            key += (fold,) if fold is not None else ()
+            held = self._folds.admit(key, self._monotonic())
             if held is None:
                 return None
             if held:
@@ -325,6 +331,31 @@ class AuditTrail:
         self._write(rec)
         return rec
 
+    def command(
+        self,
+        cmd: DriveCommand,
+        result: Result,
+        *,
+        interface: str,
+        peer: str,
+        identity: Identity | str,
+        drive: str,
+        why: str = "",
+    ) -> None:
+        """A drive command, accepted or refused. One that only moves the speed setpoint
+        (a SCADA ramping it sends one per cycle) is folded per drive and client like a
+        refusal; a run, stop, reset, direction or any other change is always written."""
+        setpoint_only = set(cmd.to_json()) <= SETPOINT_FIELDS
+        self.record(
+            Kind.COMMAND,
+            result,
+            interface=interface,
+            peer=peer,
+            identity=identity,
+            detail=f"drive {drive}: {command_text(cmd)}" + (f": {why}" if why else ""),
+            fold=f"setpoint {drive}" if setpoint_only else None,
+        )
+
     def refused_request(self, interface: str, reason: str, peer: str, detail: str) -> None:
         """A request or connection refused before anyone is identified (an address
         outside the allow-list, a Host not in web.names, a limit): folded like any refusal."""
@@ -344,11 +375,12 @@ class AuditTrail:
             return
         self._flushed = now
         for key, held in self._folds.flush(now):
-            interface, kind_type, peer, who = cast(tuple[str, str, str, str], key)
+            interface, kind_type, peer, who, result, *fold = cast(tuple[str, ...], key)
             kind = next(k for k in Kind if k.type == kind_type)
-            detail = f"{held} more refused since the last record"
+            what = f"{fold[0]}: {held} more" if fold else f"{held} more refused"
+            detail = f"{what} since the last record"
             self._new(
-                kind, Result.FAILURE, interface=interface, peer=peer, identity=who, detail=detail
+                kind, Result(result), interface=interface, peer=peer, identity=who, detail=detail
             )
 
     def _write(self, rec: Record) -> None:

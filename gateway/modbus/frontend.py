@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from gateway.access.audit import AuditTrail, Kind, Result, command_text
+from gateway.access.audit import AuditTrail, Kind, Result
 from gateway.access.roles import Identity, Role
 from gateway.config import ModbusSection
 from gateway.errors import CommandRejected
@@ -182,13 +182,14 @@ class DriveUnit:
         )
 
     def _audited(self, client: str, cmd: DriveCommand, result: Result, why: str = "") -> None:
-        self.shared.audit.record(
-            Kind.COMMAND,
+        self.shared.audit.command(
+            cmd,
             result,
             interface=INTERFACE,
             peer=client,
             identity=Identity(client, Role.OPERATOR),
-            detail=f"drive {self.drive_id}: {command_text(cmd)}" + (f": {why}" if why else ""),
+            drive=self.drive_id,
+            why=why,
         )
 
     def _apply_stop_bits(self, client: str, raw: int) -> None:

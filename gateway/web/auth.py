@@ -331,12 +331,11 @@ class WebAuth:
             }
         )
 
-    def command_audited(
-        self, request: web.Request, identity: Identity, detail: str, result: Result
-    ) -> None:
+    def command_audited(self, request: web.Request, identity: Identity, detail: str) -> None:
+        """A command refused before it was one (its body not a command)."""
         self.audit.record(
             Kind.COMMAND,
-            result,
+            Result.FAILURE,
             interface=INTERFACE,
             peer=peer(request),
             identity=identity,

@@ -44,7 +44,7 @@ from aiohttp import WSCloseCode, WSMsgType, hdrs, web
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
-from gateway.access.audit import Result, command_text
+from gateway.access.audit import Result
 from gateway.access.roles import Action, Identity
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, StartupError, UnknownDrive
@@ -603,7 +603,7 @@ class WebFrontEnd:
         try:
             cmd = _parse_command(await self._body(request))
         except CommandRejected as exc:
-            self._audit_command(request, identity, state.id, exc.reason, Result.FAILURE)
+            self.auth.command_audited(request, identity, f"drive {state.id}: {exc.reason}")
             self.hub.event(
                 state.id,
                 EventKind.COMMAND_REFUSED,
@@ -616,20 +616,32 @@ class WebFrontEnd:
         try:
             self.hub.submit(state.id, Source.WEB, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
-            self._audit_command(
-                request, identity, state.id, f"{command_text(cmd)}: {exc.reason}", Result.FAILURE
-            )
+            self._audit_command(request, identity, state.id, cmd, Result.FAILURE, exc.reason)
             self.counters.commands["refused"] += 1
             return _json({"accepted": False, "error": exc.reason}, 409)
         if not cmd.is_empty:  # a keep-alive of the page in control is no audited command
-            self._audit_command(request, identity, state.id, command_text(cmd), Result.SUCCESS)
+            self._audit_command(request, identity, state.id, cmd, Result.SUCCESS)
         self.counters.commands["accepted"] += 1
         return _json({"accepted": True, "client": client})
 
-    def _audit_command(
-        self, request: web.Request, identity: Identity, drive: str, what: str, result: Result
+    def _audit_command(  # noqa: PLR0917 (a record's fields)
+        self,
+        request: web.Request,
+        identity: Identity,
+        drive: str,
+        cmd: DriveCommand,
+        result: Result,
+        why: str = "",
     ) -> None:
-        self.auth.command_audited(request, identity, f"drive {drive}: {what}", result)
+        self.runtime.audit.command(
+            cmd,
+            result,
+            interface="web",
+            peer=_peer(request),
+            identity=identity,
+            drive=drive,
+            why=why,
+        )
 
 
 def _count(text: str | None, default: int) -> int:

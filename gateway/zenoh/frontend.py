@@ -59,7 +59,7 @@ from typing import Any
 
 import zenoh
 
-from gateway.access.audit import Kind, Result, command_text
+from gateway.access.audit import Kind, Result
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -578,22 +578,21 @@ class ZenohFrontEnd:
         try:
             self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
-            self._audit_command(
-                client, f"drive {drive_id}: {command_text(cmd)}: {exc.reason}", Result.FAILURE
+            self.runtime.audit.command(
+                cmd, Result.FAILURE, **self._who(client), drive=drive_id, why=exc.reason
             )
             return command_refused(exc.reason)
         except UnknownDrive:
             return command_refused(f"no drive {drive_id!r}")
         if not cmd.is_empty:  # a keep-alive (``{}``) is no audited command
-            self._audit_command(client, f"drive {drive_id}: {command_text(cmd)}", Result.SUCCESS)
+            self.runtime.audit.command(cmd, Result.SUCCESS, **self._who(client), drive=drive_id)
         return command_accepted()
 
-    def _audit_command(self, client: str, detail: str, result: Result) -> None:
-        """A command on the audit trail: the session's label is who; its role is what the
-        router's access control let it put (docs/operations.md, "Users and roles")."""
-        self.runtime.audit.record(
-            Kind.COMMAND, result, interface="zenoh", peer=client, identity=client, detail=detail
-        )
+    @staticmethod
+    def _who(client: str) -> dict[str, str]:
+        """Who a command is from on the audit trail: the session's label (its role is what
+        the router's access control let it put: docs/operations.md, "Users and roles")."""
+        return {"interface": "zenoh", "peer": client, "identity": client}
 
     # ------------------------------------------------------------ queries (loop)
 

@@ -143,3 +143,34 @@ def test_every_web_refusal_line_takes_a_peer_and_a_figure() -> None:
 
     for kind, refusal in REFUSALS.items():
         assert (refusal.line % ("10.0.0.1", 5)).startswith("web"), kind
+
+
+def test_setpoints_are_folded_per_drive_and_client_and_edges_never() -> None:
+    from gateway.model import DriveCommand
+
+    now = [0.0]
+    trail = AuditTrail(monotonic=lambda: now[0])
+
+    def command(cmd: DriveCommand, drive: str = "d1") -> None:
+        trail.command(
+            cmd, Result.SUCCESS, interface="modbus", peer="10.0.0.9", identity=ANA, drive=drive
+        )
+
+    for rpm in range(100):
+        command(DriveCommand(speed_rpm=float(rpm)))
+    command(DriveCommand(speed_rpm=5.0), drive="d2")  # another drive: its own record
+    command(DriveCommand(run=True))  # an edge: always
+    command(DriveCommand(run=False))
+    details = [r["detail"] for r in trail.newest()]
+    assert details == [
+        'drive d1: {"speed_rpm":0.0}',
+        'drive d2: {"speed_rpm":5.0}',
+        'drive d1: {"run":true}',
+        'drive d1: {"run":false}',
+    ]
+    now[0] = 11.0
+    trail.flush()
+    summary = trail.newest()[-1]
+    assert (summary["type"], summary["result"]) == ("command", "success")
+    assert summary["detail"] == "setpoint d1: 99 more since the last record"
+    assert trail.counts["command:success"] == 103
