@@ -591,7 +591,12 @@ class WebFrontEnd:
             return self._refuse(
                 "commands_off", 403, "commands from the web page are off (web.commands)"
             )
-        identity = self.auth.check_change(request, Action.COMMAND)
+        try:
+            identity = self.auth.check_change(request, Action.COMMAND)
+        except Refused as refused:
+            if refused.counter == "role":  # refused as any command: on the drive's events too
+                self._role_refusal_event(request, refused.reason)
+            raise
         state = self._state(request)
         page = request.headers.get("X-Page-Id", "")
         # the page id is the page's own choice: only its label is published (docs/safety.md)
@@ -623,6 +628,19 @@ class WebFrontEnd:
             self._audit_command(request, identity, state.id, cmd, Result.SUCCESS)
         self.counters.commands["accepted"] += 1
         return _json({"accepted": True, "client": client})
+
+    def _role_refusal_event(self, request: web.Request, reason: str) -> None:
+        drive_id = request.match_info["drive"]
+        if drive_id not in self.hub.drive_ids():
+            return
+        client = str(request.remote)
+        self.hub.event(
+            drive_id,
+            EventKind.COMMAND_REFUSED,
+            f"command from {Source.WEB.value} {client} refused: {reason}",
+            source=Source.WEB.value,
+            client=client,
+        )
 
     def _audit_command(  # noqa: PLR0917 (a record's fields)
         self,

@@ -85,9 +85,17 @@ async def test_a_login_opens_a_session_in_a_strict_http_only_cookie() -> None:
 
 
 async def test_a_viewer_is_refused_a_command_with_the_reason_and_it_is_audited() -> None:
+    from gateway.adapter import EventKind
+
     async with gateway() as gw:
         _, body = await login(gw, "vic")
-        status, answer = await command(gw, csrf=body["csrf"])
+        with gw.hub.subscribe_events() as events:
+            status, answer = await command(gw, csrf=body["csrf"])
+            refused = [e for e in events.drain() if e.kind is EventKind.COMMAND_REFUSED]
+        assert [e.text for e in refused] == [
+            "command from web 127.0.0.1 refused: vic has the viewer role; command needs "
+            "operator or above"
+        ]
         assert status == 403 and answer == {
             "accepted": False,
             "error": "vic has the viewer role; command needs operator or above",
