@@ -174,6 +174,9 @@ class AuditSection:
 def read_audit_section(t: Table, base: Path) -> AuditSection:
     d = AuditSection()
     text: str | None = t.string("file", None)
+    if text is not None and ("\x00" in text or not text.strip()):
+        t.errors.append(t.error("file", f"{text!r} is not a file path"))
+        text = None
     path = None if text is None else (base / text if not Path(text).is_absolute() else Path(text))
     return AuditSection(
         file=path,

@@ -330,9 +330,9 @@ class Daemon:
         section = self.config.audit
         try:
             trail = AuditTrail(section)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:
             where = f"[audit] file {section.file}"
-            reason = (exc.strerror or str(exc)).lower()
+            reason = (getattr(exc, "strerror", None) or str(exc)).lower()
             self._cannot_start(
                 StartupError("audit", f"cannot open {where}: {reason}", "fix [audit] file")
             )

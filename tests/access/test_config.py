@@ -102,6 +102,9 @@ def test_the_audit_table(tmp_path: Path) -> None:
     assert errors_of(tmp_path, "[audit]\nmax_kib = 1\n") == [
         "audit.max_kib: 1 is below the minimum 16"
     ]
+    assert errors_of(tmp_path, '[audit]\nfile = "a\\u0000b"\n') == [
+        "audit.file: 'a\\x00b' is not a file path"
+    ]
 
 
 def test_modbus_peers_and_their_rights(tmp_path: Path) -> None:
