@@ -7,6 +7,7 @@ and ``token_sha256`` (the SHA-256 of an API token from ``drive-gateway users tok
 
 from __future__ import annotations
 
+import hashlib
 import re
 from dataclasses import dataclass
 
@@ -89,3 +90,30 @@ def read_users(root: Table) -> tuple[User, ...]:
     if len(tokens) != len(set(tokens)):
         root.errors.append(root.error("users", "two users have the same token_sha256"))
     return tuple(users)
+
+
+def fingerprints(users: tuple[User, ...]) -> dict[str, dict[str, str]]:
+    """What the audit trail keeps of the users between runs: each name's role and a digest
+    of its hashes (a changed password or token shows; no hash is kept)."""
+    out: dict[str, dict[str, str]] = {}
+    for user in users:
+        secret = (user.password.line() if user.password else "") + "|" + (user.token_sha256 or "")
+        digest = hashlib.sha256(secret.encode("utf-8")).hexdigest()[:16]
+        out[user.name] = {"role": user.role.label, "secrets": digest}
+    return out
+
+
+def user_changes(before: dict[str, dict[str, str]], after: dict[str, dict[str, str]]) -> list[str]:
+    """The user changes from one run's fingerprints to the next, one line each."""
+    lines: list[str] = []
+    for name in sorted(after.keys() - before.keys()):
+        lines.append(f"user {name} added with the {after[name]['role']} role")
+    for name in sorted(before.keys() - after.keys()):
+        lines.append(f"user {name} removed")
+    for name in sorted(before.keys() & after.keys()):
+        old, new = before[name], after[name]
+        if old.get("role") != new["role"]:
+            lines.append(f"user {name}: role {old.get('role')} -> {new['role']}")
+        if old.get("secrets") != new["secrets"]:
+            lines.append(f"user {name}: password or token changed")
+    return lines

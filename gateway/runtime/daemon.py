@@ -25,16 +25,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from gateway import __version__
 from gateway.access.audit import AuditTrail, Kind, Result
+from gateway.access.users import fingerprints, user_changes
 from gateway.adapter import EventKind
 from gateway.config import BusConfig, Config, load, load_adapter
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
@@ -348,7 +351,34 @@ class Daemon:
             detail=f"{self.config.file}: {len(self.config.drives)} drive(s), "
             f"{len(self.config.users)} user(s)",
         )
+        if section.file is not None:
+            self._audit_user_changes(trail, section.file.with_name(section.file.name + ".users"))
         return True
+
+    def _audit_user_changes(self, trail: AuditTrail, kept: Path) -> None:
+        """Users live in the config: a change shows between one start and the next. The
+        users' fingerprints (roles, digests of their hashes) are kept beside the audit
+        file, and each change since the last start is a record."""
+        try:
+            read = json.loads(kept.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            read = {}
+        before = (
+            {k: v for k, v in read.items() if isinstance(v, dict)} if isinstance(read, dict) else {}
+        )
+        after = fingerprints(self.config.users)
+        for line in user_changes(before, after):
+            trail.record(
+                Kind.USER_CHANGE,
+                Result.SUCCESS,
+                interface="config",
+                identity="drive-gateway",
+                detail=f"{line} ({self.config.file})",
+            )
+        try:
+            kept.write_text(json.dumps(after, sort_keys=True), encoding="utf-8")
+        except OSError as exc:
+            log.warning("audit: cannot keep the users' fingerprints in %s: %s", kept, exc)
 
     def _cannot_start(self, error: StartupError | ConfigError) -> None:
         """Fatal at start-up: one line with the cause and the fix, then stop."""
