@@ -11,18 +11,19 @@ a short detail says what. Records go to three places:
   journald's datagram socket (:mod:`gateway.access.journal`); skipped where the socket is
   absent, never waited for (a full socket drops the datagram and counts it);
 - the newest :data:`KEEP` in memory, for engineers on the page (``/api/audit``) and on
-  Zenoh (``<prefix>/audit``).
+  Zenoh (``<prefix>/gateway/audit``).
 
 The trail never raises into its caller: a sink that fails is counted, logged once, and
 the decision it records stands.
 
 A refusal a client can repeat at its own pace (by role, CSRF, wrong token, logins refused
-unchecked, requests refused at the door) is written once per :data:`FOLD_PERIOD` for each
-interface, type, peer and identity; the ones in between are counted, and the next record of that key
-(or a summary when the period is over, :meth:`AuditTrail.flush`) says how many. A flood of
-refusals so fills neither the file's bound nor the journal's rate limit, and every refusal
-is still counted. So is a command that only moves a drive's speed setpoint, per drive and
-client. Logins, other commands, parameter writes and the rest are each written.
+unchecked, requests refused at the door, Zenoh links opened and closed) is written once per
+:data:`FOLD_PERIOD` for each interface, type, peer and identity; the ones in between are
+counted, and the next record of that key (or a summary when the period is over,
+:meth:`AuditTrail.flush`) says how many. A flood of refusals so fills neither the file's
+bound nor the journal's rate limit, and every refusal is still counted. So is a command
+that only moves a drive's speed setpoint, per drive and client. Logins, other commands,
+parameter writes and the rest are each written.
 """
 
 from __future__ import annotations
@@ -51,12 +52,12 @@ from gateway.schema import Table
 log = logging.getLogger(__name__)
 
 KEEP = 1000  # records kept in memory for the readers
-FOLD_PERIOD = 10.0  # s: refusals of one kind from one peer beyond the first are counted
+FOLD_PERIOD = 10.0  # s: records of one key beyond the first are counted (module docstring)
 FOLD_KEYS = 4096  # (interface, type, peer, identity, result[, what]) being counted
 SETPOINT_FIELDS = frozenset({"speed_rpm", "speed_pct"})
 FOLDED = frozenset(
     {"refused", "csrf", "token", "login_limited", "request_refused", "link_open", "link_close"}
-)  # Kind.type of the records folded: the refusals a client can repeat at its own pace
+)  # Kind.type of the records folded: what a client can repeat at its own pace
 DETAIL_MAX = 300  # characters of a record's detail
 FIELD_MAX = 120  # characters of a peer or identity
 
