@@ -23,6 +23,8 @@ import re
 import secrets
 from dataclasses import dataclass, replace
 
+from gateway.errors import GatewayError
+
 N = 1 << 15  # CPU/memory cost: 2^15
 R = 8  # block size
 P = 1  # parallelism
@@ -36,7 +38,7 @@ TOKEN_BYTES = 32
 _SHA256_HEX = re.compile(r"[0-9a-f]{64}")
 
 
-class BadHash(ValueError):
+class BadHash(GatewayError, ValueError):
     """A hash line that is not one this module makes (the reason is the message)."""
 
 

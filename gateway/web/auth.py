@@ -36,6 +36,7 @@ from gateway.access.passwords import ScryptHash, hash_password, token_digest, ve
 from gateway.access.roles import ANONYMOUS, Action, Identity, Role, refusal
 from gateway.access.sessions import COOKIE, CSRF_HEADER, Session, Sessions, csrf_ok
 from gateway.access.users import User
+from gateway.errors import GatewayError
 from gateway.web.admission import RefusalLog, peer_of
 from gateway.web.hosts import origin_admitted
 from gateway.web.metrics import WebCounters
@@ -55,7 +56,7 @@ def peer(request: web.BaseRequest) -> str:
     return peer_of(transport) if transport is not None else str(request.remote or "")
 
 
-class Refused(Exception):
+class Refused(GatewayError):
     """A request refused: its HTTP status, the reason (the answer's ``error``), the
     counter's reason and headers."""
 
