@@ -330,3 +330,16 @@ async def test_a_login_gives_the_page_its_role_and_a_refusal_shows_why(page: Pag
         ("login", "success", "ana"),
         ("command", "success", "ana"),
     ]
+
+
+async def test_with_anonymous_none_the_page_asks_for_a_login_first(page: Page) -> None:
+    async with small_gateway(web_section(anonymous=False), users=login_users()) as gw:
+        await page.goto(gw.url)
+        await page.wait_for_selector("#login-user", timeout=WAIT_MS)
+        assert await rows(page) == []  # nothing shown before the login
+        await log_in(page, "vic", LOGIN_PASSWORD)
+        await page.wait_for_function(  # the page opens its feed with the session
+            "document.querySelectorAll('#drives-body tr').length === 2", timeout=WAIT_MS
+        )
+        assert await page.locator("#command-bar").is_hidden()  # a viewer, commands off
+        await screenshot(page, "login-first")
