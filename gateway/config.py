@@ -6,10 +6,13 @@ Layout (see config/site.example.toml for every key)::
     [zenoh]              prefix, mode, listen, connect, multicast_scouting, heartbeat, config_file
     [modbus]             bind, allow, read_only, gateway_unit, frame_timeout, max_connections,
                          max_connections_per_peer, idle_timeout
-    [web]                bind, allow, commands, token_sha256 (gateway/webconfig.py)
+    [web]                bind, allow, names, commands, tls_cert, tls_key, anonymous
+                         (gateway/webconfig.py)
     [history]            enabled, path, period, batch_interval, max_age, max_size_mb
     [opcua]              enabled, bind, security, certificate, private_key, trusted_clients,
                          publish_interval, max_sessions (gateway/opcuaconfig.py)
+    [[users]]            name, role, password, token_sha256 (gateway/access/users.py)
+    [audit]              file, max_kib, backups, journal (gateway/access/audit.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name
                          (never a module path: :func:`load_adapter`), plus the adapter's keys
     [[buses.<name>.drives]]  id, device, address, modbus_unit, control, command_timeout,
@@ -50,6 +53,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any, ClassVar, Protocol, TypeVar
 
+from gateway.access.audit import AuditSection, read_audit_section
+from gateway.access.users import User, read_users
 from gateway.adapter import DriveAdapter
 from gateway.errors import AdapterError, ConfigError, ConfigErrors
 from gateway.json5check import Json5Error, check_json5
@@ -148,6 +153,28 @@ class ModbusSection:
     max_connections: int = 100  # clients connected at once
     max_connections_per_peer: int = 0  # from one client address; 0: only max_connections
     idle_timeout: float = 60.0  # s with no complete request before a connection is closed; 0: never
+    peers: tuple[tuple[IpNetwork, bool], ...] = ()
+    """``[[modbus.peers]]``: a network and whether its clients may command (rights
+    "command") or only read ("read"); the longest matching network decides, and a client
+    no entry names may command unless ``read_only`` (docs/modbus-map.md, "Connections")."""
+
+    def may_command(self, host: str) -> bool:
+        """Whether a client at ``host`` may write (command): not read only, and its most
+        specific ``peers`` entry, if any, gives it command rights."""
+        if self.read_only:
+            return False
+        try:
+            address = ipaddress.ip_address(host.partition("%")[0])
+        except ValueError:
+            return not self.peers
+        if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+            address = address.ipv4_mapped
+        matching = [
+            (net.prefixlen, command)
+            for net, command in self.peers
+            if address.version == net.version and address in net
+        ]
+        return max(matching, key=lambda m: (m[0], not m[1]))[1] if matching else True
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,6 +217,8 @@ class Config:
     web: WebSection = field(default_factory=WebSection)
     history: HistorySection = field(default_factory=HistorySection)
     opcua: OpcuaSection = field(default_factory=OpcuaSection)
+    users: tuple[User, ...] = ()
+    audit: AuditSection = field(default_factory=AuditSection)
 
     @property
     def drives(self) -> tuple[DriveConfig, ...]:
@@ -351,7 +380,36 @@ def _modbus_section(t: Table) -> ModbusSection:
         max_connections=t.integer("max_connections", d.max_connections, minimum=1, maximum=1000),
         idle_timeout=t.number("idle_timeout", d.idle_timeout, minimum=0.0, maximum=86400.0),
     )
-    return replace(section, max_connections_per_peer=_per_peer(t, section.max_connections))
+    return replace(
+        section,
+        max_connections_per_peer=_per_peer(t, section.max_connections),
+        peers=_modbus_peers(t),
+    )
+
+
+MODBUS_RIGHTS = {"read": False, "command": True}
+
+
+def _modbus_peers(t: Table) -> tuple[tuple[IpNetwork, bool], ...]:
+    out: list[tuple[IpNetwork, bool]] = []
+    try:
+        tables = t.table_list("peers")
+    except ConfigError as exc:
+        t.errors.append(exc)
+        return ()
+    for pt in tables:
+        text: str | None = _read(pt, lambda pt: pt.string("address"), finish=False)
+        rights: str | None = _read(pt, lambda pt: pt.string("rights"))
+        if text is None or rights is None:
+            continue
+        if rights not in MODBUS_RIGHTS:
+            t.errors.append(pt.error("rights", f'{rights!r} is not "read" or "command"'))
+            continue
+        try:
+            out.append((ipaddress.ip_network(text, strict=False), MODBUS_RIGHTS[rights]))
+        except ValueError:
+            t.errors.append(pt.error("address", f"{text!r} is not an address or CIDR network"))
+    return tuple(out)
 
 
 def _per_peer(t: Table, max_connections: int) -> int:
@@ -680,9 +738,11 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
     gateway = _section(root, "gateway", _gateway_section)
     zenoh = _section(root, "zenoh", lambda t: _zenoh_section(t, base))
     modbus = _section(root, "modbus", _modbus_section)
-    web = _section(root, "web", read_web_section)
+    web = _section(root, "web", lambda t: read_web_section(t, base))
     history = _section(root, "history", lambda t: _history_section(t, base))
     opcua = _section(root, "opcua", lambda t: read_opcua_section(t, base))
+    users = read_users(root)
+    audit = _section(root, "audit", lambda t: read_audit_section(t, base))
     buses: list[BusConfig] = []
     for name, table in (_read(root, lambda r: r.tables("buses"), finish=False) or {}).items():
         bus = _read(table, partial(_bus, name), finish=False)
@@ -702,9 +762,11 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
                         f"{modbus.gateway_unit} is also the modbus_unit of drive {d.id!r}",
                     )
                 )
+    if web is not None:
+        _check_web_users(root, web, users)
     if root.errors or gateway is None or zenoh is None or modbus is None or web is None:
         raise ConfigErrors(root.errors)
-    if opcua is None:
+    if opcua is None or audit is None:
         raise ConfigErrors(root.errors)
     return Config(
         file=file,
@@ -715,7 +777,43 @@ def parse(data: dict[str, Any], file: str, base: Path | None = None) -> Config:
         web=web,
         history=history or HistorySection(),
         opcua=opcua,
+        users=users,
+        audit=audit,
     )
+
+
+def _check_web_users(root: Table, web: WebSection, users: tuple[User, ...]) -> None:
+    """Commands on the page need users who log in (docs/operations.md, "Users and
+    roles"); only a page on this machine alone may stand on the shared token."""
+    if web.token_sha256 is not None and not web.loopback_only:
+        root.errors.append(
+            root.error(
+                "web.token_sha256",
+                "a shared token names no one: it is for a page on this machine only (web.allow "
+                "loopback); give each user or script a [[users]] entry with its own "
+                "token_sha256 (drive-gateway users token)",
+            )
+        )
+        return
+    if not web.commands or users:
+        return
+    if not web.loopback_only:
+        root.errors.append(
+            root.error(
+                "web.commands",
+                "commands = true on a page other machines reach needs [[users]]: each person "
+                "a name, a role and a password hash (drive-gateway users hash); or set "
+                "commands = false",
+            )
+        )
+    elif web.token_sha256 is None:
+        root.errors.append(
+            root.error(
+                "web.commands",
+                "commands = true needs [[users]] (drive-gateway users hash), or, for a page "
+                "on this machine only, token_sha256",
+            )
+        )
 
 
 def _depth(data: Any) -> int:

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from gateway.access.audit import AuditTrail
 from gateway.config import Config
 from gateway.history.store import HistoryStore
 from gateway.hub import Hub
@@ -103,6 +104,11 @@ class RuntimeView(Protocol):
     @property
     def history(self) -> HistoryStore | None:
         """The history's queries (``[history]`` on), else None (gateway/history/store.py)."""
+        ...
+
+    @property
+    def audit(self) -> AuditTrail:
+        """Where the front end records its access decisions (gateway/access/audit.py)."""
         ...
 
     def bus_of(self, drive_id: str) -> str: ...

@@ -12,8 +12,14 @@ the build (docs/operations.md, "Web status page and metrics").
   another. Absent: ``localhost``, ``127.0.0.1``, ``[::1]`` and the bind address itself
   (:meth:`WebSection.host_names`); a site binding a wider address lists its names.
 - ``commands``: false (default) serves a read-only page and refuses every command request.
-- ``token_sha256``: the hex SHA-256 of the token a user gives to command (required when
-  ``commands = true``). The config file holds the digest, never the token itself.
+- ``token_sha256``: the hex SHA-256 of a shared token that commands as the operator
+  ``token``: for a page on this machine alone (``allow`` loopback only). Commands on a page
+  other machines reach need ``[[users]]`` (gateway/access/users.py): the config is refused
+  otherwise. The config file holds the digest, never the token itself.
+- ``anonymous``: what a request with no login may do: ``"viewer"`` (default: the
+  read-only page, the API, /metrics) or ``"none"`` (only the page's files and the login).
+- ``tls_cert``, ``tls_key``: PEM files (both or neither): the page is served over HTTPS,
+  and the session cookie is marked Secure.
 - the admission limits (:class:`WebLimits`, docs/operations.md, "Web status page and
   metrics"): connections in all and per client address, the time a client has to send a
   request's head and body, pages in all and per address with what each may have unsent,
@@ -25,6 +31,7 @@ from __future__ import annotations
 import ipaddress
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from gateway.errors import ConfigError
 from gateway.schema import Table
@@ -102,6 +109,21 @@ class WebSection:
     token_sha256: str | None = None
     limits: WebLimits = field(default_factory=WebLimits)
     names: tuple[str, ...] | None = None  # as host_name writes them; None: the default
+    anonymous: bool = True  # a request with no login may read (the viewer role)
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
+
+    @property
+    def tls(self) -> bool:
+        return self.tls_cert is not None and self.tls_key is not None
+
+    @property
+    def loopback_only(self) -> bool:
+        """Whether only this machine may reach the page (every ``allow`` is loopback)."""
+        return all(
+            net.network_address.is_loopback and net.broadcast_address.is_loopback
+            for net in self.allow
+        )
 
     @property
     def host_names(self) -> frozenset[str]:
@@ -115,7 +137,7 @@ class WebSection:
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        return f"{'https' if self.tls else 'http'}://{host}:{self.port}/"
 
 
 def _host_port(t: Table, text: str) -> tuple[str, int] | None:
@@ -187,13 +209,6 @@ def _token(t: Table, commands: bool) -> str | None:
             )
         )
         digest = None
-    if commands and digest is None and not t.has("token_sha256"):
-        t.errors.append(
-            t.error(
-                "commands",
-                "commands = true needs token_sha256 (the SHA-256 of the token a user gives)",
-            )
-        )
     return digest
 
 
@@ -263,12 +278,45 @@ def _limits(t: Table) -> WebLimits:
     )
 
 
-def read_web_section(t: Table) -> WebSection:
+ANONYMOUS_CHOICES = {"viewer": True, "none": False}
+
+
+def _anonymous(t: Table) -> bool:
+    text: str = t.string("anonymous", "viewer")
+    if text not in ANONYMOUS_CHOICES:
+        t.errors.append(t.error("anonymous", f'{text!r} is not "viewer" or "none"'))
+        return True
+    return ANONYMOUS_CHOICES[text]
+
+
+def _tls(t: Table, base: Path | None) -> tuple[Path | None, Path | None]:
+    cert: str | None = t.string("tls_cert", None)
+    key: str | None = t.string("tls_key", None)
+    if (cert is None) != (key is None):
+        t.errors.append(
+            t.error("tls_cert" if cert is None else "tls_key", "give tls_cert and tls_key both")
+        )
+        return None, None
+    if cert is None or key is None:
+        return None, None
+    out: list[Path] = []
+    for name, text in (("tls_cert", cert), ("tls_key", key)):
+        path = Path(text)
+        if not path.is_absolute() and base is not None:
+            path = base / path
+        if not path.is_file():
+            t.errors.append(t.error(name, f"{str(path)!r} is not a file"))
+        out.append(path)
+    return out[0], out[1]
+
+
+def read_web_section(t: Table, base: Path | None = None) -> WebSection:
     """The ``[web]`` table (every problem recorded in ``t.errors``, as the loader reads)."""
     d = WebSection()
     bind: str | None = t.string("bind", None)
     where = _host_port(t, bind) if bind is not None else None
     commands: bool = t.boolean("commands", d.commands)
+    tls = _tls(t, base)
     return WebSection(
         enabled=where is not None,
         host=where[0] if where else d.host,
@@ -278,6 +326,9 @@ def read_web_section(t: Table) -> WebSection:
         commands=commands,
         token_sha256=_token(t, commands),
         limits=_limits(t),
+        anonymous=_anonymous(t),
+        tls_cert=tls[0],
+        tls_key=tls[1],
     )
 
 

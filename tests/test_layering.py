@@ -64,6 +64,10 @@ CORE_SUBFOLDERS = (
     *(f"gateway.{f}" for f in ("zenoh", "modbus", "web", "opcua")),
 )
 FRONT_ENDS = ("gateway.zenoh", "gateway.modbus", "gateway.web", "gateway.opcua")
+CORE_PACKAGES = ("gateway.access", "gateway.history")
+"""Folders of the core itself: who may do what (roles, users, sessions, the audit trail),
+and the history service, which the front ends and the runtime read as they read the
+hub. Held to the core's rules (:func:`core_rule`)."""
 SHARED_LINK_MAY_IMPORT = (*FIELDBUS_LIBS, "gateway.errors")
 ADAPTER_MAY_IMPORT = (
     "gateway.model",
@@ -224,6 +228,16 @@ def test_the_history_is_a_core_service_and_the_only_user_of_sqlite() -> None:
 
     assert is_core(f"{HISTORY}.store")
     assert violations(rule) == []
+
+
+def test_the_core_packages_are_core_and_no_other_folder_is() -> None:
+    folders = {
+        ".".join(mod.split(".")[:2])
+        for mod in MODULES
+        if mod.count(".") >= 2 and under(mod, "gateway")
+    }
+    assert folders == set(CORE_SUBFOLDERS) | set(CORE_PACKAGES)
+    assert all(is_core(mod) for mod in MODULES if under(mod, *CORE_PACKAGES))
 
 
 def front_end_rule(mod: str, imp: str) -> str | None:

@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "profibus": "adapters.profibus.cli:add_profibus",
     "devicenet": "adapters.devicenet.cli:add_devicenet",
     "sim": "gateway.cli.sim:add_sim",
+    "users": "gateway.cli.users:add_users",
     "completion": "gateway.cli.docs:add_completion",
     "manpage": "gateway.cli.docs:add_manpage",
 }

@@ -255,6 +255,12 @@ _CONNECTIONS = [
     "  at accept, before it can send anything, and counted in `connections_refused`.",
     "  An empty list accepts any client.",
     "- `modbus.read_only`: reads only; every write to a writable register gets exception 1.",
+    '- `[[modbus.peers]]` (`address`: an address or CIDR network, `rights`: `"read"` or',
+    '  `"command"`): what the clients of a network may do; the longest matching network',
+    "  decides (at equal length, read). A write from a client with read rights gets",
+    "  exception 1, changes nothing and is audited; a client no entry names may command",
+    "  (unless `modbus.read_only`). Modbus TCP has no authentication: an address is only",
+    "  as trustworthy as the network segment it comes from (docs/operations.md).",
     f"- `modbus.max_connections` (default {_MODBUS.max_connections}, 1-1000): connections"
     " open at once. One more",
     "  makes room by closing the connection idle longest (no complete request for at",

@@ -20,6 +20,9 @@ from dataclasses import dataclass, replace
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from gateway.access.audit import AuditTrail, Kind, Result
+from gateway.access.roles import Identity, Role
+from gateway.config import ModbusSection
 from gateway.errors import CommandRejected
 from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.hub import Hub
@@ -54,6 +57,7 @@ from gateway.modbus.server import (
 from gateway.model import DriveCommand, DriveState, Source
 
 log = logging.getLogger(__name__)
+INTERFACE = "modbus"
 
 Registers = list[int]
 Fill = Callable[[int, Registers], None]
@@ -80,6 +84,8 @@ class Shared:
     memory: ClientMemory
     counters: Counters
     read_only: bool
+    section: ModbusSection
+    audit: AuditTrail
 
 
 class DriveUnit:
@@ -148,9 +154,10 @@ class DriveUnit:
 
     def write(self, address: int, values: Sequence[int]) -> ExceptionCode | None:
         """Validate and apply a holding write; the exception code if it is refused."""
-        if self.shared.read_only:
-            return ExceptionCode.ILLEGAL_FUNCTION
         client = CURRENT_CLIENT.get()
+        if not self.shared.section.may_command(client):
+            self._audit_refused(client, address)
+            return ExceptionCode.ILLEGAL_FUNCTION
         try:
             scale = self.shared.hub.capabilities(self.drive_id).speed_scale
             self._apply(client, decode_holding_write(address, values, scale))
@@ -160,6 +167,30 @@ class DriveUnit:
                 self._apply_stop_bits(client, values[0])
             return exc.code
         return None
+
+    def _audit_refused(self, client: str, address: int) -> None:
+        """A write from a client without command rights: exception 1, and audited."""
+        why = "modbus.read_only" if self.shared.read_only else "its [[modbus.peers]] rights"
+        self.shared.audit.record(
+            Kind.REFUSED,
+            Result.FAILURE,
+            interface=INTERFACE,
+            peer=client,
+            identity=Identity(client, Role.VIEWER),
+            detail=f"unit {self.unit} ({self.drive_id}) register {address}: write refused "
+            f"(exception 1): this client may read only ({why})",
+        )
+
+    def _audited(self, client: str, cmd: DriveCommand, result: Result, why: str = "") -> None:
+        self.shared.audit.command(
+            cmd,
+            result,
+            interface=INTERFACE,
+            peer=client,
+            identity=Identity(client, Role.OPERATOR),
+            drive=self.drive_id,
+            why=why,
+        )
 
     def _apply_stop_bits(self, client: str, raw: int) -> None:
         """Rule 1 (docs/safety.md): a write refused for another register still applies
@@ -183,6 +214,7 @@ class DriveUnit:
             client, self.unit, replace(last, run=last.run and word.run, jog=last.jog and word.jog)
         )
         hub.submit(self.drive_id, Source.MODBUS, stop, client)
+        self._audited(client, stop, Result.SUCCESS)
 
     def _apply(self, client: str, write: HoldingWrite) -> None:
         hub = self.shared.hub
@@ -194,6 +226,7 @@ class DriveUnit:
             # never becomes an edge later (rule 1: a refused run is never held for later).
             memory.remember(client, self.unit, write.word)
         if write.command:
+            cmd = DriveCommand()
             try:
                 cmd = build_command(last, write, hub.desired(self.drive_id))
                 if cmd.is_empty:
@@ -202,7 +235,11 @@ class DriveUnit:
                     hub.submit(self.drive_id, Source.MODBUS, cmd, client)
             except CommandRejected as exc:
                 self.shared.counters.commands_refused += 1
+                if not cmd.is_empty:
+                    self._audited(client, cmd, Result.FAILURE, exc.reason)
                 raise WriteRefused(ExceptionCode.SERVER_DEVICE_FAILURE, exc.reason) from None
+            if not cmd.is_empty:
+                self._audited(client, cmd, Result.SUCCESS)
             self.shared.counters.commands_accepted += 1
         hub.refresh(self.drive_id, Source.MODBUS, client)  # only the client in control
 
@@ -260,6 +297,8 @@ class ModbusFrontEnd:
             memory=ClientMemory(),
             counters=self.counters,
             read_only=self.section.read_only,
+            section=self.section,
+            audit=runtime.audit,
         )
         self.drives: dict[str, DriveUnit] = {}
         for drive_id in self.hub.drive_ids():
@@ -333,6 +372,7 @@ class ModbusFrontEnd:
                 max_per_peer=self.section.max_connections_per_peer,
             ),
             on_peer=self.shared.memory.peer,
+            on_refused=self._audit_refused_connection,
             fast_reads=FastReads({u.unit: u for u in self.drives.values()}, MIRROR_OFFSET),
         )
         self.address = await server.start()
@@ -346,6 +386,11 @@ class ModbusFrontEnd:
             self._server = None
             await server.stop()
             log.info("Modbus TCP server stopped")
+
+    def _audit_refused_connection(self, setting: str, host: str) -> None:
+        self.runtime.audit.refused_request(
+            INTERFACE, setting, host, f"connection from {host} closed at accept ({setting})"
+        )
 
     def _log_serving(self) -> None:
         host, port = self.address or (self.section.host, self.section.port)

@@ -599,9 +599,11 @@ class GatewayServer(ModbusTcpServer):
         limits: ConnectionLimits,
         on_peer: Callable[[str, bool], None] | None = None,
         fast_reads: FastReads | None = None,
+        on_refused: Callable[[str, str], None] | None = None,
     ) -> None:
         super().__init__(devices, address=(host, port))
         self._on_peer = on_peer
+        self._on_refused = on_refused  # (the setting that refused, the peer): the audit
         self.fast_reads = fast_reads
         self.policy = policy
         self.counters = counters
@@ -723,8 +725,13 @@ class GatewayServer(ModbusTcpServer):
         idlest.close()
         return True
 
+    def _tell_refused(self, setting: str, host: str) -> None:
+        if self._on_refused is not None:
+            self._on_refused(setting, host)
+
     def refused(self, host: str) -> None:
         self.counters.connections_refused += 1
+        self._tell_refused("modbus.allow", host)
         if host in self._refused_logged or len(self._refused_logged) >= REFUSED_LOG_LIMIT:
             log.debug("refused Modbus client %s (not in modbus.allow)", host)
             return
@@ -733,6 +740,7 @@ class GatewayServer(ModbusTcpServer):
 
     def over_limit(self, host: str) -> None:
         self.counters.connections_over_limit += 1
+        self._tell_refused("modbus.max_connections", host)
         limit = self.limits.max_connections
         held = self._over_limit_log.admit(self.loop.time())
         if held is None:
@@ -748,6 +756,7 @@ class GatewayServer(ModbusTcpServer):
     def over_peer_limit(self, host: str) -> None:
         self.counters.connections_over_limit += 1
         self.counters.connections_over_peer_limit += 1
+        self._tell_refused("modbus.max_connections_per_peer", host)
         limit = self.limits.max_per_peer
         held = self._over_peer_limit_log.admit(self.loop.time())
         if held is None:

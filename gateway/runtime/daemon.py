@@ -25,15 +25,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from gateway import __version__
+from gateway.access.audit import AuditTrail, Kind, Result
+from gateway.access.users import fingerprints, user_changes
 from gateway.adapter import EventKind
 from gateway.config import BusConfig, Config, load, load_adapter
 from gateway.errors import ConfigError, ConfigErrors, LineHeld, StartupError
@@ -114,6 +118,8 @@ class Runtime:
     """The running instance of each front end (the web front end's metrics read the others)."""
     history: HistoryStore | None = None
     """The history's queries while ``[history]`` is on (gateway/history/store.py)."""
+    audit: AuditTrail = field(default_factory=AuditTrail)
+    """The audit trail (memory only until the daemon opens the configured one)."""
     _diag: dict[str, tuple[float, LineThread, dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False
     )
@@ -238,6 +244,13 @@ class Daemon:
                 raise ConfigErrors(problems)
         except (ConfigErrors, ConfigError) as exc:
             errors = exc.errors if isinstance(exc, ConfigErrors) else [exc]
+            self.runtime.audit.record(
+                Kind.CONFIG_RELOAD,
+                Result.FAILURE,
+                interface="signal",
+                identity="SIGHUP",
+                detail=f"{file}: {len(errors)} error(s); not reloaded",
+            )
             log.error(
                 "SIGHUP: configuration is not reloaded; %s has %d error(s), a restart would "
                 "fail; the running configuration stays: %s",
@@ -249,6 +262,13 @@ class Daemon:
         except Exception:
             log.exception("SIGHUP: configuration is not reloaded; checking %s failed", file)
             return
+        self.runtime.audit.record(
+            Kind.CONFIG_RELOAD,
+            Result.FAILURE,
+            interface="signal",
+            identity="SIGHUP",
+            detail=f"{file} checks ok; not reloaded (a restart applies it)",
+        )
         log.warning(
             "SIGHUP: configuration is not reloaded; the running configuration stays "
             "(%s checks ok: %d drive(s); restart the gateway to apply it)",
@@ -319,6 +339,58 @@ class Daemon:
         self.exit_status = EXIT_LINE_HELD
         self._stop.set()
 
+    def _open_audit(self) -> bool:
+        """The configured audit trail, its first record the configuration loaded."""
+        section = self.config.audit
+        try:
+            trail = AuditTrail(section)
+        except (OSError, ValueError) as exc:
+            where = f"[audit] file {section.file}"
+            reason = (getattr(exc, "strerror", None) or str(exc)).lower()
+            self._cannot_start(
+                StartupError("audit", f"cannot open {where}: {reason}", "fix [audit] file")
+            )
+            return False
+        self.runtime.audit = trail
+        journal = "on" if trail.journal_open else "off (no journald socket)"
+        log.info("audit trail: file %s, journal %s", section.file or "(none)", journal)
+        trail.record(
+            Kind.CONFIG_LOAD,
+            Result.SUCCESS,
+            interface="config",
+            identity="drive-gateway",
+            detail=f"{self.config.file}: {len(self.config.drives)} drive(s), "
+            f"{len(self.config.users)} user(s)",
+        )
+        if section.file is not None:
+            self._audit_user_changes(trail, section.file.with_name(section.file.name + ".users"))
+        return True
+
+    def _audit_user_changes(self, trail: AuditTrail, kept: Path) -> None:
+        """Users live in the config: a change shows between one start and the next. The
+        users' fingerprints (roles, digests of their hashes) are kept beside the audit
+        file, and each change since the last start is a record."""
+        try:
+            read = json.loads(kept.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            read = {}
+        before = (
+            {k: v for k, v in read.items() if isinstance(v, dict)} if isinstance(read, dict) else {}
+        )
+        after = fingerprints(self.config.users)
+        for line in user_changes(before, after):
+            trail.record(
+                Kind.USER_CHANGE,
+                Result.SUCCESS,
+                interface="config",
+                identity="drive-gateway",
+                detail=f"{line} ({self.config.file})",
+            )
+        try:
+            kept.write_text(json.dumps(after, sort_keys=True), encoding="utf-8")
+        except OSError as exc:
+            log.warning("audit: cannot keep the users' fingerprints in %s: %s", kept, exc)
+
     def _cannot_start(self, error: StartupError | ConfigError) -> None:
         """Fatal at start-up: one line with the cause and the fix, then stop."""
         if self.fatal is None:
@@ -339,6 +411,7 @@ class Daemon:
         interval = self.config.gateway.tick
         while True:
             self.hub.tick()
+            self.runtime.audit.flush()  # the counts of refusals folded (at most once a second)
             await asyncio.sleep(interval)
 
     async def _watchdog(self, interval: float) -> None:
@@ -409,6 +482,8 @@ class Daemon:
             )
         for problem in descriptor_problems(self.config):
             log.warning("%s", problem)
+        if not self._open_audit():
+            return EXIT_STARTUP
         if self.recorder is not None:  # before the front ends: it records their events too
             self._history_task = self._spawn(self.recorder.run(), "history")
         self._start_front_ends()
@@ -502,6 +577,7 @@ class Daemon:
         last = [t for t in (self._history_task,) if t is not None]  # records the shutdown
         await self._cancel([t for t in self._tasks if t not in self._adapter_tasks + last])
         await self._cancel(last)
+        self.runtime.audit.close()
         log.info("drive-gateway stopped")
 
     def _left_turning(self, bound: float) -> None:

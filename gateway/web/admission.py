@@ -33,6 +33,7 @@ import asyncio
 import collections
 import ipaddress
 import logging
+import ssl
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -147,6 +148,32 @@ REFUSALS: dict[str, Refusal] = {
         " within web.token_window; %s s to wait",
         "commands refused unchecked (too many wrong tokens)",
     ),
+    "login": Refusal(
+        logging.WARNING,
+        "web login from %s failed (%s wrong within web.token_window)",
+        "logins failed",
+    ),
+    "login_limit": Refusal(
+        logging.WARNING,
+        "web logins from %s refused (429) unchecked: web.token_failures failed logins"
+        " within web.token_window; %s s to wait",
+        "logins refused unchecked (too many failed logins)",
+    ),
+    "login_busy": Refusal(
+        logging.WARNING,
+        "web login from %s refused (503): %s logins are waiting for their check",
+        "logins refused (too many at once)",
+    ),
+    "role": Refusal(
+        logging.INFO,
+        "web request from %s refused (403): %s",
+        "requests refused (the role does not allow them)",
+    ),
+    "csrf": Refusal(
+        logging.WARNING,
+        "web request from %s refused (403): no valid CSRF token (%s)",
+        "requests refused (no valid CSRF token)",
+    ),
     "request_rate": Refusal(
         logging.INFO,
         "web requests from %s held back: over web.request_rate (%s)",
@@ -177,12 +204,16 @@ class RefusalLog:
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self.clock = clock
         self._limit = LogRateLimit(LOG_PERIOD)
+        self.listener: Callable[[str, str, str], None] | None = None
+        """Told of every refusal, logged or not: its kind, peer and line (the audit)."""
 
     def note(
         self, kind: str, peer: str, figure: object, exc_info: BaseException | None = None
     ) -> None:
         """A refusal of ``kind`` (a key of :data:`REFUSALS`) of ``peer``; ``exc_info``: the
         failure whose traceback the line carries, if it is written."""
+        if self.listener is not None:
+            self.listener(kind, peer, REFUSALS[kind].line % (peer, figure))
         held = self._limit.admit(kind, self.clock())
         if held is None:
             return
@@ -487,8 +518,15 @@ class AdmissionSite(web.BaseSite):
 
     __slots__ = ("_gate", "_host", "_port")
 
-    def __init__(self, runner: web.BaseRunner, host: str, port: int, gate: Gate) -> None:
-        super().__init__(runner, backlog=BACKLOG)
+    def __init__(
+        self,
+        runner: web.BaseRunner,
+        host: str,
+        port: int,
+        gate: Gate,
+        ssl_context: ssl.SSLContext | None = None,
+    ) -> None:
+        super().__init__(runner, backlog=BACKLOG, ssl_context=ssl_context)
         self._gate = gate
         self._host = host
         self._port = port
@@ -496,7 +534,8 @@ class AdmissionSite(web.BaseSite):
     @property
     def name(self) -> str:
         host = f"[{self._host}]" if ":" in self._host else self._host
-        return f"http://{host}:{self._port}"
+        scheme = "https" if self._ssl_context is not None else "http"
+        return f"{scheme}://{host}:{self._port}"
 
     @property
     def bound(self) -> tuple[str, int] | None:
@@ -524,4 +563,9 @@ class AdmissionSite(web.BaseSite):
             self._port,
             backlog=self._backlog,
             reuse_address=True,
+            ssl=self._ssl_context,
+            # a TLS handshake is part of a request's head: the same deadline
+            ssl_handshake_timeout=self._gate.limits.header_timeout
+            if self._ssl_context is not None
+            else None,
         )

@@ -6,7 +6,10 @@ An aiohttp server on the daemon's own event loop serves, on ``web.bind``:
 - ``/ws`` the push feed (WebSocket, gateway/web/feed.py);
 - ``/api/health``, ``/api/drives``, ``/api/drives/<id>``, ``/api/buses``, ``/api/events``,
   ``/api/history`` and ``/api/history/<id>`` (JSON, docs/operations.md);
-- ``POST /api/drives/<id>/command`` only with ``web.commands = true`` and the token;
+- ``POST /api/drives/<id>/command`` only with ``web.commands = true``, by an operator
+  or above (a session with its CSRF token, or an API token: gateway/web/auth.py);
+- ``POST /api/login``, ``POST /api/logout``, ``GET /api/session`` (the session cookie),
+  ``GET /api/audit`` (the audit trail, engineers and above);
 - ``/metrics`` (gateway/web/metrics.py), from a render shared by the scrapes within
   ``web.metrics_max_age``.
 
@@ -28,11 +31,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
-import hashlib
-import hmac
 import logging
-import math
 import re
+import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -45,6 +46,8 @@ from aiohttp import WSCloseCode, WSMsgType, hdrs, web
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
+from gateway.access.audit import Result
+from gateway.access.roles import Action, Identity
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, HistoryError, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -59,13 +62,13 @@ from gateway.web.admission import (
     connection_of,
     peer_of,
 )
+from gateway.web.auth import Refused, WebAuth
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
 from gateway.web.history import ring_json
 from gateway.web.hosts import host_admitted, origin_admitted, shown
 from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
 from gateway.web.page import check_template
 from gateway.web.page import render as render_page
-from gateway.web.tokens import TokenFailures
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json
 from gateway.webconfig import LOOPBACK
 
@@ -93,6 +96,23 @@ SECURITY_HEADERS = {
     "Cache-Control": "no-store",
 }
 MAX_BODY = 4096  # bytes of a command request
+AUDITED_AT_THE_DOOR = frozenset(
+    {
+        "allow",
+        "over_limit",
+        "over_peer_limit",
+        "pages",
+        "pages_per_peer",
+        "token_limit",
+        "request_rate",
+        "host",
+        "bad_request",
+        "login_busy",
+    }
+)
+"""The refusals of :class:`RefusalLog` that are access decisions: on the audit trail."""
+OPEN_PATHS = frozenset({*STATIC, "/favicon.ico", "/api/login", "/api/logout", "/api/session"})
+"""Served without a login even with ``web.anonymous = "none"``: the page and the login."""
 SHUTDOWN_TIMEOUT = 2.0  # s open requests and pages get when the gateway stops
 WS_HEARTBEAT = 20.0  # s between pings: a page that went away is noticed
 WS_MAX_MESSAGE = 1024  # bytes a page may send on the feed (it sends nothing we read)
@@ -161,7 +181,11 @@ class WebFrontEnd:
         self.gate = Gate(self.section, self.counters, self.refusals)
         self.names = self.section.host_names
         self.request_log = RequestLog(self.refusals)
-        self.tokens = TokenFailures(self.limits.token_failures, self.limits.token_window)
+        self.auth = WebAuth(
+            self.section, runtime.config.users, runtime.audit, self.counters, self.refusals
+        )
+        self.tokens = self.auth.tokens
+        self.refusals.listener = self._audit_refusal
         self.static = load_static()
         check_template(self.static["/"][0].decode("utf-8"))
         self.address: tuple[str, int] | None = None
@@ -199,6 +223,10 @@ class WebFrontEnd:
         app.router.add_get("/api/events", self._events)
         app.router.add_get("/api/history", self._history)
         app.router.add_get("/api/history/{drive}", self._history_of)
+        app.router.add_post("/api/login", self._login)
+        app.router.add_post("/api/logout", self._logout)
+        app.router.add_get("/api/session", self._session)
+        app.router.add_get("/api/audit", self._audit)
         return app
 
     async def run(self) -> None:
@@ -218,7 +246,9 @@ class WebFrontEnd:
         await runner.setup()
         self.feed.open()
         try:
-            site = AdmissionSite(runner, self.section.host, self.section.port, self.gate)
+            site = AdmissionSite(
+                runner, self.section.host, self.section.port, self.gate, self._tls_context()
+            )
             try:
                 await site.start()
             except OSError as exc:
@@ -234,6 +264,7 @@ class WebFrontEnd:
                 task.cancel()
             await self._close_sockets()
             await runner.cleanup()
+            self.auth.close()
             log.info("web front end stopped")
 
     async def _close_sockets(self) -> None:
@@ -246,6 +277,31 @@ class WebFrontEnd:
 
         await asyncio.gather(*(close(page.ws) for page in list(self._pages)))
 
+    def _audit_refusal(self, kind: str, peer: str, line: str) -> None:
+        """A refusal at the door on the audit trail (those of an identity are audited
+        where they are decided, gateway/web/auth.py)."""
+        if kind in AUDITED_AT_THE_DOOR:
+            self.runtime.audit.refused_request("web", kind, peer, line)
+
+    def _tls_context(self) -> ssl.SSLContext | None:
+        """The server's TLS context from ``web.tls_cert`` and ``web.tls_key`` (None: plain
+        HTTP); StartupError naming the file and the cause when they do not load."""
+        cert, key = self.section.tls_cert, self.section.tls_key
+        if cert is None or key is None:
+            return None
+        context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        context.minimum_version = ssl.TLSVersion.TLSv1_2
+        try:
+            context.load_cert_chain(cert, key)
+        except (OSError, ssl.SSLError) as exc:
+            reason = getattr(exc, "strerror", None) or str(exc)
+            raise StartupError(
+                "web",
+                f"cannot load web.tls_cert {cert} and web.tls_key {key}: {reason}",
+                "give a PEM certificate and its private key",
+            ) from None
+        return context
+
     def _bind_error(self, exc: OSError) -> StartupError:
         where = f"{self.section.host}:{self.section.port}"
         cause, fix = _BIND_FIXES.get(
@@ -257,15 +313,26 @@ class WebFrontEnd:
     def url(self) -> str:
         host, port = self.address or (self.section.host, self.section.port)
         shown = f"[{host}]" if ":" in host else host
-        return f"http://{shown}:{port}/"
+        return f"{'https' if self.section.tls else 'http'}://{shown}:{port}/"
 
     def _log_serving(self) -> None:
         log.info(
             "web status page on %s (metrics at %smetrics; commands %s)",
             self.url,
             self.url,
-            "on, with the token" if self.section.commands else "off",
+            "on, by operators" if self.section.commands else "off",
         )
+        users = self.runtime.config.users
+        log.info(
+            "web users: %d; without a login: %s",
+            len(users),
+            "viewer" if self.section.anonymous else "nothing but the page and the login",
+        )
+        if self.section.commands and self.section.token_sha256 is not None and not users:
+            log.warning(
+                "web commands by the shared token_sha256 (operator 'token'): it names no "
+                "person; give each user a [[users]] table (drive-gateway users hash)"
+            )
         networks = ", ".join(str(n) for n in self.section.allow)
         log.info("web clients allowed from %s", networks)
         log.info("web host names: %s", ", ".join(sorted(self.names)))
@@ -321,7 +388,16 @@ class WebFrontEnd:
             connection.request_started()
             task.add_done_callback(lambda _: connection.expect_request())
         misdirected = self._misdirected(request)
-        response = misdirected if misdirected is not None else await handler(request)
+        try:
+            if misdirected is not None:
+                response: web.StreamResponse = misdirected
+            else:
+                if request.path not in OPEN_PATHS:
+                    self.auth.check_read(request)
+                response = await handler(request)
+        except Refused as refused:
+            self.counters.refused[refused.counter] += 1
+            response = refused.response()
         if not response.prepared:
             response.headers.update(SECURITY_HEADERS)
         return response
@@ -354,6 +430,8 @@ class WebFrontEnd:
             # a WebSocket is not held to the same-origin rule: a page of another site open
             # in the operator's browser could otherwise read the feed
             self.counters.refused["origin"] += 1
+            origin = request.headers.get(hdrs.ORIGIN, "")
+            self.runtime.audit.refused_request("web", "origin", _peer(request), shown(origin))
             return web.Response(status=403, text="forbidden: the feed serves this page only\n")
         peer = _peer(request)
         if self.gate.page_refusal(peer) is not None:
@@ -497,44 +575,28 @@ class WebFrontEnd:
 
     # ------------------------------------------------------------ commands
 
-    def _token_ok(self, request: web.Request) -> bool:
-        expected = self.section.token_sha256
-        scheme, _, token = request.headers.get("Authorization", "").partition(" ")
-        if expected is None or scheme.lower() != "bearer" or not token:
-            return False
-        digest = hashlib.sha256(token.strip().encode()).hexdigest()
-        return hmac.compare_digest(digest, expected)
-
     def _refuse(
         self, reason: str, status: int, text: str, headers: dict[str, str] | None = None
     ) -> web.Response:
         self.counters.refused[reason] += 1
         return _json({"accepted": False, "error": text}, status, headers)
 
-    def _admit_command(self, request: web.Request) -> web.Response | None:
-        """The refusal of a command before its body is read, or None: commands off, an
-        address that gave too many wrong tokens (unchecked), a wrong token."""
-        if not self.section.commands:
-            return self._refuse(
-                "commands_off", 403, "commands from the web page are off (web.commands)"
-            )
-        peer = _peer(request)
-        now = time.monotonic()
-        wait = self.tokens.wait(peer, now)
-        if wait > 0:
-            self.refusals.note("token_limit", peer, math.ceil(wait))
-            return self._refuse(
-                "token_limit",
-                429,
-                "too many wrong tokens from this address: try again later",
-                {"Retry-After": str(math.ceil(wait))},
-            )
-        if not self._token_ok(request):
-            self.tokens.failed(peer, now)
-            self.refusals.note("token", peer, self.tokens.count(peer))
-            return self._refuse("token", 401, "a valid token is needed (Authorization: Bearer)")
-        self.tokens.succeeded(peer)
-        return None
+    # ------------------------------------------------------------ identities
+
+    async def _login(self, request: web.Request) -> web.Response:
+        return await self.auth.login(request, await self._body(request))
+
+    async def _logout(self, request: web.Request) -> web.Response:
+        return self.auth.logout(request)
+
+    async def _session(self, request: web.Request) -> web.Response:
+        return self.auth.whoami(request)
+
+    async def _audit(self, request: web.Request) -> web.Response:
+        self.auth.check_read(request, Action.AUDIT_READ)
+        since = _count(request.query.get("since"), 0)
+        limit = _count(request.query.get("limit"), 200)
+        return _json({"records": self.runtime.audit.newest(min(limit, 1000), since)})
 
     async def _body(self, request: web.Request) -> bytes:
         """The command's body, within ``web.body_timeout`` (408 and closed beyond it)."""
@@ -552,9 +614,16 @@ class WebFrontEnd:
             raise CommandRejected("the body is not a JSON command of at most 4 KiB") from None
 
     async def _command(self, request: web.Request) -> web.Response:
-        refused = self._admit_command(request)
-        if refused is not None:
-            return refused
+        if not self.section.commands:
+            return self._refuse(
+                "commands_off", 403, "commands from the web page are off (web.commands)"
+            )
+        try:
+            identity = self.auth.check_change(request, Action.COMMAND)
+        except Refused as refused:
+            if refused.counter == "role":  # refused as any command: on the drive's events too
+                self._role_refusal_event(request, refused.reason)
+            raise
         state = self._state(request)
         page = request.headers.get("X-Page-Id", "")
         # the page id is the page's own choice: only its label is published (docs/safety.md)
@@ -566,6 +635,7 @@ class WebFrontEnd:
         try:
             cmd = _parse_command(await self._body(request))
         except CommandRejected as exc:
+            self.auth.command_audited(request, identity, f"drive {state.id}: {exc.reason}")
             self.hub.event(
                 state.id,
                 EventKind.COMMAND_REFUSED,
@@ -578,10 +648,52 @@ class WebFrontEnd:
         try:
             self.hub.submit(state.id, Source.WEB, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
+            self._audit_command(request, identity, state.id, cmd, Result.FAILURE, exc.reason)
             self.counters.commands["refused"] += 1
             return _json({"accepted": False, "error": exc.reason}, 409)
+        if not cmd.is_empty:  # a keep-alive of the page in control is no audited command
+            self._audit_command(request, identity, state.id, cmd, Result.SUCCESS)
         self.counters.commands["accepted"] += 1
         return _json({"accepted": True, "client": client})
+
+    def _role_refusal_event(self, request: web.Request, reason: str) -> None:
+        drive_id = request.match_info["drive"]
+        if drive_id not in self.hub.drive_ids():
+            return
+        client = str(request.remote)
+        self.hub.event(
+            drive_id,
+            EventKind.COMMAND_REFUSED,
+            f"command from {Source.WEB.value} {client} refused: {reason}",
+            source=Source.WEB.value,
+            client=client,
+        )
+
+    def _audit_command(  # noqa: PLR0917 (a record's fields)
+        self,
+        request: web.Request,
+        identity: Identity,
+        drive: str,
+        cmd: DriveCommand,
+        result: Result,
+        why: str = "",
+    ) -> None:
+        self.runtime.audit.command(
+            cmd,
+            result,
+            interface="web",
+            peer=_peer(request),
+            identity=identity,
+            drive=drive,
+            why=why,
+        )
+
+
+def _count(text: str | None, default: int) -> int:
+    """A non-negative whole number of a query string (``default`` if absent or not one)."""
+    if text is None or not text.isascii() or not text.isdigit() or len(text) > 12:
+        return default
+    return int(text)
 
 
 def _parse_command(body: bytes) -> DriveCommand:

@@ -88,8 +88,11 @@ METRICS: dict[str, str] = {
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
     f"{NS}_web_clients_over_budget": "Pages dropped: more unsent than web.page_send_budget_kib.",
     f"{NS}_web_requests_refused": (
-        "Refused requests (host, origin, token, token_limit, commands_off, pages, pages_per_peer)."
+        "Refused requests (host, origin, token, token_limit, commands_off, pages, pages_per_peer,"
+        " login, login_limit, login_busy, role, csrf, login_required)."
     ),
+    f"{NS}_web_logins": "Web logins by result (success, failure, limited: refused unchecked).",
+    f"{NS}_audit_records": "Audit records written, by type and result.",
     f"{NS}_web_commands": "Commands from the page, by result (accepted, refused).",
     f"{NS}_web_connections": (
         "Web connections by result (accepted, refused, over_limit, over_peer_limit)."
@@ -129,10 +132,18 @@ class WebCounters:
                 "commands_off",
                 "pages",
                 "pages_per_peer",
+                "login",
+                "login_limit",
+                "login_busy",
+                "role",
+                "csrf",
+                "login_required",
             ),
             0,
         )
         """Requests refused, by reason."""
+        self.logins: dict[str, int] = {"success": 0, "failure": 0, "limited": 0}
+        """Web logins by result (limited: refused unchecked, too many failures)."""
         self.commands: dict[str, int] = {"accepted": 0, "refused": 0}
         self.connections: dict[str, int] = dict.fromkeys(
             ("accepted", "refused", "over_limit", "over_peer_limit"), 0
@@ -366,6 +377,14 @@ class GatewayCollector(Collector):
         throttled = _counter(f"{NS}_web_requests_throttled")
         throttled.add_metric([], web.throttled)
         yield from (over_budget, connections, open_now, timeouts, renders, throttled)
+        logins = _counter(f"{NS}_web_logins", ["result"])
+        for result, count in web.logins.items():
+            logins.add_metric([result], count)
+        audit = _counter(f"{NS}_audit_records", ["type", "result"])
+        for key, count in sorted(self.runtime.audit.counts.items()):
+            kind, _, result = key.partition(":")
+            audit.add_metric([kind, result], count)
+        yield from (logins, audit)
 
 
 def _maybe(

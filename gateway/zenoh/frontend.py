@@ -59,6 +59,7 @@ from typing import Any
 
 import zenoh
 
+from gateway.access.audit import Kind, Result
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -66,7 +67,7 @@ from gateway.hub import EventSubscription, StateSubscription
 from gateway.model import CommState, DriveState, Source
 from gateway.zenoh.history import HistoryQueries
 from gateway.zenoh.keys import KeyKind, KeySpace, is_concrete
-from gateway.zenoh.link import ANONYMOUS, Incoming, Oversize, Payload, ZenohLink
+from gateway.zenoh.link import ANONYMOUS, Incoming, LinkSeen, Oversize, Payload, ZenohLink
 from gateway.zenoh.params import ParamQueries
 from gateway.zenoh.replies import Pending, Replies
 from gateway.zenoh.requests import (
@@ -177,6 +178,7 @@ class ZenohFrontEnd:
             KeyKind.PARAM: self._params.query,
             KeyKind.HEALTH: self._query_health,
             KeyKind.HISTORY: self._history.query,
+            KeyKind.AUDIT: self._query_audit,
         }
 
     @property
@@ -265,6 +267,7 @@ class ZenohFrontEnd:
             self._command_from_zenoh,
             self._query_from_zenoh,
             recovery_cache=self.section.recovery_cache,
+            on_link=self._link_from_zenoh,
         )
         return dict(self._link.change_publishers)
 
@@ -353,6 +356,23 @@ class ZenohFrontEnd:
 
     def _command_from_zenoh(self, key: str, payload: Payload, client: str) -> None:
         self._to_loop(self._on_command_put, key, payload, client)
+
+    def _link_from_zenoh(self, seen: LinkSeen) -> None:
+        self._to_loop(self._on_link, seen)
+
+    def _on_link(self, seen: LinkSeen) -> None:
+        """A link opened or closed on the audit trail: the certificate's name, when the
+        link authenticated with one, is the identity (what the access control matches)."""
+        host = seen.remote.rpartition(":")[0] or seen.remote
+        self.runtime.audit.record(
+            Kind.LINK_OPEN if seen.opened else Kind.LINK_CLOSE,
+            Result.SUCCESS,
+            interface="zenoh",
+            peer=host,
+            identity=seen.auth or seen.client,
+            detail=f"{seen.remote}, session {seen.client}"
+            + (f", certificate {seen.auth}" if seen.auth else ", no certificate"),
+        )
 
     def _query_from_zenoh(self, incoming: Incoming) -> None:
         if not self._to_loop(self._on_query, incoming):
@@ -562,10 +582,21 @@ class ZenohFrontEnd:
         try:
             self.hub.submit(drive_id, Source.ZENOH, cmd, client)  # reports its own refusals
         except CommandRejected as exc:
+            self.runtime.audit.command(
+                cmd, Result.FAILURE, **self._who(client), drive=drive_id, why=exc.reason
+            )
             return command_refused(exc.reason)
         except UnknownDrive:
             return command_refused(f"no drive {drive_id!r}")
+        if not cmd.is_empty:  # a keep-alive (``{}``) is no audited command
+            self.runtime.audit.command(cmd, Result.SUCCESS, **self._who(client), drive=drive_id)
         return command_accepted()
+
+    @staticmethod
+    def _who(client: str) -> dict[str, str]:
+        """Who a command is from on the audit trail: the session's label (its role is what
+        the router's access control let it put: docs/operations.md, "Users and roles")."""
+        return {"interface": "zenoh", "peer": client, "identity": client}
 
     # ------------------------------------------------------------ queries (loop)
 
@@ -601,6 +632,19 @@ class ZenohFrontEnd:
             return
         body = self._apply_command(parsed.drive_id, incoming.payload, incoming.client)
         self._replies.answer(pending, [Answer.reply(incoming.key, body)])
+
+    def _query_audit(self, pending: Pending) -> None:
+        """``<prefix>/gateway/audit[?since=N]``: the newest audit records (engineers: the
+        router's access control says who may ask, config/zenoh-secure.json5)."""
+        since = 0
+        for part in filter(None, pending.incoming.parameters.split(";")):
+            name, _, value = part.partition("=")
+            if name != "since" or not (value.isascii() and value.isdigit() and len(value) < 13):
+                self._replies.refuse(pending, "the audit key takes since=N only")
+                return
+            since = int(value)
+        body = {"records": self.runtime.audit.newest(since=since)}
+        self._replies.answer(pending, [Answer.reply(self.keys.key(KeyKind.AUDIT), body)])
 
     def _query_health(self, pending: Pending) -> None:
         body = self.runtime.health()

@@ -29,6 +29,7 @@ class KeyKind(Enum):
     GATEWAY_TOKEN = "gateway token"
     HEALTH = "health"
     HISTORY = "history"
+    AUDIT = "audit"
 
 
 class Role(Enum):
@@ -167,6 +168,18 @@ KEYS: tuple[KeySpec, ...] = (
         'as the events key published it: `{"drive", "start", "end", "events": [...]}` '
         "(`history?events;start=now-1d`): what an advanced subscriber missed beyond the "
         'cache (below, "Recovery").',
+    ),
+    KeySpec(
+        KeyKind.AUDIT,
+        "{prefix}/gateway/audit",
+        (Role.QUERYABLE,),
+        'JSON: `{"records": [...]}`, the newest audit records (at most 1000), oldest first',
+        "reply",
+        'The audit trail (docs/operations.md, "Users, roles and the audit trail"): each '
+        "record has `seq`, `timestamp` (UTC), `interface`, `peer`, `identity`, `role`, "
+        "`category`, `type`, `event_id`, `result` and `detail`. `?since=N` answers the "
+        "records after sequence number N. For engineers: the router's access control "
+        "(config/zenoh-secure.json5) says which certificates may ask.",
     ),
 )
 

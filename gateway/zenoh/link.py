@@ -72,6 +72,21 @@ ANONYMOUS = "anonymous"
 """The client id of a put or query that carries no source info (docs/operations.md)."""
 
 
+@dataclass(frozen=True, slots=True)
+class LinkSeen:
+    """A link of the session opened or closed, as handed to the event loop: the remote
+    session's label, where it is, and the name its link authenticated with (a TLS client
+    certificate's common name), if any."""
+
+    opened: bool
+    client: str
+    remote: str
+    auth: str | None
+
+
+LinkSink = Callable[[LinkSeen], None]
+
+
 def client_of(source_info: Any) -> str:
     """The client behind a sample or query: the label (:func:`client_label`) of its
     session's id from the source info (``put(..., source_info=SourceInfo(publisher.id,
@@ -102,6 +117,7 @@ class ZenohLink:
         on_query: QuerySink,
         *,
         recovery_cache: int = 0,
+        on_link: LinkSink | None = None,
     ) -> None:
         self.session = session
         self.keys = keys
@@ -131,6 +147,26 @@ class ZenohLink:
         for kind in (KeyKind.STATE, KeyKind.COMMAND, KeyKind.PARAM, KeyKind.HISTORY):
             self._entities.append(self._queryable(keys.all_drives(kind), kind))
         self._entities.append(self._queryable(keys.key(KeyKind.HEALTH), KeyKind.HEALTH))
+        self._entities.append(self._queryable(keys.key(KeyKind.AUDIT), KeyKind.AUDIT))
+        self._on_link = on_link
+        declare = getattr(getattr(session, "info", None), "declare_link_events_listener", None)
+        if on_link is not None and declare is not None:
+            self._entities.append(declare(self._link_event, history=True))
+
+    def _link_event(self, event: Any) -> None:
+        """A link opened or closed (a Zenoh thread): copied and handed over."""
+        if self._on_link is None:
+            return
+        link = event.link
+        auth = link.auth_identifier
+        self._on_link(
+            LinkSeen(
+                opened=event.kind == zenoh.SampleKind.PUT,
+                client=client_label(str(link.zid)),
+                remote=str(link.dst),
+                auth=None if auth is None else str(auth),
+            )
+        )
 
     def _publisher(self, key: str, cache: int) -> Any:
         """A BLOCK publisher; with ``cache``, Zenoh's advanced publisher keeping the last
@@ -159,11 +195,18 @@ class ZenohLink:
         on_query: QuerySink,
         *,
         recovery_cache: int = 0,
+        on_link: LinkSink | None = None,
     ) -> ZenohLink:
         session = open_session(config)  # StartupError names the cause and the fix
         try:
             return cls(
-                session, keys, drive_ids, on_command, on_query, recovery_cache=recovery_cache
+                session,
+                keys,
+                drive_ids,
+                on_command,
+                on_query,
+                recovery_cache=recovery_cache,
+                on_link=on_link,
             )
         except BaseException:
             session.close()

@@ -14,6 +14,7 @@ import logging
 from typing import Any
 
 from gateway import paramsbackup
+from gateway.access.audit import Kind, Result
 from gateway.adapter import ParamValue
 from gateway.errors import GatewayError
 from gateway.frontend import RuntimeView
@@ -85,7 +86,30 @@ class ParamQueries:
         self.tasks.add(task)
         task.add_done_callback(self.tasks.discard)
 
+    def _audit(self, kind: Kind, pending: Pending, detail: str, failure: str | None) -> None:
+        """A parameter write or backup, as the audit trail keeps it (the client is the
+        session's label; the role is the router's access control, docs/operations.md)."""
+        self.runtime.audit.record(
+            kind,
+            Result.SUCCESS if failure is None else Result.FAILURE,
+            interface="zenoh",
+            peer=pending.incoming.client,
+            identity=pending.incoming.client,
+            detail=detail if failure is None else f"{detail}: {failure}",
+        )
+
     async def _serve_param(self, pending: Pending, drive_id: str, req: ParamRequest) -> None:
+        failure = "the gateway is shutting down"
+        try:
+            failure = await self._answer_param(pending, drive_id, req) or ""
+        finally:
+            if req.value is not None:
+                where = f"{req.number}" if req.subindex is None else f"{req.number}/{req.subindex}"
+                detail = f"drive {drive_id} parameter {where} = {req.value!r}"
+                self._audit(Kind.PARAM_WRITE, pending, detail, failure or None)
+
+    async def _answer_param(self, pending: Pending, drive_id: str, req: ParamRequest) -> str | None:
+        """Serve one parameter request; why it failed, or None."""
         key = pending.incoming.key
         info = self.hub.capabilities(drive_id).params.get(req.number)
         try:
@@ -105,13 +129,16 @@ class ParamQueries:
             raise
         except GatewayError as exc:
             self._replies.answer(pending, [Answer.error(error_body(exc))])
+            return str(exc) or type(exc).__name__
         except TimeoutError:
             self._replies.refuse(pending, f"no answer from drive {drive_id} in {PARAM_TIMEOUT:g} s")
+            return f"no answer in {PARAM_TIMEOUT:g} s"
         except Exception as exc:
             log.exception("parameter request %s failed", key)
             self._replies.answer(pending, [Answer.error(error_body(exc))])
-        else:
-            self._replies.answer(pending, [Answer.reply(key, body)])
+            return type(exc).__name__
+        self._replies.answer(pending, [Answer.reply(key, body)])
+        return None
 
     def _backup(self, pending: Pending, drive_id: str) -> None:
         """``<prefix>/drives/<id>/params``: the drive's parameter backup document
@@ -169,8 +196,11 @@ class ParamQueries:
             raise
         except paramsbackup.BackupError as exc:
             self._replies.refuse(pending, str(exc))
+            self._audit(Kind.BACKUP, pending, f"drive {drive_id}", str(exc))
         except Exception as exc:
             log.exception("parameter backup of %s failed", drive_id)
             self._replies.answer(pending, [Answer.error(error_body(exc))])
+            self._audit(Kind.BACKUP, pending, f"drive {drive_id}", type(exc).__name__)
         else:
             self._replies.answer(pending, [Answer.reply(pending.incoming.key, body)])
+            self._audit(Kind.BACKUP, pending, f"drive {drive_id}", None)

@@ -176,6 +176,11 @@ async def test_a_peer_outside_allow_is_closed_before_anything_is_made_for_it(
     counters = gw.frontend.counters
     assert (counters.connections_refused, counters.connections_accepted) == (1, 1)
     assert counters.requests == 1  # the allowed client's only
+    refused = [r for r in gw.daemon.runtime.audit.newest() if r["type"] == "request_refused"]
+    assert [(r["interface"], r["peer"], r["result"]) for r in refused] == [
+        ("modbus", "127.0.0.1", "failure")
+    ]
+    assert refused[0]["detail"].startswith("modbus.allow: connection from 127.0.0.1 closed")
 
 
 # ---------------------------------------------------------------- no descriptor left

@@ -111,7 +111,7 @@ async def running_gateway(tmp_path: Path, **kwargs: Any) -> AsyncIterator[Gatewa
     config = load(cfg)
     daemon = Daemon(config, notifier=Notifier({}))
     history = FakeHistory()
-    daemon.runtime.history = history  # type: ignore[attr-defined]
+    daemon.runtime.history = history  # type: ignore[assignment]  # a fake of the store
     task = asyncio.create_task(daemon.run())
     try:
         await asyncio.wait_for(daemon.ready.wait(), READY_BOUND + TIMEOUT)

@@ -404,6 +404,20 @@ def test_read_only_identity_recovers_missed_events_and_reads_the_history(
     assert history.ok and history.json()["drive"] == "d1", history
 
 
+def test_each_links_certificate_name_is_on_the_audit_trail(
+    site: Site, readonly: Scada, operator: Scada
+) -> None:
+    round_trip(readonly)  # both links are up
+    records = operator.one(f"{PREFIX}/gateway/audit").json()["records"]
+    opened = [r for r in records if r["type"] == "link_open"]
+    assert {"scada-operator", "scada-readonly"} <= {r["identity"] for r in opened}
+    mine = next(r for r in opened if r["identity"] == "scada-operator")
+    assert (mine["interface"], mine["category"], mine["event_id"]) == ("zenoh", "access", 1005)
+    assert mine["detail"].endswith(", certificate scada-operator")
+    # the audit trail is not for the read-only identity: the access control stops the query
+    assert readonly.query(f"{PREFIX}/gateway/audit") == []
+
+
 def test_an_identity_the_config_does_not_name_gets_nothing(site: Site, operator: Scada) -> None:
     intruder = site.open(site.unknown)  # a valid certificate: the TLS link is accepted
     try:

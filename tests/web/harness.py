@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 
 import aiohttp
 
+from gateway.access.users import User
 from gateway.config import DEFAULT_CONFIG, Config, load
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState, DriveStatus
@@ -140,17 +141,24 @@ class Small:
 
 @contextlib.asynccontextmanager
 async def small_gateway(
-    web: WebSection, drives: tuple[str, ...] = ("d1", "d2"), **state: Any
+    web: WebSection,
+    drives: tuple[str, ...] = ("d1", "d2"),
+    users: tuple[User, ...] = (),
+    **state: Any,
 ) -> AsyncIterator[Small]:
     hub = Hub()
     for i, drive in enumerate(drives):
         hub.add_drive(DriveState(id=drive, device=Device.TEST, bus="line", address=i + 1))
         hub.update(drive, comm=CommState.ONLINE, status=DriveStatus.READY, **state)
-    runtime = Runtime(config=Config(file="test.toml", web=web), hub=hub)
+    runtime = Runtime(config=Config(file="test.toml", web=web, users=users), hub=hub)
     front_end = WebFrontEnd(runtime)
     runtime.front_ends["web"] = front_end
     task = asyncio.create_task(front_end.run())
-    http = aiohttp.ClientSession(timeout=aiohttp.ClientTimeout(total=TIMEOUT))
+    http = aiohttp.ClientSession(
+        timeout=aiohttp.ClientTimeout(total=TIMEOUT),
+        cookie_jar=aiohttp.CookieJar(unsafe=True),  # cookies of an address (127.0.0.1)
+        connector=aiohttp.TCPConnector(ssl=False),  # a test's self-signed certificate
+    )
     try:
         ready = asyncio.create_task(front_end.ready.wait())
         done, _ = await asyncio.wait({ready, task}, timeout=TIMEOUT, return_when="FIRST_COMPLETED")

@@ -18,6 +18,9 @@ import pytest
 import pytest_asyncio
 from playwright.async_api import Page, async_playwright
 
+from gateway.access.passwords import hash_password
+from gateway.access.roles import Role
+from gateway.access.users import User
 from gateway.model import CommState, Device, DriveState, DriveStatus, Source
 from gateway.web.feed import PUSH_PERIOD
 from tests.support.simulated import sim_runner
@@ -291,3 +294,77 @@ async def test_the_header_counts_faulted_drives_and_a_canopen_code_is_hex(page: 
         row = page.locator('#drives-body tr[data-drive="d2"] td[data-col="fault"]')
         assert await row.text_content() == "26"
         await screenshot(page, "counts")
+
+
+LOGIN_PASSWORD = "a good password"
+
+
+def login_users() -> tuple[User, ...]:
+    digest = hash_password(LOGIN_PASSWORD, n=1 << 14)
+    return (User("vic", Role.VIEWER, digest), User("ana", Role.OPERATOR, digest))
+
+
+async def log_in(page: Page, user: str, password: str) -> None:
+    await page.fill("#login-user", user)
+    await page.fill("#login-password", password)
+    await page.click("#login-button")
+
+
+async def test_a_login_gives_the_page_its_role_and_a_refusal_shows_why(page: Page) -> None:
+    async with small_gateway(web_section(commands=True), users=login_users()) as gw:
+        await open_page(page, gw.url, 2)
+        await log_in(page, "vic", LOGIN_PASSWORD)
+        await page.wait_for_function(
+            "(document.querySelector('#who') || {}).textContent === 'vic (viewer)'",
+            timeout=WAIT_MS,
+        )
+        run = page.locator('#drives-body tr[data-drive="d1"] button[data-cmd="run"]')
+        await run.click()
+        await page.wait_for_function(
+            "document.querySelector('#command-result').textContent.includes("
+            "'refused: vic has the viewer role; command needs operator or above')",
+            timeout=WAIT_MS,
+        )
+        assert not gw.hub.desired("d1").run
+        await screenshot(page, "login-viewer-refused")
+        await page.click("#logout")
+        await log_in(page, "ana", "not the password")
+        await page.wait_for_function(
+            "document.querySelector('#login-result').textContent.includes('wrong user name')",
+            timeout=WAIT_MS,
+        )
+        await log_in(page, "ana", LOGIN_PASSWORD)
+        await page.wait_for_function(
+            "(document.querySelector('#who') || {}).textContent === 'ana (operator)'",
+            timeout=WAIT_MS,
+        )
+        assert await page.evaluate("document.cookie") == ""  # HttpOnly: no script reads it
+        await run.click()
+        await page.wait_for_function(
+            "document.querySelector('#command-result').textContent.includes('accepted')",
+            timeout=WAIT_MS,
+        )
+        assert gw.hub.desired("d1").run
+        await screenshot(page, "login-operator")
+    seen = [(r["type"], r["result"], r["identity"]) for r in gw.runtime.audit.newest()]
+    assert seen == [
+        ("login", "success", "vic"),
+        ("refused", "failure", "vic"),
+        ("logout", "success", "vic"),
+        ("login", "failure", "ana"),
+        ("login", "success", "ana"),
+        ("command", "success", "ana"),
+    ]
+
+
+async def test_with_anonymous_none_the_page_asks_for_a_login_first(page: Page) -> None:
+    async with small_gateway(web_section(anonymous=False), users=login_users()) as gw:
+        await page.goto(gw.url)
+        await page.wait_for_selector("#login-user", timeout=WAIT_MS)
+        assert await rows(page) == []  # nothing shown before the login
+        await log_in(page, "vic", LOGIN_PASSWORD)
+        await page.wait_for_function(  # the page opens its feed with the session
+            "document.querySelectorAll('#drives-body tr').length === 2", timeout=WAIT_MS
+        )
+        assert await page.locator("#command-bar").is_hidden()  # a viewer, commands off
+        await screenshot(page, "login-first")

@@ -49,12 +49,14 @@ def test_a_full_web_table(tmp_path: Path) -> None:
         write(
             tmp_path,
             f'bind = "0.0.0.0:8081"\nallow = ["10.1.0.0/16", "::1"]\ncommands = true\n'
-            f'token_sha256 = "{TOKEN_SHA256}"',
+            f'[[users]]\nname = "ana"\nrole = "operator"\ntoken_sha256 = "{"1" * 64}"',
         )
     ).web
     assert (web.enabled, web.host, web.port, web.commands) == (True, "0.0.0.0", 8081, True)
     assert web.allow == (ipaddress.ip_network("10.1.0.0/16"), ipaddress.ip_network("::1"))
-    assert web.token_sha256 == TOKEN_SHA256
+    assert web.token_sha256 is None
+    local = load(write(tmp_path, f'commands = true\ntoken_sha256 = "{TOKEN_SHA256}"')).web
+    assert local.token_sha256 == TOKEN_SHA256  # a page on this machine only
 
 
 @pytest.mark.parametrize(
@@ -64,7 +66,17 @@ def test_a_full_web_table(tmp_path: Path) -> None:
         ('bind = "h:99999"', "web.bind: port 99999 is not 0-65535"),
         ("allow = []", "web.allow: an empty list refuses everyone"),
         ('allow = ["10.0.0.0/33"]', "web.allow[0]: '10.0.0.0/33' is not an address or CIDR"),
-        ("commands = true", "web.commands: commands = true needs token_sha256"),
+        ("commands = true", "web.commands: commands = true needs [[users]]"),
+        (
+            'allow = ["10.0.0.0/8"]\ncommands = true',
+            "web.commands: commands = true on a page other machines reach needs [[users]]",
+        ),
+        (
+            f'allow = ["10.0.0.0/8"]\ntoken_sha256 = "{TOKEN_SHA256}"',
+            "web.token_sha256: a shared token names no one: it is for a page on this machine",
+        ),
+        ('anonymous = "guest"', 'web.anonymous: \'guest\' is not "viewer" or "none"'),
+        ('tls_cert = "c.pem"', "web.tls_key: give tls_cert and tls_key both"),
         ('token_sha256 = "abc"', "web.token_sha256: must be 64 lower-case hex digits"),
         ("names = []", "web.names: give 1 to 64 names users reach the page by"),
         ('names = ["gw:8080"]', "web.names[0]: 'gw:8080' is not a host name or address, with"),

@@ -11,6 +11,10 @@ const S = {
   span: 600,
   pageId: (crypto.randomUUID ? crypto.randomUUID() : String(Math.random()).slice(2)).slice(0, 36),
   client: "",  // this page's label in control_client, from its first accepted command
+  user: null,   // the logged-in user (GET /api/session), with their role and CSRF token
+  role: null,
+  csrf: null,
+  sessionKnown: false,
   dirty: new Set(),
 };
 const MAX_EVENTS = 100;
@@ -126,14 +130,73 @@ function renderHead() {
 
 function renderCommandBar() {
   const bar = $("command-bar");
-  if (!S.commands) { bar.hidden = true; bar.replaceChildren(); return; }
+  if (!S.commands) {
+    // no commands: the bar only for a login the gateway asks for (web.anonymous = "none")
+    bar.hidden = !S.sessionKnown || S.role !== null || S.user !== null;
+    if (bar.hidden) bar.replaceChildren();
+    else if (!$("login")) { bar.replaceChildren(el("span", {id: "login"})); renderLogin(); }
+    return;
+  }
   bar.hidden = false;
-  if (bar.childElementCount) return;
+  if ($("token")) return;
   const token = el("input", {type: "password", id: "token", placeholder: "token", autocomplete: "off"});
   token.value = sessionStorage.getItem("drive-gateway-token") || "";
   token.addEventListener("change", () => sessionStorage.setItem("drive-gateway-token", token.value));
-  bar.append(el("label", {htmlFor: "token"}, "Commands are on: token "), token,
+  bar.replaceChildren(el("span", {id: "login"}),
+    el("label", {htmlFor: "token"}, "Commands are on: token "), token,
     el("span", {id: "command-result"}));
+  renderLogin();
+}
+
+// ---------------------------------------------------------------- login (gateway/web/auth.py)
+
+async function loadSession() {
+  try {
+    const s = await (await fetch("/api/session")).json();
+    S.user = s.user; S.role = s.role; S.csrf = s.csrf || null; S.sessionKnown = true;
+  } catch (e) { /* the page stays as it is */ }
+  renderCommandBar();
+  renderLogin();
+}
+
+function renderLogin() {
+  const box = $("login");
+  if (!box) return;
+  if (S.user) {
+    const out = el("button", {type: "button", id: "logout"}, "log out");
+    out.addEventListener("click", logout);
+    box.replaceChildren(el("span", {id: "who"}, `${S.user} (${S.role})`), out);
+    return;
+  }
+  const user = el("input", {id: "login-user", placeholder: "user", autocomplete: "username"});
+  const pass = el("input", {type: "password", id: "login-password", placeholder: "password",
+    autocomplete: "current-password"});
+  const go = el("button", {type: "button", id: "login-button"}, "log in");
+  go.addEventListener("click", () => login(user.value, pass.value));
+  pass.addEventListener("keydown", (e) => { if (e.key === "Enter") login(user.value, pass.value); });
+  box.replaceChildren(user, pass, go, el("span", {id: "login-result"}));
+}
+
+async function login(user, password) {
+  const r = await fetch("/api/login", {
+    method: "POST", headers: {"Content-Type": "application/json"},
+    body: JSON.stringify({user, password}),
+  });
+  const answer = await r.json();
+  if (r.ok) {
+    S.user = answer.user; S.role = answer.role; S.csrf = answer.csrf;
+    renderLogin();
+    if (!S.commands) location.reload();  // the page the login opens (web.anonymous = "none")
+  } else {
+    const result = $("login-result");
+    if (result) result.textContent = ` ${answer.error}`;
+  }
+}
+
+async function logout() {
+  await fetch("/api/logout", {method: "POST", headers: {"X-CSRF-Token": S.csrf || ""}});
+  S.user = null; S.csrf = null;
+  renderLogin();
 }
 
 function renderCommands(tr, d) {
@@ -159,10 +222,13 @@ function renderCommands(tr, d) {
 async function command(id, body) {
   const result = $("command-result");
   const token = ($("token") || {}).value || "";
+  const headers = {"Content-Type": "application/json", "X-Page-Id": S.pageId};
+  if (S.csrf) headers["X-CSRF-Token"] = S.csrf;  // a logged-in session
+  if (token || !S.csrf) headers["Authorization"] = "Bearer " + token;
   try {
     const r = await fetch(`/api/drives/${encodeURIComponent(id)}/command`, {
       method: "POST",
-      headers: {"Content-Type": "application/json", "Authorization": "Bearer " + token, "X-Page-Id": S.pageId},
+      headers,
       body: JSON.stringify(body),
     });
     const answer = await r.json();
@@ -471,6 +537,7 @@ function connect() {
   };
 }
 
+loadSession();
 connect();
 $("trend-range").addEventListener("change", chooseRange);
 setInterval(() => { if (S.range) loadRange(); }, 60000);
