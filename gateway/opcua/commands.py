@@ -109,8 +109,8 @@ class Commands:
         client = session.client if session is not None else "internal"
         if session is not None and self.roles(session.user_of()) is not Role.OPERATE:
             reason = (
-                f"{client} may not operate drives: users and roles decide who may "
-                "(this server gives commands to loopback clients only until they are set)"
+                f"{client} may not operate drives: a session operates when it logs in as a "
+                "user of role operator or above (a server without users: from loopback only)"
             )
             self._refused_event(drive_id, client, reason)
             return Outcome(ua.StatusCodes.BadUserAccessDenied, reason)

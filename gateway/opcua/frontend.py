@@ -57,6 +57,7 @@ from gateway.opcua.space import (
     eu_range,
     variant,
 )
+from gateway.opcua.users import ConfiguredUsers
 from gateway.opcua.variables import READINGS, Range, bus_figures, changed_values, values_of
 from gateway.paramsbackup import firmware_of
 
@@ -92,7 +93,11 @@ class OpcuaFrontEnd:
         self.hub = runtime.hub
         self.section = runtime.config.opcua
         self.history = history if history is not None else getattr(runtime, "history", None)
-        self.roles = roles or default_roles(self.section)
+        users = runtime.config.users
+        # the config's users (gateway/access): sessions log in, their roles decide
+        self.users = ConfiguredUsers(users, Role.OBSERVE) if users else None
+        default = self.users.role_of if self.users is not None else default_roles(self.section)
+        self.roles = roles or default
         self.ready = asyncio.Event()
         self.commands = Commands(self.hub, self.roles)
         self.server: Server | None = None
@@ -122,7 +127,7 @@ class OpcuaFrontEnd:
         return self.section.endpoint
 
     async def run(self) -> None:
-        server = self.server = Server()
+        server = self.server = Server(user_manager=self.users)
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"drive-gateway {self.runtime.config.gateway.name}")

@@ -48,10 +48,15 @@ class FakeHistory:
 
 
 def config_text(
-    port: int, *, command_timeout: float = 0.0, security: str = '["none"]', extra: str = ""
+    port: int,
+    *,
+    command_timeout: float = 0.0,
+    security: str = '["none"]',
+    extra: str = "",
+    extra_root: str = "",
 ) -> str:
     timeout = f"command_timeout = {command_timeout}\n" if command_timeout else ""
-    return f"""
+    return f"""{extra_root}
 [gateway]
 shutdown_timeout = 3.0
 tick = 0.01
