@@ -105,8 +105,14 @@ def _containers(doc: Any, out: list[Any]) -> list[Any]:
     return out
 
 
+NEST_BUDGET = 300
+"""Levels of nesting one document's mutations add in all: deep enough for any parser's
+limit, and within this writer's own recursion (several nests of 200 went past Python's)."""
+
+
 def mutate(data: st.DataObject, doc: dict[str, Any]) -> dict[str, Any]:
     doc = json.loads(json.dumps(doc, default=str))  # a deep copy (dates become strings)
+    nest_budget = NEST_BUDGET
     for _ in range(data.draw(st.integers(1, 6), label="mutations")):
         node = data.draw(st.sampled_from(_containers(doc, [])), label="where")
         op = data.draw(st.sampled_from(["set", "delete", "rename", "add", "nest", "near", "bus"]))
@@ -131,7 +137,8 @@ def mutate(data: st.DataObject, doc: dict[str, Any]) -> dict[str, Any]:
         elif op == "delete":
             del node[slot]
         elif op == "nest":
-            depth = data.draw(st.sampled_from([1, 2, 5, 33, 200]), label="depth")
+            depth = min(data.draw(st.sampled_from([1, 2, 5, 33, 200]), label="depth"), nest_budget)
+            nest_budget -= depth
             in_list = data.draw(st.booleans(), label="in a list")
             wrapped = node[slot]
             for _ in range(depth):
