@@ -109,14 +109,19 @@ class Gateway:
 
 
 @contextlib.asynccontextmanager
-async def running_gateway(tmp_path: Path, **kwargs: Any) -> AsyncIterator[Gateway]:
+async def running_gateway(
+    tmp_path: Path, fake_history: bool = True, **kwargs: Any
+) -> AsyncIterator[Gateway]:
+    """``fake_history``: the made-up rows of :class:`FakeHistory` (False: the daemon's own
+    store, as its config has it)."""
     port = free_port()
     cfg = tmp_path / "gateway.toml"
     cfg.write_text(config_text(port, **kwargs))
     config = load(cfg)
     daemon = Daemon(config, notifier=Notifier({}))
     history = FakeHistory()
-    daemon.runtime.history = history  # type: ignore[assignment]  # a fake of the store
+    if fake_history:
+        daemon.runtime.history = history  # type: ignore[assignment]  # a fake of the store
     task = asyncio.create_task(daemon.run())
     try:
         await asyncio.wait_for(daemon.ready.wait(), READY_BOUND + TIMEOUT)

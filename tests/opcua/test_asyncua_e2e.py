@@ -5,6 +5,7 @@ HistoryRead from the gateway's history store (a fake one here)."""
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
 from pathlib import Path
@@ -13,10 +14,11 @@ from typing import Any
 import pytest
 from asyncua import Client, Node, ua
 
-from gateway.model import DriveStatus, Source
+from gateway.model import DriveCommand, DriveStatus, Source
 from gateway.opcua.frontend import OpcuaFrontEnd
 from gateway.opcua.variables import PERCENT, RPM
 from tests.opcua.harness import HISTORY_ROWS, HISTORY_START, TIMEOUT, Gateway, running_gateway
+from tests.reliability.demo import until
 
 NS = 2
 
@@ -261,3 +263,37 @@ async def test_a_session_in_control_feeds_the_watchdog_while_its_client_is_there
             assert any(
                 "no command from opcua session" in t and "ramp_stop applied" in t for t in texts
             )
+
+
+async def test_history_read_serves_the_gateways_own_store(tmp_path: Path) -> None:
+    """HistoryRead against the SQLite history the daemon records (``[history]`` on): the
+    samples a client reads are the store's own."""
+    history = f"""
+[history]
+enabled = true
+path = "{tmp_path / "history.sqlite"}"
+period = 0.1
+batch_interval = 0.1
+"""
+    async with running_gateway(tmp_path, fake_history=False, extra_root=history) as gateway:
+        store = gateway.daemon.runtime.history
+        assert store is not None
+        gateway.daemon.hub.submit("m1", Source.ZENOH, DriveCommand(run=True, speed_rpm=300.0))
+        start = time.time() - 1.0
+
+        def recorded() -> list[Any]:
+            return [
+                r for r in store.readings("m1", start, time.time()) if r.values.get("speed_rpm")
+            ]
+
+        await until(lambda: len(recorded()) >= 5)  # the writer commits every batch_interval
+        rows = recorded()
+        async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
+            first = datetime.fromtimestamp(rows[0].t, UTC)
+            last = datetime.fromtimestamp(rows[-1].t, UTC)
+            values = await node(client, "m1", "SpeedRpm").read_raw_history(first, last)
+        served = [(v.SourceTimestamp.timestamp(), v.Value.Value) for v in values]
+        assert len(served) >= len(rows)
+        for row in rows:
+            near = [value for t, value in served if abs(t - row.t) < 1e-3]
+            assert near == [row.values["speed_rpm"]], (row, served)
