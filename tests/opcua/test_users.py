@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 
-from gateway.access.passwords import hash_password
+from gateway.access.passwords import hash_password, verify_password
 from gateway.access.roles import Role as AccessRole
 from gateway.access.users import User
 from gateway.opcua import users as users_mod
@@ -44,11 +44,10 @@ def test_guessing_is_locked_out_without_a_check_and_a_good_check_is_remembered(
     now = [0.0]
     users = ConfiguredUsers((ANA,), Role.OBSERVE, clock=lambda: now[0])
     checks: list[str] = []
-    real = users_mod.verify_password
 
     def counted(password: str, stored: object) -> bool:
         checks.append(password)
-        return real(password, stored)  # type: ignore[arg-type]
+        return verify_password(password, stored)  # type: ignore[arg-type]
 
     monkeypatch.setattr(users_mod, "verify_password", counted)
     for _ in range(MAX_FAILURES):
