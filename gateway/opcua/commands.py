@@ -22,7 +22,7 @@ from typing import Any
 from asyncua import ua
 
 from gateway.adapter import EventKind
-from gateway.errors import CommandRejected, UnknownDrive
+from gateway.errors import CommandRejected, GatewayError, UnknownDrive
 from gateway.hub import Hub
 from gateway.model import DriveCommand, Source
 from gateway.opcua.sessions import CALLER, Role, RoleMap
@@ -55,7 +55,7 @@ def _set_speed(args: tuple[Any, ...]) -> DriveCommand:
     return DriveCommand(speed_rpm=float(value))
 
 
-class BadArgument(ValueError):
+class BadArgument(GatewayError, ValueError):
     """A method argument that is not what the method takes."""
 
 
