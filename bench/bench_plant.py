@@ -678,6 +678,7 @@ def _figures(
         extra = ""
         if pbsim:
             turn = pbsim["master_turnaround"]
+            figures += _turnaround_figures(turn)
             late = pbsim["reply_lateness"]
             extra = (
                 f"; master turnaround seen on the line p50 {turn['p50_us']} us p99 "
@@ -685,8 +686,6 @@ def _figures(
                 f"simulator reply lateness p50 {late['p50_us']} us p99 {late['p99_us']} us "
                 f"mean {late['mean_us']} us"
             )
-        if pbsim:
-            figures += _turnaround_figures(pbsim["master_turnaround"])
         request, reply = exchange_bits()
         pb = _cycles_in(cycles["profibus"], t0, t1)
         extra += f"; {len(pb) * plant.profibus / (t1 - t0):.0f} Data_Exchange/s"
@@ -721,7 +720,8 @@ def _figures(
         )
     if plant.canopen:
         co = _cycles_in(cycles.get("canopen", []), t0, t1)
-        extra = f"; sync_period {canopen_sync_period(plant.canopen) * 1e3:.3f} ms"
+        sync = plant.cycle or canopen_sync_period(plant.canopen)
+        extra = f"; sync_period {sync * 1e3:.3f} ms"
         if colog is not None and co:
             ends, bits = colog
             carried = canbus.bits_between(ends, bits, t0, t1)

@@ -168,7 +168,12 @@ async def test_parameters_claimed_and_figures_come_from_the_line() -> None:
 
 
 class SlowParams(StepAdapter):
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked = asyncio.Event()  # the test's, set from the line's thread
+
     async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
+        self.test_loop.call_soon_threadsafe(self.asked.set)
         await asyncio.Event().wait()  # a drive that never answers
         return 0
 
@@ -179,7 +184,7 @@ async def test_a_request_under_way_when_the_line_stops_is_answered() -> None:
     task = asyncio.create_task(line.run())
     await wait_running(adapter)
     request = asyncio.create_task(line.read_param("d", 100, 0))
-    await asyncio.sleep(0.01)
+    await asyncio.wait_for(adapter.asked.wait(), scaled(10.0))  # under way on the line
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
