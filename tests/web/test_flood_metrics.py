@@ -146,7 +146,9 @@ async def test_each_flood_moves_its_counter_in_a_scrape_of_the_demo() -> None:
 
     assert moved("drive_gateway_bus_emcy_dropped", bus="canopen") > 0
     assert moved("drive_gateway_bus_duplicate_mac_unanswered", bus="devicenet") > 0
-    assert moved("drive_gateway_bus_events_dropped", bus="canopen") >= 50
+    dropped = moved("drive_gateway_bus_events_dropped", bus="canopen")
+    assert dropped >= 50  # more when the line's own events were waiting too
     assert moved("drive_gateway_bus_events_dropped", bus="devicenet") == 0
-    assert moved("drive_gateway_events_folded") >= OUTBOX_EVENTS - 1
+    # the burst's events the outbox took are one run: the first told, the rest folded
+    assert moved("drive_gateway_events_folded") >= OUTBOX_EVENTS + 50 - dropped - 1
     assert moved("drive_gateway_web_tokens_failed") == WRONG_TOKENS
