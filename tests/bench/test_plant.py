@@ -121,7 +121,6 @@ def test_a_tiny_plant_runs_and_stops() -> None:
         settle=0.5,
     )
     figures = {f.name: f for f in bench_plant.measure(plant)}
-    print(*(f.line() for f in figures.values() if "cpu" in f.name), sep="\n")
     assert all(proc.poll() is not None for proc in plant.procs.values())
     assert figures["plant_gateway_cpu"].value > 0
     assert figures["plant_gateway_rss"].value > 0
