@@ -23,6 +23,9 @@ Figures, over the measured window (after every drive is online and a settling ti
 
 - the gateway's CPU as a share of one core: its process's utime + stime
   (``/proc/<pid>/stat``) over the wall time; its RSS (``/proc/<pid>/status`` VmRSS);
+- the same CPU by part (``plant_gateway_cpu_<part>``, reference: the process's total;
+  :mod:`bench.plant.cpusplit`): each line's thread, the daemon's loop and its share per
+  part (Modbus, Zenoh, web, hub, ...), Zenoh's own threads;
 - each line's median cycle time against its physical minimum (the reference; target
   ratio <= 1.05). Profibus (Felser): the sum over the slaves of request and reply telegram
   bits (11 bits per character) + min TSDR + TSYN, plus the Global_Control broadcast
@@ -34,9 +37,14 @@ Figures, over the measured window (after every drive is online and a settling ti
 - what the clients saw: polls per drive per second (reference: the rate asked) and Zenoh
   state samples per second over the drives that published;
 - line diagnostics: the master's turnaround seen from the Profibus line (reply written ->
-  next request read, against TSYN), how late the paced simulators and the CAN broker were.
+  next request read, against TSYN), how late the paced simulators and the CAN broker were;
+  the turnaround's mean and p99 against its median (``plant_profibus_turnaround_mean``,
+  ``_p99``; targets ratio <= 1.5 and <= 3).
 
-``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--canopen N] [--profile F]``;
+:func:`run` measures the plant twice: every line flat out (``plant_*``), then every line's
+cycle at :data:`CYCLE_100MS` (``plant_100ms_*``: the CPU a steady plant costs).
+
+``python -m bench.bench_plant [--seconds S] [--profibus N] [--devicenet N] [--canopen N] [--cycle S] [--profile F]``;
 ``make bench`` runs it with :data:`MEASURE` seconds (``BENCH_PLANT_SECONDS`` overrides, the
 ``--short`` flag of ``python -m bench`` gives :data:`SHORT_MEASURE`). Start-up is bounded
 by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
@@ -64,7 +72,7 @@ from adapters.profibus.codec.dp import DataExchange, build_request
 from adapters.profibus.codec.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
 from adapters.profibus.master.timing import BITS_PER_CHAR, BusParams
 from bench.common import Figure, add_number, arg_parser, positive_float, print_figures
-from bench.plant import PIN_ENV, canbus
+from bench.plant import PIN_ENV, canbus, cpusplit
 from tests.support.net import free_port
 
 PROFIBUS_SLAVES: Final = 125
@@ -80,6 +88,7 @@ MODBUS_CLIENTS: Final = 10
 MODBUS_RATE: Final = 10.0  # Hz, every drive, every client
 MEASURE: Final = 30.0  # s measured (make bench)
 SHORT_MEASURE: Final = 8.0  # s measured with --short
+CYCLE_100MS: Final = 0.1  # s: every line's cycle in the second run (the issue's CPU target)
 SETTLE: Final = 3.0  # s of full load before the window opens
 PROFIBUS_WATCHDOG: Final = 2.0  # s, the slaves' (the config below)
 STARTUP_BOUND: Final = 150.0  # s for every drive to come online (three lines on a loaded host)
@@ -110,6 +119,9 @@ class Plant:
     """OPC UA client sessions subscribed to every drive (bench/bench_opcua.py); 0: the
     gateway serves no OPC UA."""
     opcua_interval: float = 0.1  # s, their subscriptions' publishing interval
+    # every line's cycle (Profibus cycle_time, DeviceNet poll_interval, CANopen sync_period),
+    # s; None: each line flat out (back to back, the SYNC at the line's minimum)
+    cycle: float | None = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     logs: list[Any] = field(default_factory=list)
     raw: dict[str, Any] = field(default_factory=dict)
@@ -185,7 +197,7 @@ def config_text(
             f'port = "{tmp / "profibus.tty"}"',
             f"baudrate = {PROFIBUS_BAUD}",
             f"master_address = {MASTER_ADDRESS}",
-            "cycle_time = 0.0",
+            f"cycle_time = {plant.cycle or 0.0!r}",
             f"watchdog = {PROFIBUS_WATCHDOG:g}",
             "latency = 0.05",
             "live_list_period = 0.0",
@@ -209,7 +221,7 @@ def config_text(
             f'channel = "{tmp / "can.sock"}"',
             f"bitrate = {CAN_BITRATE}",
             "mac = 0",
-            "poll_interval = 0.001",
+            f"poll_interval = {plant.cycle or 0.001!r}",
             "expected_packet_rate = 0.5",
         ]
         for mac in range(1, plant.devicenet + 1):
@@ -272,7 +284,7 @@ def canopen_line(plant: Plant, tmp: Path, first_unit: int) -> list[str]:
         f'interface = "{canbus.INTERFACE}"',
         f'channel = "{tmp / "canopen.sock"}"',
         f"bitrate = {CAN_BITRATE}",
-        f"sync_period = {canopen_sync_period(plant.canopen)!r}",
+        f"sync_period = {plant.cycle or canopen_sync_period(plant.canopen)!r}",
     ]
     for node in range(1, plant.canopen + 1):
         lines += [
@@ -628,6 +640,7 @@ def measure(plant: Plant) -> list[Figure]:
         cycles = doc.get("cycles", {"profibus": [], "devicenet": [], "canopen": []})
         gc_pauses = [p for p in doc.get("gc", []) if t0 <= p[0] < t1]
         profibus_errors = doc.get("profibus_errors", [])
+        cpu_parts = cpusplit.split(doc.get("cpu", []), t0, t1)
         pbsim = _read_json(tmp / "profibus-sim.json")
         canlog, broker = _broker_log(tmp, "canbus")
         colog, cobroker = _broker_log(tmp, "canopen-bus")
@@ -652,6 +665,7 @@ def measure(plant: Plant) -> list[Figure]:
         gc_pauses=gc_pauses,
         come_up=(started, online_at),
         profibus_errors=profibus_errors,
+        cpu_parts=cpu_parts,
     )
 
 
@@ -674,6 +688,7 @@ def _figures(
     gc_pauses: list[list[float]],
     come_up: tuple[float, float] | None = None,
     profibus_errors: list[dict[str, int]] | None = None,
+    cpu_parts: dict[str, float] | None = None,
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
@@ -691,6 +706,7 @@ def _figures(
         ),
         Figure("plant_gateway_rss", round(rss, 1), "MiB", note="VmRSS at the end of the window"),
         _gc_figure(gc_pauses, t1 - t0),
+        *_cpu_figures(cpu_parts, cpu_share),
     ]
     if come_up is not None:
         figures.append(_come_up_figure(come_up, cycles.get("profibus", [])))
@@ -699,6 +715,7 @@ def _figures(
         extra = ""
         if pbsim:
             turn = pbsim["master_turnaround"]
+            figures += _turnaround_figures(turn)
             late = pbsim["reply_lateness"]
             extra = (
                 f"; master turnaround seen on the line p50 {turn['p50_us']} us p99 "
@@ -740,7 +757,8 @@ def _figures(
         )
     if plant.canopen:
         co = _cycles_in(cycles.get("canopen", []), t0, t1)
-        extra = f"; sync_period {canopen_sync_period(plant.canopen) * 1e3:.3f} ms"
+        sync = plant.cycle or canopen_sync_period(plant.canopen)
+        extra = f"; sync_period {sync * 1e3:.3f} ms"
         if colog is not None and co:
             ends, bits = colog
             carried = canbus.bits_between(ends, bits, t0, t1)
@@ -793,6 +811,52 @@ def _figures(
     return figures
 
 
+def _cpu_figures(parts: dict[str, float] | None, total: float) -> list[Figure]:
+    """The gateway's CPU by part (:mod:`bench.plant.cpusplit`), each against the process's
+    total in the same window."""
+    if not parts:
+        return []
+    threads = sum(v for k, v in parts.items() if not k.startswith("loop: "))
+    note = (
+        "cores, by thread and the loop's by the callbacks it ran "
+        f"(bench/plant/cpusplit.py); all threads {threads:.3f} of the process's "
+        f"{total:.3f}; {json.dumps(parts)}"
+    )
+    out = []
+    for part, cores in sorted(parts.items()):
+        slug = "".join(c if c.isalnum() else "_" for c in part).strip("_")
+        slug = "_".join(w for w in slug.split("_") if w)
+        out.append(
+            Figure(f"plant_gateway_cpu_{slug}", cores, "core", reference=round(total, 4), note=note)
+        )
+    return out
+
+
+def _turnaround_figures(turn: dict[str, float]) -> list[Figure]:
+    """The master's turnaround as the slave simulator sees it: mean and p99 against the
+    median (issue targets: 1.5 x and 3 x)."""
+    median = turn["p50_us"]
+    note = f"Profibus master turnaround on the line (reply written -> next request read): {turn}"
+    return [
+        Figure(
+            "plant_profibus_turnaround_mean",
+            turn["mean_us"],
+            "us",
+            reference=median,
+            target="ratio <= 1.5",
+            note=note,
+        ),
+        Figure(
+            "plant_profibus_turnaround_p99",
+            turn["p99_us"],
+            "us",
+            reference=median,
+            target="ratio <= 3",
+            note=note,
+        ),
+    ]
+
+
 def _come_up_figure(come_up: tuple[float, float], profibus: list[list[float]]) -> Figure:
     """How long every drive took to come online (from the gateway's start), and the
     Profibus cycles meanwhile against the slaves' watchdog (a longer cycle drops slaves
@@ -825,22 +889,30 @@ def run() -> list[Figure]:
             "BENCH_PLANT_SECONDS", SHORT_MEASURE if os.environ.get("BENCH_SHORT") else MEASURE
         )
     )
+    return plant_figures("plant", seconds) + plant_figures("plant_100ms", seconds, CYCLE_100MS)
+
+
+def plant_figures(prefix: str, seconds: float, cycle: float | None = None) -> list[Figure]:
+    """The plant's figures, named ``<prefix>_*`` (whole, or in two parts: :func:`run`)."""
+
+    def named(tag: str, figures: list[Figure]) -> list[Figure]:
+        return [
+            dataclasses.replace(f, name=f.name.replace("plant_", f"{tag}_", 1)) for f in figures
+        ]
+
     try:
-        return measure(Plant(seconds=seconds))
+        return named(prefix, measure(Plant(seconds=seconds, cycle=cycle)))
     except StartupFailed as exc:
-        figures = [_not_up("plant", PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES, exc)]
+        figures = [_not_up(prefix, PROFIBUS_SLAVES + DEVICENET_NODES + CANOPEN_NODES, exc)]
     for tag, part in (
-        ("pbdn", Plant(canopen=0, seconds=seconds)),
-        ("co", Plant(profibus=0, devicenet=0, seconds=seconds)),
+        ("pbdn", Plant(canopen=0, seconds=seconds, cycle=cycle)),
+        ("co", Plant(profibus=0, devicenet=0, seconds=seconds, cycle=cycle)),
     ):
         try:
-            figures += [
-                dataclasses.replace(f, name=f.name.replace("plant_", f"plant_{tag}_", 1))
-                for f in measure(part)
-            ]
+            figures += named(f"{prefix}_{tag}", measure(part))
         except StartupFailed as exc:
             figures.append(
-                _not_up(f"plant_{tag}", part.profibus + part.devicenet + part.canopen, exc)
+                _not_up(f"{prefix}_{tag}", part.profibus + part.devicenet + part.canopen, exc)
             )
     return figures
 
@@ -889,6 +961,13 @@ def main(argv: list[str] | None = None) -> int:
         default=MODBUS_RATE,
         help="polls per second of each drive by each client",
     )
+    parser.add_argument(
+        "--cycle",
+        type=positive_float,
+        metavar="S",
+        default=None,
+        help="every line's cycle (default: flat out; make bench also runs 0.1)",
+    )
     parser.add_argument("--profile", help="write the gateway's cProfile stats here")
     parser.add_argument(
         "--pin",
@@ -905,6 +984,7 @@ def main(argv: list[str] | None = None) -> int:
         seconds=args.seconds,
         profile=args.profile,
         pin=args.pin,
+        cycle=args.cycle,
     )
     print_figures(measure(plant))
     return 0

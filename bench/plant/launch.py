@@ -13,7 +13,9 @@
   second the number of drives online; written at ``--record`` (the status part every
   0.5 s, the cycles when the daemon ends), and every garbage collection's pause. The
   recording is a list append per cycle and per collection; at the end also each Profibus
-  line's error counters (retries, timeouts, bad telegrams: whole run, come-up included);
+  line's error counters (retries, timeouts, bad telegrams: whole run, come-up included),
+  and every 0.5 s the CPU time of each part of the gateway (:mod:`bench.plant.cpusplit`:
+  each line's thread, the daemon's loop split by what it runs, Zenoh's threads);
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
 
 The daemon is the real one (``gateway.runtime.daemon.Daemon``), set up as ``drive-gateway run``
@@ -34,11 +36,13 @@ import sys
 import time
 from typing import Any
 
-from bench.plant import canbus, pin_from_env
+from bench.plant import canbus, cpusplit, pin_from_env
 
 CYCLES: dict[str, list[tuple[float, float]]] = {"profibus": [], "devicenet": [], "canopen": []}
 GC_PAUSES: list[tuple[float, int, float]] = []  # (monotonic end, generation, seconds)
 PROFIBUS_LINES: list[Any] = []  # each Profibus master's LineFigures (its error counters)
+CPU: list[dict[str, Any]] = []  # every 0.5 s: the CPU by thread group (bench.plant.cpusplit)
+ACCOUNT = cpusplit.LoopAccount()
 
 
 def _hook_gc() -> None:
@@ -113,6 +117,7 @@ def _write(path: str, online: dict[str, int], total: int, final: bool) -> None:
         doc["cycles"] = CYCLES
         doc["gc"] = GC_PAUSES
         doc["profibus_errors"] = [line.counters() for line in PROFIBUS_LINES]
+        doc["cpu"] = CPU
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         json.dump(doc, f)
@@ -136,6 +141,7 @@ async def _daemon(config_path: str, record: str | None) -> int:
 
     async def report() -> None:
         while record is not None:
+            CPU.append(cpusplit.sample(ACCOUNT))
             _write(record, online(), total, final=False)
             await asyncio.sleep(0.5)
 
@@ -169,6 +175,8 @@ def main() -> None:
             setup_logging(args.log_level)
             _hook_cycles()
             _hook_gc()
+            if args.record:
+                ACCOUNT.install()
             status = asyncio.run(_daemon(argv[argv.index("--config") + 1], args.record))
         else:
             from gateway.cli import main as gateway_main

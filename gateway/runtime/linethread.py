@@ -13,7 +13,8 @@ side waiting on the other) and three narrow calls:
   :data:`LEAVE_BOUND`, for it to leave the bus cleanly (safety rule 4);
 - ``read_param`` / ``write_param`` run the adapter's own on the line's loop;
 - ``diagnostics`` gives the line's figures as the line last built them (every
-  :data:`DIAG_PERIOD`, on its own loop, never per request from a front end).
+  :data:`DIAG_PERIOD`, on its own loop, never per request from a front end), with the
+  events its hand-over dropped (``events_dropped``).
 
 It stands in the runtime's adapters for its adapter (:class:`gateway.adapter.DriveAdapter`).
 """
@@ -189,13 +190,21 @@ class LineThread:
     async def _diagnostics_loop(self, main: asyncio.AbstractEventLoop) -> None:
         while True:
             try:
-                self._diag = diag = self.adapter.diagnostics()
+                self._diag = diag = self._with_port(self.adapter.diagnostics())
             except Exception:  # an adapter between states: the last figures stay
                 log.debug("bus %s: diagnostics failed", self.name, exc_info=True)
             else:
                 if self._diag_waiters:
                     main.call_soon_threadsafe(self._diag_built, diag)
             await asyncio.sleep(DIAG_PERIOD)
+
+    def _with_port(self, diag: dict[str, Any]) -> dict[str, Any]:
+        """The adapter's figures and the hand-over's own: the events its outbox dropped
+        (:data:`~gateway.runtime.lineport.OUTBOX_EVENTS` waiting)."""
+        port = self.port
+        if port is None:
+            return diag
+        return {**diag, "events_dropped": port.events_dropped}
 
     async def _watch_claimed(
         self, main: asyncio.AbstractEventLoop, task: asyncio.Task[None]

@@ -31,6 +31,7 @@ from prometheus_client.registry import Collector
 
 from gateway.frontend import RuntimeView
 from gateway.model import CommState, DriveStatus
+from gateway.web.floodmetrics import FLOOD_METRICS, FloodCollector
 from gateway.web.views import (
     BUS_FIGURES,
     STATION_FIGURES,
@@ -101,6 +102,7 @@ METRICS: dict[str, str] = {
     f"{NS}_web_timeouts": "Web requests cut: a head or body came, or an answer went, too slowly.",
     f"{NS}_web_metrics_renders": "/metrics renders (the scrapes in between share one).",
     f"{NS}_web_requests_throttled": "Requests held back: their address was over web.request_rate.",
+    **FLOOD_METRICS,  # gateway/web/floodmetrics.py
 }
 """Every metric the collector exposes (the process figures come from prometheus_client)."""
 
@@ -398,5 +400,6 @@ def make_registry(runtime: RuntimeView, feed: FeedCounters, web: WebCounters) ->
     """The front end's own registry: the gateway's collector and the process figures."""
     registry = CollectorRegistry(auto_describe=False)
     registry.register(GatewayCollector(runtime, feed, web))
+    registry.register(FloodCollector(runtime, web))
     ProcessCollector(registry=registry)
     return registry

@@ -138,6 +138,13 @@ def test_a_tiny_plant_runs_and_stops() -> None:
     modbus = figures["plant_modbus_poll_rate"]
     assert modbus.value > 0 and "0 exceptions" in modbus.note
     assert "6 of 6 drives seen" in figures["plant_zenoh_states"].note
+    # the CPU by part: each line's thread, the loop (split by what it runs), Zenoh's threads
+    assert figures["plant_gateway_cpu_zenoh"].value >= 0  # its native threads: 10 ms ticks
+    for part in ("line_profibus", "line_devicenet", "line_canopen", "loop"):
+        assert figures[f"plant_gateway_cpu_{part}"].value > 0, part
+    assert figures["plant_gateway_cpu_loop_modbus"].value > 0  # its requests, timed
+    turnaround = figures["plant_profibus_turnaround_p99"]
+    assert turnaround.reference is not None and turnaround.value >= turnaround.reference > 0
 
 
 def test_the_line_errors_of_every_profibus_line_are_summed() -> None:

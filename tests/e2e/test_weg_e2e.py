@@ -456,8 +456,8 @@ async def test_a_refused_startup_parameter_leaves_the_drive_not_configured(
             return got
 
         async with asyncio.timeout(TIMEOUT):
-            while reason() is None:  # noqa: ASYNC110 (the line's figures: no event)
-                await asyncio.sleep(0.05)
+            while reason() is None:
+                await line.next_diagnostics()
         assert reason() == (
             "not configured: startup P0313 = 9: parameter value out of the limits (error 0x0002)"
         )

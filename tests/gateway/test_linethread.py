@@ -15,6 +15,7 @@ from gateway.adapter import Capabilities, EventKind, HubPort, ParamValue
 from gateway.errors import DriveOffline, LineHeld
 from gateway.hub import Hub
 from gateway.model import CommState, Device, DriveState
+from gateway.runtime.lineport import OUTBOX_EVENTS
 from gateway.runtime.linethread import LineThread
 from tests.support.timing import scaled
 
@@ -167,7 +168,12 @@ async def test_parameters_claimed_and_figures_come_from_the_line() -> None:
 
 
 class SlowParams(StepAdapter):
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked = asyncio.Event()  # the test's, set from the line's thread
+
     async def read_param(self, drive_id: str, number: int, subindex: int) -> ParamValue:
+        self.test_loop.call_soon_threadsafe(self.asked.set)
         await asyncio.Event().wait()  # a drive that never answers
         return 0
 
@@ -178,9 +184,49 @@ async def test_a_request_under_way_when_the_line_stops_is_answered() -> None:
     task = asyncio.create_task(line.run())
     await wait_running(adapter)
     request = asyncio.create_task(line.read_param("d", 100, 0))
-    await asyncio.sleep(0.01)
+    await asyncio.wait_for(adapter.asked.wait(), scaled(10.0))  # under way on the line
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
     with pytest.raises(DriveOffline, match="stopped during the request"):
         await asyncio.wait_for(request, scaled(5.0))
+
+
+class EventFlood(StepAdapter):
+    """A line that says ``count`` identical events at once when its test asks."""
+
+    def __init__(self, count: int) -> None:
+        super().__init__()
+        self.count = count
+        self.flood = threading.Event()  # set by the test
+        self.flooded = threading.Event()  # set by the line once every event is said
+
+    async def run(self, hub: HubPort) -> None:
+        self.hub = hub
+        await super().run(hub)
+
+    def diagnostics(self) -> dict[str, Any]:
+        if self.flood.is_set() and not self.flooded.is_set():
+            for _ in range(self.count):
+                self.hub.event("d", EventKind.BUS, "the same again")
+            self.flooded.set()
+        return super().diagnostics()
+
+
+async def test_events_the_outbox_drops_are_in_the_lines_figures() -> None:
+    hub, adapter = make_hub(), EventFlood(OUTBOX_EVENTS + 100)
+    line = LineThread(adapter, hub)
+    task = asyncio.create_task(line.run())
+    await wait_running(adapter)  # "line up" applied: the flush before it ran first
+    first = await asyncio.wait_for(line.next_diagnostics(), scaled(10.0))
+    assert first["events_dropped"] == 0
+    adapter.flood.set()
+    # the daemon's loop held up until the line has said them all: none is applied meanwhile
+    assert adapter.flooded.wait(scaled(10.0))
+    built = await asyncio.wait_for(line.next_diagnostics(), scaled(10.0))
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert built["events_dropped"] == 100
+    assert built["steps"] >= 1  # the adapter's own figures beside it
+    assert hub.events_folded == OUTBOX_EVENTS - 1  # those applied: one told, the rest folded

@@ -13,7 +13,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import queue
 import signal
 import subprocess
 import sys
@@ -59,7 +58,8 @@ class GatewayProcess:
             cmd, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
         )
         self.log: list[str] = []
-        self._lines: queue.Queue[str] = queue.Queue()
+        self._lines: asyncio.Queue[str] = asyncio.Queue()
+        self._loop = asyncio.get_running_loop()
         self._reader = threading.Thread(target=self._read, name="gateway-log", daemon=True)
         self._reader.start()
 
@@ -67,18 +67,18 @@ class GatewayProcess:
         assert self.proc.stderr is not None
         for line in self.proc.stderr:
             self.log.append(line)
-            self._lines.put(line)
-        self._lines.put("")
+            self._hand_over(line)
+        self._hand_over("")
+
+    def _hand_over(self, line: str) -> None:
+        with contextlib.suppress(RuntimeError):  # the test's loop has closed
+            self._loop.call_soon_threadsafe(self._lines.put_nowait, line)
 
     async def line(self, text: str, within: float = START_TIMEOUT) -> str:
-        """The next log line holding ``text`` (polled: the log is read by a thread)."""
+        """The next log line holding ``text`` (handed over by the thread reading the log)."""
         async with asyncio.timeout(within):
             while True:
-                try:
-                    line = self._lines.get_nowait()
-                except queue.Empty:
-                    await asyncio.sleep(0.02)
-                    continue
+                line = await self._lines.get()
                 if not line:
                     raise AssertionError(f"the gateway exited before {text!r}:\n{self.text()}")
                 if text in line:
