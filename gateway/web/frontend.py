@@ -47,7 +47,7 @@ from prometheus_client import CONTENT_TYPE_LATEST
 
 from gateway import jsontext
 from gateway.access.audit import Result
-from gateway.access.roles import Action, Identity
+from gateway.access.roles import Action, Identity, may
 from gateway.adapter import EventKind
 from gateway.errors import CommandRejected, HistoryError, StartupError, UnknownDrive
 from gateway.frontend import FrontEndCounters, RuntimeView
@@ -419,7 +419,11 @@ class WebFrontEnd:
     async def _static(self, request: web.Request) -> web.Response:
         body, content_type = self.static[request.path]
         if request.path == "/":  # the drives as they are now, shown before the script runs
-            body = render_page(body.decode("utf-8"), self.runtime).encode("utf-8")
+            # ... to a reader who may see them: with web.anonymous = "none" a visitor without
+            # a session gets the page's frame only (it asks for the login)
+            shown = may(self.auth.reader(request), Action.READ)
+            page = render_page(body.decode("utf-8"), self.runtime, drives=shown)
+            body = page.encode("utf-8")
         return web.Response(body=body, content_type=content_type, charset="utf-8")
 
     async def _no_icon(self, request: web.Request) -> web.Response:

@@ -159,10 +159,13 @@ def row_html(d: Mapping[str, Any], now: float) -> str:
     return f"<tr{tr}{_attr('data-status', d['status'])}>{''.join(tds)}</tr>"
 
 
-def render(template: str, runtime: RuntimeView, now: float | None = None) -> str:
-    """index.html with the drives as they are now."""
+def render(
+    template: str, runtime: RuntimeView, now: float | None = None, drives: bool = True
+) -> str:
+    """index.html with the drives as they are now (``drives`` False: none, for a visitor
+    who may not read them)."""
     now = time.time() if now is None else now
-    states = runtime.hub.states()
+    states = runtime.hub.states() if drives else []
     rows = "".join(row_html(drive_row(runtime, s), now) for s in states)
     head = "".join(f"<th{_attr('data-col', key)}>{html.escape(t)}</th>" for key, t in COLUMNS)
     name = html.escape(runtime.config.gateway.name, quote=False)

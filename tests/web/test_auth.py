@@ -390,3 +390,18 @@ async def test_a_key_that_does_not_load_stops_the_start(tmp_path: Path) -> None:
     with pytest.raises(StartupError, match=r"cannot load web\.tls_cert"):
         async with gateway(tls_cert=cert, tls_key=bad):
             pass
+
+
+async def test_with_anonymous_none_the_first_html_shows_no_drive_before_the_login() -> None:
+    """The page's first HTML carries the drive table (the script is not needed to see it):
+    to a visitor who may not read, it carries none; after the login, the drives."""
+    async with small_gateway(web_section(anonymous=False), users=USERS) as gw:
+        async with gw.http.get(gw.url) as r:
+            assert r.status == 200
+            before = await r.text()
+        assert 'data-drive="d1"' not in before and 'id="drives-body"' in before
+        status, _ = await login(gw, "ana")
+        assert status == 200
+        async with gw.http.get(gw.url) as r:
+            after = await r.text()
+        assert 'data-drive="d1"' in after
