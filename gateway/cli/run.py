@@ -12,10 +12,12 @@ from gateway.cli.check import load_or_report, print_config_errors
 from gateway.config import DEFAULT_CONFIG
 from gateway.errors import ConfigError
 
-LIBRARY_LOGGERS = ("canopen", "can")
+LIBRARY_LOGGERS = ("canopen", "can", "asyncua")
 """The libraries whose own loggers are held at ``gateway.library_log_level`` (WARNING by
 default): the canopen library logs every PDO map, SDO and NMT change at INFO (98 % of a
-demo's log), python-can its interface set-up; the gateway says what matters itself."""
+demo's log), python-can its interface set-up, asyncua every node of the standard address
+space it could not place (about 1,100 lines at each start of the OPC UA server); the
+gateway says what matters itself."""
 
 
 def setup_logging(level: str, library_level: str = "WARNING") -> None:
