@@ -1,4 +1,4 @@
-"""CPU per steady DeviceNet poll: the gateway's whole line against a bare python-can loop.
+"""CPU per steady DeviceNet poll: the gateway's line against a bare request and response loop.
 
 The gateway's side is its DeviceNet line as the daemon runs it: the adapter with its
 CFW-08 profiles on a :class:`~gateway.runtime.linethread.LineThread` (a thread and event
@@ -38,7 +38,7 @@ from typing import Any, Final
 
 from bench.common import Figure, add_counts, add_number, arg_parser, id_range, print_figures
 
-NODES: Final = (8,)
+NODES: Final = (8, 63)
 BITRATE: Final = 500_000
 WINDOW: Final = 8  # the scanner's poll window (ScannerConfig.poll_window)
 ROUNDS: Final = 3

@@ -42,6 +42,7 @@ from adapters.devicenet.scanner.context import LineContext, ms
 from adapters.devicenet.scanner.events import (
     Action,
     Event,
+    InputData,
     IoKind,
     LineFault,
     LineOnline,
@@ -50,7 +51,7 @@ from adapters.devicenet.scanner.events import (
     ScannerConfig,
 )
 from adapters.devicenet.scanner.jobs import ExplicitJobs
-from adapters.devicenet.scanner.machine import NodeMachine
+from adapters.devicenet.scanner.machine import INPUTS_REFRESH, NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
 from adapters.devicenet.scanner.ownmac import OwnMacDefence
 from adapters.devicenet.scanner.scheduler import Scheduler
@@ -283,14 +284,15 @@ class Scanner:
     def _steady_reply(self, node: Node, now: float, frame: CanFrame) -> bool:
         """A quiet node's poll response equal to its last inputs reported, taken by its bytes
         (docs/decisions/0097): what the full step does for it (the figures, the poll
-        answered, the node's deadlines, the next polls), without dispatching the frame,
-        delivering the inputs or ticking the node, whose tick does nothing then. False,
-        nothing done: the full step takes it (the inputs changed or are due, a second
-        answer to one poll, a node with more under way than its polls, a keep-alive due)."""
+        answered, the inputs reported when their refresh is due, the node's deadlines, the
+        next polls), without matching and dispatching the frame or ticking the node, whose
+        tick does nothing then. False, nothing done: the full step takes it (the inputs
+        changed, a second answer to one poll, a node with more under way than its polls,
+        a keep-alive due)."""
         ctx, config = self._ctx, self.config
+        data = frame.data
         if (
-            frame.data != node.last_inputs
-            or now >= node.inputs_due
+            data != node.last_inputs
             or not node.poll_open
             or self.phase is not LinePhase.ONLINE
             or ctx.leaving
@@ -315,6 +317,9 @@ class Scanner:
         if sent is not None:
             figures.rtt(now - sent)
         node.poll_open = False
+        if now >= node.inputs_due:  # the refresh of the unchanged inputs
+            node.last_inputs, node.inputs_due = data, now + INPUTS_REFRESH
+            ctx.out.append(InputData(node.mac, data))
         inactive = now + INACTIVITY_EPR_FACTOR * node.epr
         keep_alive = node.last_explicit + config.explicit_epr / 2
         ctx.fold((min(inactive, ctx.gated(keep_alive)),))

@@ -18,6 +18,7 @@ import pytest
 from adapters.devicenet import adapter as adapter_module
 from adapters.devicenet.adapter import DeviceNetAdapter
 from adapters.devicenet.scanner import InputData, machine
+from adapters.devicenet.scanner import engine as scanner_engine
 from adapters.devicenet.sim import SimRunner
 from gateway.config import parse
 from gateway.hub import Hub
@@ -134,6 +135,7 @@ async def test_a_run_and_a_stop_reach_a_quiet_node_within_its_next_polls(
     to the node within a few polls: the refreshes are seconds apart here."""
     monkeypatch.setattr(adapter_module, "INPUTS_REFRESH", REFRESH)
     monkeypatch.setattr(machine, "INPUTS_REFRESH", REFRESH)
+    monkeypatch.setattr(scanner_engine, "INPUTS_REFRESH", REFRESH)
     async with line() as (hub, adapter, runner), asyncio.timeout(scaled(LIMIT) + 8 * REFRESH):
         engine = adapter.engine
         assert engine is not None
