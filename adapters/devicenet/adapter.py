@@ -595,6 +595,7 @@ class DeviceNetAdapter(
         d.configured, d.problem = True, None
         self._disarm(d)  # the first output after (re)configuration is a stop, built fresh
         d.input_key = d.output_key = None
+        self._want(d)  # its first outputs at the next pass, its next input handled
         hub.event(d.id, EventKind.CONFIG, d.profile.configured_text())
         d.status = asyncio.get_running_loop().create_task(
             self._watch_status(d), name=f"devicenet-status-{d.id}"
