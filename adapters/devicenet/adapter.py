@@ -57,6 +57,7 @@ from adapters.link.candriver import CanDriver
 from adapters.link.canline import leave_line
 from gateway.adapter import (
     EventKind,
+    HubPort,
     ParamInfo,
     ParamTable,
     ParamValue,
@@ -85,6 +86,9 @@ IDLE = "idle"
 # cycles: a forger answering each poll keeps it doubtful); a reconnect does not clear it.
 DOUBT_CLEAN_INPUTS = 50
 CONFLICT_EVENT_INTERVAL = 10.0  # s: at most one conflict event per drive this often
+# A quiet drive's outputs are refreshed from the hub at least this often besides its
+# command changes (docs/decisions/0097); the scanner reports its unchanged inputs as often.
+INPUTS_REFRESH = 0.1  # s
 
 REPORT_EVENTS: dict[ReportKind, EventKind] = {
     ReportKind.ALLOCATION: EventKind.COMM,
@@ -202,7 +206,8 @@ class DeviceNetAdapter(
         return _Drive(cfg, opts, load_profile(cfg.device)(cfg.id, opts))
 
     def setup(self) -> None:
-        self._next_refresh = 0.0
+        self._next_refresh = self._next_full = 0.0
+        self._loud = True  # a drive online is not quiet (the last refresh found one)
         self._refreshed_cycle = -1  # the poll cycles counted at the last refresh
         self.adr = AdrWatch(
             self.name,
@@ -263,8 +268,17 @@ class DeviceNetAdapter(
 
     # ------------------------------------------------------------ run
 
+    async def run(self, hub: HubPort) -> None:
+        """The line's run (:meth:`CanAdapter.run`), told of every new desired command
+        (docs/decisions/0097)."""
+        off = hub.on_command(self._on_command)
+        try:
+            await super().run(hub)
+        finally:
+            off()
+
     def make_engine(self) -> Scanner:
-        self._next_refresh = 0.0
+        self._next_refresh = self._next_full = 0.0
         self._refreshed_cycle = -1
         return Scanner(self.scanner_config(), self.node_configs())
 
@@ -280,10 +294,15 @@ class DeviceNetAdapter(
         """Desired commands reach the outputs once per poll: every ``poll_interval``, and
         no more than once per poll cycle (a cycle longer than the interval polls each node
         once; refreshing the outputs meanwhile would cost a pass over every drive, every
-        interval, for nothing)."""
+        interval, for nothing). A quiet drive (docs/decisions/0097) is refreshed when its
+        command changes (:meth:`_on_command`) and in a full pass every
+        :data:`INPUTS_REFRESH` s; with every drive quiet, nothing is refreshed between."""
         if now >= self._next_refresh and self._refresh_due():
             self._refresh_outputs(now)
-            self._next_refresh = now + self.options.poll_interval
+            if self._loud:
+                self._next_refresh = now + self.options.poll_interval
+            else:
+                self._next_refresh = min(now + INPUTS_REFRESH, self._next_full)
             if self.engine is not None:
                 self._refreshed_cycle = self.engine.line.cycles
 
@@ -301,8 +320,9 @@ class DeviceNetAdapter(
         # mid-cycle the refresh waits for the cycle's end: an event (its last poll reply,
         # or the scanner's own poll timeout), which steps the driver anyway
         refresh = self._next_refresh if self._refresh_due() else None
-        times = [t for t in (refresh, adr) if t is not None]
-        return min(times) if times else None
+        if adr is None:
+            return refresh
+        return adr if refresh is None or adr < refresh else refresh
 
     def after_step(self, now: float) -> None:
         engine = self.engine
@@ -391,17 +411,56 @@ class DeviceNetAdapter(
         hub = self._hub_port()
         desired = hub.desired(d.id)
         key = (action.data, desired, d.doubtful)
-        if key == d.input_key:
-            return  # the same reading for the same command: nothing new to publish
-        d.input_key = key
-        try:
-            changes = d.profile.inputs(action.data, desired)
-        except DeviceNetDecodeError:
-            d.bad_inputs += 1
+        if key != d.input_key:  # else the same reading for the same command: nothing new
+            d.input_key = key
+            try:
+                changes = d.profile.inputs(action.data, desired)
+            except DeviceNetDecodeError:
+                d.bad_inputs += 1
+                return
+            changes["values"] = d.values  # the I/O words with the parameters read
+            changes["doubtful"] = d.doubtful
+            hub.update(d.id, comm=CommState.ONLINE, **changes)
+            engine = self.engine  # what the readings change of the command (rule 1), now
+            if engine is not None and engine.nodes[d.mac].phase is Phase.ONLINE:
+                self._refresh_drive(engine, hub, d, now)
+        self._quiet(d, now)
+
+    # ------------------------------------------------------------ the steady case (0097)
+
+    def _quiet(self, d: _Drive, now: float) -> None:
+        """Tell the scanner whether the drive's unchanged inputs tell the adapter nothing:
+        configured, readings not doubtful (every input counts then), no fault reset pulse
+        running, its outputs computed from the command in force (docs/decisions/0097)."""
+        engine = self.engine
+        if engine is not None:
+            quiet = (
+                d.configured
+                and not d.doubtful
+                and now >= d.reset_until
+                and d.output_key is not None
+                and d.output_key != IDLE
+            )
+            engine.quiet_inputs(d.mac, quiet)
+
+    def _want(self, d: _Drive) -> None:
+        """Something besides the inputs changed for the drive: its next input is handled,
+        and the next refresh looks at it."""
+        engine = self.engine
+        if engine is not None:
+            engine.quiet_inputs(d.mac, False)
+        self._next_refresh = 0.0
+
+    def _on_command(self, drive_id: str) -> None:
+        """The hub's desired command changed: the drive's outputs now (a stop goes with
+        its next poll), and its next input handled."""
+        d = self._by_id.get(drive_id)
+        engine, hub = self.engine, self._hub
+        if d is None or engine is None or hub is None:
             return
-        changes["values"] = d.values  # the I/O words with the parameters read
-        changes["doubtful"] = d.doubtful
-        hub.update(d.id, comm=CommState.ONLINE, **changes)
+        self._want(d)
+        if engine.nodes[d.mac].phase is Phase.ONLINE:
+            self._refresh_drive(engine, hub, d, self.clock())
 
     def _count_clean(self, d: _Drive) -> None:
         d.clean_inputs += 1
@@ -417,6 +476,7 @@ class DeviceNetAdapter(
         d = self.drives[action.mac]
         d.clean_inputs = 0
         d.conflicts_unsaid += 1
+        self._want(d)
         hub = self._hub_port()
         if not d.doubtful:
             d.doubtful = True
@@ -446,35 +506,54 @@ class DeviceNetAdapter(
     # ------------------------------------------------------------ outputs
 
     def _refresh_outputs(self, now: float) -> None:
+        """The outputs of the online drives not quiet, and every :data:`INPUTS_REFRESH` s
+        of all of them (docs/decisions/0097); ``_loud``: whether any drive online is not
+        quiet (the next refresh is then a poll interval away)."""
         engine, hub = self.engine, self._hub
+        self._loud = True
         if engine is None or hub is None:
             return
+        everyone = now >= self._next_full
+        if everyone:
+            self._next_full = now + INPUTS_REFRESH
+        loud = False
         for d in self.drives.values():
-            if engine.nodes[d.mac].phase is not Phase.ONLINE:
+            node = engine.nodes[d.mac]
+            if node.phase is not Phase.ONLINE:
                 continue
-            if not d.configured or not d.profile.ready:
-                if d.output_key != IDLE:
-                    engine.set_output(d.mac, None)  # idle: the master is not driving it
-                    d.output_key = IDLE
+            if node.quiet and not everyone:
                 continue
-            desired = hub.desired(d.id)
-            if desired.fault_reset_seq != d.reset_seen:
-                d.reset_seen = desired.fault_reset_seq
-                d.reset_until = now + self._reset_pulse()
-                d.reset_sent_at = now
-                note = d.profile.reset_note
-                hub.event(
-                    d.id,
-                    EventKind.FAULT,
-                    "fault reset sent" if note is None else f"fault reset sent ({note})",
-                )
-            if d.output_key is not None:  # the first output after (re)configuration: a stop
-                d.armed = d.armed or desired is not d.held or not (desired.run or desired.jog)
-            command = desired if d.armed else motion_free(desired)
-            key = (command, now < d.reset_until)
-            if key != d.output_key:
-                d.output_key = key
-                engine.set_output(d.mac, d.profile.outputs(command, key[1]))
+            loud = loud or not node.quiet
+            self._refresh_drive(engine, hub, d, now)
+        self._loud = loud
+
+    def _refresh_drive(self, engine: Scanner, hub: HubPort, d: _Drive, now: float) -> None:
+        """One online drive's outputs from the hub's desired command (rule 1: a run only
+        once armed; the reset bit for its pulse)."""
+        if not d.configured or not d.profile.ready:
+            if d.output_key != IDLE:
+                engine.set_output(d.mac, None)  # idle: the master is not driving it
+                d.output_key = IDLE
+            return
+        desired = hub.desired(d.id)
+        if desired.fault_reset_seq != d.reset_seen:
+            d.reset_seen = desired.fault_reset_seq
+            d.reset_until = now + self._reset_pulse()
+            d.reset_sent_at = now
+            note = d.profile.reset_note
+            hub.event(
+                d.id,
+                EventKind.FAULT,
+                "fault reset sent" if note is None else f"fault reset sent ({note})",
+            )
+        if d.output_key is not None:  # the first output after (re)configuration: a stop
+            d.armed = d.armed or desired is not d.held or not (desired.run or desired.jog)
+        command = desired if d.armed else motion_free(desired)
+        key = (command, now < d.reset_until)
+        if key != d.output_key:
+            d.output_key = key
+            engine.set_output(d.mac, d.profile.outputs(command, key[1]))
+            engine.quiet_inputs(d.mac, False)  # the readings of the new command: next input
 
     def _disarm(self, d: _Drive) -> None:
         """No run or jog reaches the drive until a command given from now on (rule 1)."""
@@ -516,6 +595,7 @@ class DeviceNetAdapter(
         d.configured, d.problem = True, None
         self._disarm(d)  # the first output after (re)configuration is a stop, built fresh
         d.input_key = d.output_key = None
+        self._want(d)  # its first outputs at the next pass, its next input handled
         hub.event(d.id, EventKind.CONFIG, d.profile.configured_text())
         d.status = asyncio.get_running_loop().create_task(
             self._watch_status(d), name=f"devicenet-status-{d.id}"
@@ -527,6 +607,8 @@ class DeviceNetAdapter(
             await asyncio.sleep(self.options.status_interval)
             with contextlib.suppress(GatewayTimeout, DriveOffline, ParameterError):
                 await d.profile.poll_status(port)
+            d.input_key = None  # the readings of the parameters read: mapped again
+            self._want(d)
 
     # ------------------------------------------------------------ parameters
 

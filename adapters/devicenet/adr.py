@@ -72,6 +72,8 @@ class AdrWatch:
         self.next_look = 0.0
         """When the next look may start."""
         self._missing_since: dict[int, float] = {}
+        # the drives with ``adr = true`` (none while a configured drive holds MAC 63)
+        self._adr = [] if ADR_MAC in drives else [d for d in drives.values() if d.opts.adr]
 
     def deadline(self) -> float | None:
         return self.probe.next_deadline() if self.probe is not None else None
@@ -83,6 +85,8 @@ class AdrWatch:
     def tick(self, now: float, engine: Scanner) -> None:
         """Each driver pass: which ``adr`` drives are missing since when; a look at MAC 63
         started when one is missing long enough, or the one under way stepped."""
+        if not self._adr:
+            return  # every pass of a line without adr drives
         for d in self._replaceable(engine):
             if engine.nodes[d.mac].phase is Phase.ONLINE:
                 self._missing_since.pop(d.mac, None)
@@ -100,9 +104,7 @@ class AdrWatch:
 
     def _replaceable(self, engine: Scanner) -> list[AdrDrive]:
         """Drives with ``adr = true`` (none while a configured drive holds MAC 63)."""
-        if ADR_MAC in self.drives or not engine.online:
-            return []
-        return [d for d in self.drives.values() if d.opts.adr]
+        return self._adr if engine.online else []
 
     def _missing(self, now: float) -> list[AdrDrive]:
         """``adr`` drives missing long enough to be replaced (not merely slow to start)."""

@@ -86,10 +86,13 @@ class Outputs:
 
     def __init__(self) -> None:
         self.sent: list[str] = []
-        self.nodes = {MAC: SimpleNamespace(phase=Phase.ONLINE)}
+        self.nodes = {MAC: SimpleNamespace(phase=Phase.ONLINE, quiet=False)}
 
     def set_output(self, mac: int, data: bytes | None) -> None:
         self.sent.append("idle" if data is None else data.hex(" "))
+
+    def quiet_inputs(self, mac: int, quiet: bool) -> None:
+        self.nodes[mac].quiet = quiet
 
 
 def wired(hub: FakeHub) -> tuple[DeviceNetAdapter, Outputs]:

@@ -181,6 +181,7 @@ class Cfw08Model(RuleBasedStateMachine):
         self.line = CutLine(adapter.scanner_config(), adapter.node_configs(), [sim])
         adapter.engine = self.line.scanner
         adapter._hub = self.hub
+        self.hub.on_command(adapter._on_command)  # as adapter.run registers it
         adapter._request = self._request  # type: ignore[method-assign]
         adapter.publish_capabilities(adapter.drives[MAC])
         self.hub.update("d", comm=CommState.OFFLINE)

@@ -98,6 +98,21 @@ class LineContext:
         for payload in fragment_io(data):
             self.send(node, PredefinedMessage.MASTER_POLL_COMMAND, payload)
 
+    def send_poll(self, node: Node) -> None:
+        """The node's poll (its output), as :meth:`send_io` sends it; an output of one frame
+        is encoded once and its :class:`Send` kept on the node until the output changes
+        (the steady poll costs no encoding: docs/decisions/0097)."""
+        data = node.output
+        poll = node.poll
+        if poll is None or poll.frame.data is not data:
+            if len(data) > UNFRAGMENTED_MAX:
+                self.send_io(node, data)
+                return
+            poll = node.poll = Send(_frame(PredefinedMessage.MASTER_POLL_COMMAND, node.mac, data))
+        node.figures.frames_tx += 1
+        self.figures.frames_tx += 1
+        self.out.append(poll)
+
     def emit(self, frame: CanFrame) -> None:
         self.figures.frames_tx += 1
         self.out.append(Send(frame))

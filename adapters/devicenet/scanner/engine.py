@@ -33,13 +33,16 @@ from adapters.can.events import BadFrame, BusErrorIn, FrameIn, LinkDown, NodeUna
 from adapters.can.health import LineHealth, health_after
 from adapters.devicenet.codec.dupmac import DUPMAC_LENGTH, DupMacCheck, DupMacKind, is_request
 from adapters.devicenet.codec.explicit import Request
+from adapters.devicenet.codec.fragment import UNFRAGMENTED_MAX
 from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.codec.ids import PredefinedId, PredefinedMessage, match_predefined
+from adapters.devicenet.codec.objects import INACTIVITY_EPR_FACTOR
 from adapters.devicenet.errors import DeviceNetDecodeError, InvalidCanId
 from adapters.devicenet.scanner.context import LineContext, ms
 from adapters.devicenet.scanner.events import (
     Action,
     Event,
+    InputData,
     IoKind,
     LineFault,
     LineOnline,
@@ -48,7 +51,7 @@ from adapters.devicenet.scanner.events import (
     ScannerConfig,
 )
 from adapters.devicenet.scanner.jobs import ExplicitJobs
-from adapters.devicenet.scanner.machine import NodeMachine
+from adapters.devicenet.scanner.machine import INPUTS_REFRESH, NodeMachine
 from adapters.devicenet.scanner.node import Node, Phase
 from adapters.devicenet.scanner.ownmac import OwnMacDefence
 from adapters.devicenet.scanner.scheduler import Scheduler
@@ -97,6 +100,13 @@ class Scanner:
         # for hold_until: fixed by the scan list, and every node's explicit queue
         self._all_polled = all(n.cfg.io is IoKind.POLLED for n in self.nodes.values())
         self._queues = [n.queue for n in self.nodes.values()]
+        # the steady lane (docs/decisions/0097): a polled node's poll response by its identifier
+        self.lane = True  # False: every frame through the full step (tests compare)
+        self._poll_replies = {
+            PredefinedId(PredefinedMessage.SLAVE_POLL_RESPONSE, n.mac).arbitration_id: n
+            for n in self.nodes.values()
+            if n.cfg.io is IoKind.POLLED and n.cfg.produced_size <= UNFRAGMENTED_MAX
+        }
         self._frame_handlers: dict[PredefinedMessage, Callable[[Node, float, bytes], None]] = {
             PredefinedMessage.SLAVE_POLL_RESPONSE: self.machine.on_poll_response,
             PredefinedMessage.SLAVE_COS_CYCLIC: self.machine.on_production,
@@ -112,6 +122,10 @@ class Scanner:
         window); every timer runs on ``step(now)``, due at :meth:`next_deadline`.
         """
         ctx, schedule = self._ctx, self.schedule
+        if type(event) is FrameIn and self.lane:
+            node = self._poll_replies.get(event.frame.arbitration_id)
+            if node is not None and node.quiet and self._steady_reply(node, now, event.frame):
+                return ctx.take()
         if event is None:
             if self._own_mac.due_at is not None:
                 self._own_mac_due(now)
@@ -162,6 +176,15 @@ class Scanner:
         ):
             return None
         return schedule.hold_until(now)
+
+    def quiet_inputs(self, mac: int, quiet: bool) -> None:
+        """Whether the caller is quiet about a node: its outputs and readings depend on
+        nothing but its inputs and what it is told otherwise, so an unchanged input need
+        not be reported but every :data:`~adapters.devicenet.scanner.machine.INPUTS_REFRESH`
+        s (docs/decisions/0097). Only an online node is quiet; any change of its phase
+        ends it."""
+        node = self.nodes[mac]
+        node.quiet = quiet and node.phase is Phase.ONLINE
 
     def set_output(self, mac: int, data: bytes | None) -> None:
         """The output data for a node's next production; None = idle (zero-length)."""
@@ -255,6 +278,54 @@ class Scanner:
 
     def average_cycle(self) -> float | None:
         return self.line.cycle_sum / self.line.cycles if self.line.cycles else None
+
+    # ------------------------------------------------------------ the steady lane
+
+    def _steady_reply(self, node: Node, now: float, frame: CanFrame) -> bool:
+        """A quiet node's poll response equal to its last inputs reported, taken by its bytes
+        (docs/decisions/0097): what the full step does for it (the figures, the poll
+        answered, the inputs reported when their refresh is due, the node's deadlines, the
+        next polls), without matching and dispatching the frame or ticking the node, whose
+        tick does nothing then. False, nothing done: the full step takes it (the inputs
+        changed, a second answer to one poll, a node with more under way than its polls,
+        a keep-alive due)."""
+        ctx, config = self._ctx, self.config
+        data = frame.data
+        if (
+            data != node.last_inputs
+            or not node.poll_open
+            or self.phase is not LinePhase.ONLINE
+            or ctx.leaving
+            or node.unconnected is not None
+            or node.current is not None
+            or node.queue
+            or node.reassembler.deadline is not None
+            or node.epr <= 0.0
+            or now >= node.last_explicit + config.explicit_epr / 2
+        ):
+            return False
+        schedule = self.schedule
+        ctx.touched = node
+        schedule.bringing = schedule.in_bringup
+        ctx.tx_backoff = config.tx_backoff_min
+        self._no_ack_reported = self._link_down_reported = False
+        self.line.frames_rx += 1
+        figures = node.figures
+        figures.frames_rx += 1
+        node.last_rx = now
+        sent = schedule.in_flight.pop(node.mac, None)
+        if sent is not None:
+            figures.rtt(now - sent)
+        node.poll_open = False
+        if now >= node.inputs_due:  # the refresh of the unchanged inputs
+            node.last_inputs, node.inputs_due = data, now + INPUTS_REFRESH
+            ctx.out.append(InputData(node.mac, data))
+        inactive = now + INACTIVITY_EPR_FACTOR * node.epr
+        keep_alive = node.last_explicit + config.explicit_epr / 2
+        ctx.fold((min(inactive, ctx.gated(keep_alive)),))
+        self._timers.track_steady(node, inactive if inactive < keep_alive else keep_alive)
+        schedule.after_frame(now)
+        return True
 
     # ------------------------------------------------------------ deadlines
 

@@ -83,6 +83,7 @@ class _Step:
 _CLAIM_PHASES = (Phase.WAITING, Phase.REFUSED, Phase.ALLOCATING, Phase.CONFIGURING)
 CLAIM_MARGIN = 0.1  # of a check period, after the node's check is expected to end
 EXPLICIT_LOST_AFTER = 2  # explicit requests in a row unanswered: allocate explicit again
+INPUTS_REFRESH = 0.1  # s: unchanged inputs of a quiet node reported at least this often
 
 
 class NodeMachine:
@@ -554,7 +555,7 @@ class NodeMachine:
             self.ctx.out.append(IoConflict(node.mac, message, node.figures.io_conflicts))
             return
         node.poll_open = False  # (a late answer to a timed out poll is still its answer)
-        self._deliver(node, message)
+        self._deliver(node, now, message)
 
     def on_production(self, node: Node, now: float, data: bytes) -> None:
         if node.cfg.io is IoKind.POLLED:
@@ -565,7 +566,7 @@ class NodeMachine:
             return
         if node.cfg.ack and node.phase is Phase.ONLINE:
             self.ctx.send(node, PredefinedMessage.MASTER_COS_CYCLIC_ACK, b"")
-        self._deliver(node, message)
+        self._deliver(node, now, message)
 
     def _io_message(self, node: Node, now: float, data: bytes) -> bytes | None:
         """A whole I/O message: the frame itself, or the last of its fragments when the
@@ -580,12 +581,20 @@ class NodeMachine:
             node.figures.bad_frames += 1
             return None
 
-    def _deliver(self, node: Node, data: bytes) -> None:
+    def _deliver(self, node: Node, now: float, data: bytes) -> None:
+        """A node's whole input message, as :class:`InputData` when it changed, when the
+        adapter has not said it is quiet, and at least every :data:`INPUTS_REFRESH` s (a
+        quiet adapter's outputs and readings depend on nothing but the inputs and what it
+        is told otherwise: docs/decisions/0097)."""
         if node.phase is not Phase.ONLINE:
             return
         if len(data) != node.cfg.produced_size:
             node.figures.bad_frames += 1
             return
+        if node.quiet and data == node.last_inputs and now < node.inputs_due:
+            return
+        node.last_inputs = data
+        node.inputs_due = now + INPUTS_REFRESH
         self.ctx.out.append(InputData(node.mac, data))
 
     def _tick_production(self, node: Node, now: float) -> None:

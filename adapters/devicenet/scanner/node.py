@@ -8,8 +8,10 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
+from adapters.can.events import Send
 from adapters.devicenet.codec.explicit import ExplicitMessage, Request, Response
 from adapters.devicenet.codec.fragment import ExplicitReassembler, ExplicitSender, IoReassembler
+from adapters.devicenet.codec.frame import CanFrame
 from adapters.devicenet.scanner.events import NodeConfig
 
 
@@ -158,6 +160,12 @@ class Node:
     ack_retried: bool = False
     poll_open: bool = False  # a poll went out and its response has not come yet
     last_rx: float = 0.0
+    # the steady case (docs/decisions/0097): quiet, the adapter said that unchanged inputs
+    # tell it nothing; the inputs last reported and until when unchanged ones need not be
+    quiet: bool = False
+    last_inputs: bytes | None = None
+    inputs_due: float = 0.0
+    poll: Send[CanFrame] | None = None  # the poll of ``output``, built once per output
     figures: NodeFigures = field(default_factory=NodeFigures)
 
     @property

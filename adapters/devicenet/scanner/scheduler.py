@@ -45,6 +45,8 @@ class Scheduler:
         of nodes in bring-up is kept (not counted over the line for every frame)."""
         self.in_bringup += (phase in _BRINGUP_PHASES) - (node.phase in _BRINGUP_PHASES)
         self.online += (phase is Phase.ONLINE) - (node.phase is Phase.ONLINE)
+        if phase is not node.phase:  # a new phase: every input reported until told again
+            node.quiet, node.last_inputs = False, None
         node.phase = phase
 
     def bringups(self) -> int:
@@ -102,7 +104,7 @@ class Scheduler:
         while self.poll_queue and len(self.in_flight) < ctx.config.poll_window and ctx.tx_ok(now):
             node = ctx.nodes[self.poll_queue.popleft()]
             if node.phase is Phase.ONLINE:
-                ctx.send_io(node, node.output)
+                ctx.send_poll(node)
                 node.poll_open = True
                 self.in_flight.pop(node.mac, None)  # (never there: kept in send order)
                 self.in_flight[node.mac] = now

@@ -79,6 +79,15 @@ class SteadyTimers:
             self._entry.pop(mac, None)  # its heap entry is stale from now on
             self.unsteady.add(mac)
 
+    def track_steady(self, node: Node, idle: float) -> None:
+        """:meth:`track` for a node known steady, with its idle time (the steady lane)."""
+        mac = node.mac
+        self.unsteady.discard(mac)
+        old = self._entry.get(mac)
+        if old is None or idle < old:
+            self._entry[mac] = idle
+            self._push(idle, mac)
+
     def due(self, now: float) -> list[Node]:
         """The nodes a timer step at ``now`` ticks, in the full pass's order: every node
         not steady, and the steady ones whose idle time has come (taken off the heap; the
