@@ -69,6 +69,12 @@ def asks_less_motion(cmd: DriveCommand) -> bool:
     return any(getattr(cmd, n) is v for n, v in STOP_FIELDS.items())
 
 
+def stops_a_run(cmd: DriveCommand) -> bool:
+    """A stop of a run: run false, a quick or coast stop. A jog stop alone (``jog`` false,
+    ``run`` not given) ends a jog, not a run the same client gave (asserted below)."""
+    return cmd.run is False or bool(cmd.quick_stop) or bool(cmd.coast_stop)
+
+
 class Clock:
     def __init__(self) -> None:
         self.t = 0.0
@@ -164,7 +170,7 @@ class HubModel(RuleBasedStateMachine):
         after = self.hub.desired("d")
         took_control = before.controller != who and before.source is not Source.NONE
         latched = (before.quick_stop, before.coast_stop) != (after.quick_stop, after.coast_stop)
-        if took_control or latched or cmd.fault_reset or asks_less_motion(cmd):
+        if took_control or latched or cmd.fault_reset or stops_a_run(cmd):
             self._stop_condition()
         if accepted and (cmd.run or cmd.jog):
             self.run_given = (who, self.epoch)
@@ -206,3 +212,16 @@ HubModel.TestCase.settings = settings(
     suppress_health_check=[HealthCheck.too_slow],
 )
 TestHubModel = HubModel.TestCase
+
+
+def test_a_jog_stop_ends_a_jog_and_leaves_the_clients_run() -> None:
+    """The model's own case: a run, then a jog stop from the same client: the run stays
+    (it was given in this epoch) and no jog is left."""
+    model = HubModel()
+    who = CLIENTS[0]
+    model.command(who, DriveCommand(run=True, speed_rpm=100.0))
+    model.command(who, DriveCommand(jog=False))
+    desired = model.hub.desired("d")
+    assert desired.run and not desired.jog
+    model.i1_run_only_on_a_current_run_command()
+    model.teardown()
