@@ -19,7 +19,8 @@ gateway then bare; each side's figure is the median of its rounds.
 
 Figures: CPU per SYNC cycle of the line's thread, and per node; of the whole process (line,
 hub, hand-over); against the bare loop's CPU per cycle (issue 34: a steady exchange costs
-next to nothing). ``--profile`` prints where the line's thread spends its CPU
+next to nothing). ``--general`` measures the line without its steady fast path
+(``CanOpenAdapter.fast_path`` off: every TPDO1 handled, every command read each cycle). ``--profile`` prints where the line's thread spends its CPU
 (``cProfile`` with ``time.thread_time`` in that thread) in the last gateway round.
 """
 
@@ -48,6 +49,12 @@ ONLINE_BOUND: Final = 60.0  # s for every drive to come online
 NMT_START_ALL: Final = (0x000, b"\x01\x00")
 COB_SYNC: Final = 0x080
 TARGET: Final = "ratio <= 2"
+
+
+class GENERAL:
+    on = False  # --general: the line without its steady fast path
+
+
 DRAIN_AHEAD: Final = 0.0005  # s before the next cycle the bare loop takes what came
 
 
@@ -132,6 +139,8 @@ async def gateway_round(
     counting = _Counting(hub)
     bus = config.buses[0]
     adapter = load_adapter(bus.adapter)(bus)
+    if GENERAL.on:
+        adapter.fast_path = False  # type: ignore[attr-defined]
     line = LineThread(adapter, hub)
     task = asyncio.create_task(line.run())
     report = ""
@@ -322,7 +331,9 @@ def main(argv: list[str] | None = None) -> int:
     add_number(parser, "--seconds", MEASURE, "seconds measured per round and side")
     add_number(parser, "--rounds", ROUNDS, "rounds of each side")
     parser.add_argument("--profile", action="store_true", help="profile the line's thread")
+    parser.add_argument("--general", action="store_true", help="without the steady fast path")
     args = parser.parse_args(argv)
+    GENERAL.on = args.general
     print_figures(run(args.nodes, args.sync, args.rounds, args.seconds, args.profile))
     return 0
 
