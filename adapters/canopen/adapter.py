@@ -30,7 +30,7 @@ import asyncio
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from adapters.can.adapter import BusSpec, CanAdapter, Drive, handles
 from adapters.canopen.codec import cia402
@@ -71,6 +71,7 @@ from adapters.link.canline import act_quietly, leave_line
 from gateway.adapter import (
     Capabilities,
     EventKind,
+    HubPort,
     ParamInfo,
     ParamTable,
     ParamValue,
@@ -88,6 +89,9 @@ LEAVE_WAIT = 0.05  # s given to the last frames on shutdown
 LEAVE_MARGIN = 0.1  # s: beyond the SDO timeout, the bound on the release writes on leaving
 DOUBT_HOLD = 10.0  # s without a conflicting frame before a drive's readings are trusted again
 CONFLICT_EVENT_EVERY = 5.0  # s: at most one conflict event per drive this often
+# s: every drive's desired command read again at least this often, told of a change or
+# not (the line's fast path reads it when the hub says it changed: docs/decisions/0098)
+COMMAND_SWEEP = 0.1
 # 0x6007 values that stop the drive when the master is lost (CiA 402-2 §6.4.5: 1 fault,
 # 2 disable voltage, 3 quick stop; 0 no action; negative: the manufacturer's, unknown)
 FAILSAFE_OPTIONS = frozenset({1, 2, 3})
@@ -105,6 +109,7 @@ class _Drive(Drive):
     problem: str | None = None
     quick_stop_option: int | None = None
     input_key: object = None
+    stale: bool = True  # the desired command is to be read again before the next cycle
     want_from: object = None  # the desired command the engine's wish was made of
     want_made: object = None  # that wish
     doubtful: bool = False  # conflicting frames heard (reported to the hub)
@@ -143,6 +148,11 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
     spec = BusSpec(BusOptions, parse_bus, CanOpenBus, SdoDone)
     devices = devices_of("canopen")
     address_range = (1, 127)
+    fast_path: ClassVar[bool] = True
+    """The steady fast path (docs/decisions/0098): a drive's unchanged TPDO1 not handled
+    while nothing else changed, its desired command read when the hub says it changed
+    (and every :data:`COMMAND_SWEEP` s). False: every TPDO1 handled, every command read
+    before every cycle (the general path, which the fast path's frames must equal)."""
 
     @classmethod
     def parse_drive_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
@@ -165,6 +175,16 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
         o = self.options
         self.node_configs = [node_config(d.node, d.opts, o) for d in self.drives.values()]
         self._next_refresh = 0.0
+        self._sweep_at = 0.0
+
+    async def run(self, hub: HubPort) -> None:
+        """The line's run (:meth:`CanAdapter.run`), told of every new desired command."""
+        off = hub.on_command(self._on_command) if self.fast_path else None
+        try:
+            await super().run(hub)
+        finally:
+            if off is not None:
+                off()
 
     def master_config(self) -> MasterConfig:
         return master_config(self.options)
@@ -172,6 +192,9 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
     # ------------------------------------------------------------ run
 
     def make_engine(self) -> Master:
+        self._sweep_at = 0.0
+        for d in self.drives.values():
+            d.stale = True
         return Master(self.master_config(), self.node_configs)
 
     def drive_left(self, d: _Drive) -> None:
@@ -232,28 +255,66 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
     def _refresh(self, now: float) -> None:
         """The hub's desired commands into the engine's wishes, once per cycle. A drive
         not reported online is wished stopped whatever the hub holds (it goes online
-        first, which clears a run: rule 1); a new reset request is one edge."""
+        first, which clears a run: rule 1); a new reset request is one edge.
+
+        The fast path reads a drive's command only when it may have changed: the hub said
+        so (:meth:`_on_command`), the line reported a change of the drive (the port may
+        hold a run back until the hub applied it), the engine replaced the wish (the node
+        was lost), and every :data:`COMMAND_SWEEP` s."""
         engine, hub = self.engine, self._hub
         if engine is None or hub is None:
             return
+        sweep = not self.fast_path or now >= self._sweep_at
+        if sweep:
+            self._sweep_at = now + COMMAND_SWEEP
         for d in self.drives.values():
             if d.doubtful and now >= d.doubt_until:
                 self._trust(d)
             if not d.online:
                 engine.set_want(d.node, want(_STOPPED_DESIRED, d.opts))
                 d.want_from = None
+                d.stale = True
                 continue
-            desired = hub.desired(d.id)
-            # the hub's commands are frozen: the same object is the same command, and the
-            # wish made of it is still the engine's (unless the engine replaced it)
-            if desired is not d.want_from or engine.wish(d.node) is not d.want_made:
-                d.want_made = want(desired, d.opts)
-                engine.set_want(d.node, d.want_made)
-                d.want_from = desired
-            if desired.fault_reset_seq != d.reset_seen:
-                d.reset_seen = desired.fault_reset_seq
-                if engine.fault_reset(d.node, now):
-                    hub.event(d.id, EventKind.FAULT, "fault reset sent (controlword bit 7 edge)")
+            if sweep or d.stale or engine.wish(d.node) is not d.want_made:
+                d.stale = False
+                self._command(d, hub.desired(d.id), engine, now)
+
+    def _command(self, d: _Drive, desired: DesiredCommand, engine: Master, now: float) -> None:
+        """An online drive's desired command into the engine's wish; a new reset request
+        is one edge (:meth:`Master.fault_reset`, only from a cycle's refresh)."""
+        # the hub's commands are frozen: the same object is the same command, and the
+        # wish made of it is still the engine's (unless the engine replaced it)
+        if desired is not d.want_from or engine.wish(d.node) is not d.want_made:
+            d.want_made = want(desired, d.opts)
+            engine.set_want(d.node, d.want_made)
+            if desired != d.want_from:
+                engine.quiet_inputs(d.node, False)  # its readings show the command
+            d.want_from = desired
+        if desired.fault_reset_seq != d.reset_seen:
+            d.reset_seen = desired.fault_reset_seq
+            if engine.fault_reset(d.node, now):
+                self._hub_port().event(
+                    d.id, EventKind.FAULT, "fault reset sent (controlword bit 7 edge)"
+                )
+
+    def _on_command(self, drive_id: str) -> None:
+        """The hub's desired command of a drive changed (on the line's loop): the new wish
+        is the engine's at once, so the next cycle's RPDO1 carries it, and the drive's next
+        TPDO1 is handled (its readings show the command). A reset request waits for the
+        cycle's refresh (the pulse is timed from a cycle)."""
+        d = self._by_id.get(drive_id)
+        engine, hub = self.engine, self._hub
+        if d is None or engine is None or hub is None:
+            return
+        d.stale = True
+        if not d.online:
+            return
+        engine.quiet_inputs(d.node, False)
+        desired = hub.desired(d.id)
+        if desired is not d.want_from or engine.wish(d.node) is not d.want_made:
+            d.want_made = want(desired, d.opts)
+            engine.set_want(d.node, d.want_made)
+            d.want_from = desired
 
     # ------------------------------------------------------------ actions
 
@@ -357,18 +418,26 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
         ms = min(0xFFFF, math.ceil(o.heartbeat * o.heartbeat_factor))
         return f"0x1016:1 watches node {o.node_id}'s heartbeat ({ms} ms)"
 
+    def _loud(self, d: _Drive) -> None:
+        """The drive's next TPDO1 is handled whatever its bytes (something besides them
+        changed its readings)."""
+        d.input_key = None
+        engine = self.engine
+        if engine is not None:
+            engine.quiet_inputs(d.node, False)
+
     @handles(NodeUp)
     def _on_up(self, now: float, action: NodeUp) -> None:
         d = self.drives[action.node]
         d.up = True
-        d.input_key = None
+        self._loud(d)
         d.reset_seen = self._hub_port().desired(d.id).fault_reset_seq
 
     @handles(NodeDown)
     def _on_down(self, now: float, action: NodeDown) -> None:
         d = self.drives[action.node]
         d.up = d.online = False
-        d.input_key = None
+        self._loud(d)
         hub = self._hub_port()
         hub.update(d.id, comm=CommState.OFFLINE, running=False, at_reference=False)
         hub.event(d.id, EventKind.COMM, f"drive offline: {action.reason}", node=d.node)
@@ -396,8 +465,12 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
         desired = hub.desired(d.id)
         key = (action.statusword, action.values, desired, d.fault_code)
         if key == d.input_key and d.online:
+            # nothing new: its repeats need not come (the line's fast path)
+            if self.fast_path and self.engine is not None:
+                self.engine.quiet_inputs(d.node, True)
             return
         d.input_key = key
+        d.stale = True  # the port may hold a run back until the hub took the change
         changes = readings(action.statusword, action.values, desired, d.opts, d.fault_code)
         faulted = changes["status"] is DriveStatus.FAULTED
         if d.was_faulted and not faulted:
@@ -419,7 +492,7 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
             hub.event(d.id, EventKind.FAULT, "EMCY error reset (no error)", node=d.node)
             return
         d.emcy_code = d.fault_code = emcy.error_code
-        d.input_key = None
+        self._loud(d)
         register = ", ".join(error_register_texts(emcy.error_register)) or "none"
         hub.event(
             d.id,
@@ -439,7 +512,7 @@ class CanOpenAdapter(CanAdapter[CanFrame, Event, Action, Master, _Drive, BusOpti
         code = int.from_bytes(raw, "little") if raw else None
         if code:
             d.fault_code = code
-            d.input_key = None
+            self._loud(d)
         parts = []
         if code is not None:
             parts.append(f"0x603F = 0x{code:04X} {emcy_text(code)}")

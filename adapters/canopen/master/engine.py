@@ -76,6 +76,7 @@ from adapters.canopen.master.events import (
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
 RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
+INPUTS_REFRESH = 0.1  # s: an unchanged TPDO1 of a quiet node is reported at least this often
 COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 # then the bit is back at 0 this many cycles (>= 1 RPDO and SYNC) before the next
@@ -151,6 +152,16 @@ class Master:
 
     def set_want(self, node_id: int, want: Want) -> None:
         self.nodes[node_id].want = want
+
+    def quiet_inputs(self, node_id: int, quiet: bool) -> None:
+        """Whether the adapter is quiet for the node: an unchanged TPDO1 tells it nothing
+        (its readings and the node's RPDO1 depend on nothing but the TPDO1 and what it is
+        told otherwise: docs/decisions/0098). A quiet node's TPDO1 is reported
+        (:class:`Inputs`) when its bytes changed and at least every
+        :data:`INPUTS_REFRESH` s; the engine's own bookkeeping (the TPDO1 allowance, the
+        loss watch, the state behind the statusword) is kept for every one. A node that
+        is lost or brought up again is never quiet until the adapter says so again."""
+        self.nodes[node_id].quiet = quiet
 
     def wish(self, node_id: int) -> Want:
         """The node's wish as the engine holds it (STOPPED again once the node is lost)."""
@@ -493,6 +504,7 @@ class Master:
         node.rpdo_sent, node.rpdo_at = None, 0.0
         node.rpdo_key = node.rpdo_frame = None
         node.tpdo_data = node.tpdo_inputs = None
+        node.quiet = False
 
     def _lose(self, node: Node, now: float, reason: str, out: list[Action]) -> None:
         was_seen = node.seen
@@ -698,10 +710,14 @@ class Master:
         last = node.tpdo_inputs
         if data == node.tpdo_data and last is not None and last.statusword == node.statusword:
             node.figures["tpdo_rx"] += 1
+            if node.quiet and now < node.inputs_due:
+                return  # the steady case: nothing new for a quiet adapter
+            node.inputs_due = now + INPUTS_REFRESH
             out.append(last)
             return
         inputs = self._decode_tpdo(node, data)
         if inputs is not None:
+            node.inputs_due = now + INPUTS_REFRESH
             out.append(inputs)
         node.tpdo_data, node.tpdo_inputs = data, inputs
 

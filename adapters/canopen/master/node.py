@@ -81,6 +81,10 @@ class Node:
     # TPDO1 as last received and what it gave (a repeated TPDO1 gives the same again)
     tpdo_data: bytes | None = None
     tpdo_inputs: Inputs | None = None
+    # the steady case (docs/decisions/0098): the adapter said an unchanged TPDO1 tells it
+    # nothing (quiet), and until when an unchanged one need not be reported again
+    quiet: bool = False
+    inputs_due: float = 0.0
     # TPDO1's mapping as one struct (every field 1, 2, 4 or 8 bytes), else None
     tpdo_struct: struct.Struct | None = None
     # cycles (SYNCs) since the last TPDO1 while online: lost beyond TPDO_LOSS_CYCLES
