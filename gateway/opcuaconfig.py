@@ -30,6 +30,7 @@ from enum import Enum
 from pathlib import Path
 
 from gateway.schema import Table
+from gateway.webconfig import host_port
 
 
 class OpcuaSecurity(Enum):
@@ -82,16 +83,7 @@ def _bind(t: Table) -> tuple[str, int] | None:
     text: str | None = t.string("bind", None)
     if text is None:
         return None
-    host, sep, port_text = text.rpartition(":")
-    host = host.strip("[]")
-    if not sep or not host or not (port_text.isascii() and port_text.isdigit()):
-        t.errors.append(t.error("bind", f"{text!r} is not HOST:PORT (like 127.0.0.1:4840)"))
-        return None
-    port = int(port_text)
-    if not 0 <= port <= 65535:
-        t.errors.append(t.error("bind", f"port {port} is not 0-65535"))
-        return None
-    return host, port
+    return host_port(t, text, "127.0.0.1:4840")
 
 
 def _security(t: Table) -> tuple[OpcuaSecurity, ...]:

@@ -140,11 +140,12 @@ class WebSection:
         return f"{'https' if self.tls else 'http'}://{host}:{self.port}/"
 
 
-def _host_port(t: Table, text: str) -> tuple[str, int] | None:
+def host_port(t: Table, text: str, example: str = "127.0.0.1:8080") -> tuple[str, int] | None:
+    """A ``bind`` of a front end's table as (host, port); None with the error noted."""
     host, sep, port_text = text.rpartition(":")
     host = host.strip("[]")
     if not sep or not host or not (port_text.isascii() and port_text.isdigit()):
-        t.errors.append(t.error("bind", f"{text!r} is not HOST:PORT (like 127.0.0.1:8080)"))
+        t.errors.append(t.error("bind", f"{text!r} is not HOST:PORT (like {example})"))
         return None
     port = int(port_text)
     if not 0 <= port <= 65535:
@@ -314,7 +315,7 @@ def read_web_section(t: Table, base: Path | None = None) -> WebSection:
     """The ``[web]`` table (every problem recorded in ``t.errors``, as the loader reads)."""
     d = WebSection()
     bind: str | None = t.string("bind", None)
-    where = _host_port(t, bind) if bind is not None else None
+    where = host_port(t, bind) if bind is not None else None
     commands: bool = t.boolean("commands", d.commands)
     tls = _tls(t, base)
     return WebSection(
@@ -337,7 +338,7 @@ def web_bind(section: WebSection, text: str) -> WebSection:
     from dataclasses import replace
 
     t = Table({"bind": text}, "--web-bind", collect=True)
-    where = _host_port(t, text)
+    where = host_port(t, text)
     if where is None:
         raise ConfigError("--web-bind", "", t.errors[0].reason)
     return replace(section, enabled=True, host=where[0], port=where[1])
