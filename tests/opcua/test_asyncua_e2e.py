@@ -289,7 +289,8 @@ batch_interval = 0.1
         await until(lambda: len(recorded()) >= 5)  # the writer commits every batch_interval
         rows = recorded()
         async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
-            first = datetime.fromtimestamp(rows[0].t, UTC)
+            # a datetime holds microseconds (rounded): ask from just before the first row
+            first = datetime.fromtimestamp(rows[0].t - 0.01, UTC)
             last = datetime.fromtimestamp(rows[-1].t + 0.01, UTC)  # the last one within
             values = await node(client, "m1", "SpeedRpm").read_raw_history(first, last)
         served = [(v.SourceTimestamp.timestamp(), v.Value.Value) for v in values]
