@@ -47,7 +47,7 @@ def client_config(
     if rcvbuf is not None:
         doc["transport"] = {"link": {"tcp": {"so_rcvbuf": rcvbuf}}}
     if zid is not None:
-        doc["id"] = zid
+        doc["id"] = zid.lstrip("0") or "0"  # the same id: Zenoh's config takes no leading 0
     return zenoh.Config.from_json5(json.dumps(doc))
 
 
