@@ -37,7 +37,7 @@ from typing import Any
 from asyncua import Server, ua
 
 from gateway.adapter import Capabilities
-from gateway.errors import StartupError
+from gateway.errors import GatewayError, StartupError
 from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.model import CommState, DriveState, Source
 from gateway.opcua.alarms import Alarms
@@ -62,6 +62,11 @@ from gateway.opcua.variables import READINGS, Range, bus_figures, changed_values
 from gateway.paramsbackup import firmware_of
 
 log = logging.getLogger(__name__)
+
+
+class NotStarted(GatewayError):
+    """A server call before the server was built (or after it stopped)."""
+
 
 SLOW_PERIOD = 1.0  # s between bus figures, firmware reads, ranges and watchdog feeds
 LOOP_SHARE = 0.25
@@ -221,7 +226,8 @@ class OpcuaFrontEnd:
             res.StatusCode = ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
             return res
         comment = values[1].Text if isinstance(values[1], ua.LocalizedText) else str(values[1])
-        assert self.alarms is not None
+        if self.alarms is None:
+            raise NotStarted("the OPC UA server is not started")
         status = await self.alarms.acknowledge(parent, values[0], comment or "", client)
         res.StatusCode = ua.StatusCode(status)
         return res
@@ -294,7 +300,8 @@ class OpcuaFrontEnd:
     async def _batch(self, states: list[DriveState]) -> float:
         """Write the variables that changed, and step the alarms; the seconds of work it
         took. The loop gets a turn after every :data:`SLICE` s of it."""
-        assert self.server is not None and self.alarms is not None
+        if self.server is None or self.alarms is None:
+            raise NotStarted("the OPC UA server is not started")
         write = self.server.iserver.aspace.write_attribute_value
         now = datetime.now(UTC)
         work = 0.0
@@ -344,7 +351,8 @@ class OpcuaFrontEnd:
 
     async def _show_result(self, drive_id: str, text: str) -> None:
         """A method call's outcome, in the drive's LastCommandResult."""
-        assert self.server is not None
+        if self.server is None:
+            raise NotStarted("the OPC UA server is not started")
         await self.server.iserver.aspace.write_attribute_value(
             self.drives[drive_id].variables[LAST_RESULT],
             ua.AttributeIds.Value,
@@ -361,7 +369,8 @@ class OpcuaFrontEnd:
         self.slow_pass.set()
 
     async def _bus_figures(self) -> None:
-        assert self.server is not None and self._builder is not None
+        if self.server is None or self._builder is None:
+            raise NotStarted("the OPC UA server is not started")
         write = self.server.iserver.aspace.write_attribute_value
         for name, line in self.runtime.adapters.items():
             bus = self.buses.get(name)
@@ -390,7 +399,8 @@ class OpcuaFrontEnd:
         if self._caps.get(drive_id) is caps:
             return
         self._caps[drive_id] = caps
-        assert self.server is not None
+        if self.server is None:
+            raise NotStarted("the OPC UA server is not started")
         write = self.server.iserver.aspace.write_attribute_value
         known = self._ranges[drive_id]
         for reading in READINGS:
@@ -428,7 +438,8 @@ class OpcuaFrontEnd:
         if firmware is None:
             log.debug("OPC UA: no firmware for %s: %s", drive_id, source)
             return
-        assert self.server is not None
+        if self.server is None:
+            raise NotStarted("the OPC UA server is not started")
         await self.server.iserver.aspace.write_attribute_value(
             self.drives[drive_id].properties["Firmware"],
             ua.AttributeIds.Value,
@@ -438,7 +449,8 @@ class OpcuaFrontEnd:
     def _feed_watchdogs(self) -> None:
         """A drive controlled by an OPC UA session whose client still makes requests: its
         command watchdog is fed (only by that session: ``hub.refresh`` checks)."""
-        assert self.sessions is not None
+        if self.sessions is None:
+            raise NotStarted("the OPC UA server is not started")
         now = time.monotonic()
         for drive_id in self.drives:
             desired = self.hub.desired(drive_id)
