@@ -16,7 +16,10 @@ Figures:
   UA server and its sessions cost;
 - ``opcua_notifications``: the data changes the sessions received per second in all (what
   the drives changed, at most one per item per interval);
-- ``opcua_sessions_up``: the sessions subscribed before the window opened.
+- ``opcua_sessions_up``: the sessions subscribed before the window opened;
+- ``opcua_host_busy``: the cores every process on the host used with OPC UA, its
+  reference the same without (the client sessions' process is on the same host: when it
+  fills the host, the simulators slow down and the lines' rates with them).
 
 The plant's drives stand still (their readings hardly change), so the server's cost under
 change is measured apart, in one process (:mod:`bench.opcua_changes`: ``opcua_changes_*``,
@@ -95,6 +98,19 @@ def compare(without: Plant, with_opcua: Plant) -> list[Figure]:
             round(run["cpu_share"] - ref["cpu_share"], 3),
             "core",
             note="with minus without OPC UA: the server and its sessions",
+        )
+    )
+    busy, ref_busy = run["others"]["host (all CPUs)"], ref["others"]["host (all CPUs)"]
+    cpus = os.cpu_count() or 1
+    figures.append(
+        Figure(
+            "opcua_host_busy",
+            busy,
+            "cores",
+            reference=ref_busy,
+            note=f"every process on the host, of {cpus} CPUs; the OPC UA client sessions' "
+            f"process {run['others'].get('opcua-clients', math.nan)} core: a host near "
+            f"{cpus} slows the simulators, so the lines' rates fall whatever the server costs",
         )
     )
     clients = run["clients"].get("opcua-clients", {})

@@ -645,7 +645,12 @@ def measure(plant: Plant) -> list[Figure]:
         canlog, broker = _broker_log(tmp, "canbus")
         colog, cobroker = _broker_log(tmp, "canopen-bus")
     plant.raw.update(
-        t0=t0, t1=t1, cpu_share=(cpu1 - cpu0) / (t1 - t0), cycles=cycles, clients=clients
+        t0=t0,
+        t1=t1,
+        cpu_share=(cpu1 - cpu0) / (t1 - t0),
+        cycles=cycles,
+        clients=clients,
+        others=others,
     )
     return _figures(
         plant,

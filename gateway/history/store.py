@@ -432,10 +432,20 @@ class HistoryStore:
             return _by_minutes(conn, drive, start, end, step)
         return _buckets(_raw_sums(conn, drive, start, end, step), step)
 
-    def events(self, drive_id: str | None, start: float, end: float) -> list[HistoryEvent]:
+    def events(
+        self,
+        drive_id: str | None,
+        start: float,
+        end: float,
+        limit: int | None = None,
+        newest: bool = False,
+    ) -> list[HistoryEvent]:
         """The events (of one drive, or of all with None) with ``start <= t < end``, in
-        order; HistoryError beyond ``max_rows``."""
+        order (``newest``: the newest first); HistoryError beyond ``max_rows``. With
+        ``limit``: at most ``limit + 1`` (the one after the last is where the next read
+        goes on), never an error."""
         check_range(start, end, None)
+        cap = self.max_rows if limit is None else min(limit, self.max_rows)
         conn = self._reader()
         if conn is None:
             return []
@@ -447,10 +457,10 @@ class HistoryStore:
         with _closing(conn):
             rows = conn.execute(
                 f"SELECT t, drive, kind, text, data FROM events WHERE {where} "
-                "ORDER BY t, id LIMIT ?",
-                (*args, self.max_rows + 1),
+                f"ORDER BY {'t DESC, id DESC' if newest else 't, id'} LIMIT ?",
+                (*args, cap + 1),
             ).fetchall()
-        if len(rows) > self.max_rows:
+        if limit is None and len(rows) > self.max_rows:
             raise HistoryError(f"more than {self.max_rows} events: ask for a shorter range")
         return [HistoryEvent(t, d, k, text, _data(raw)) for t, d, k, text, raw in rows]
 

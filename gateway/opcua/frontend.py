@@ -198,7 +198,17 @@ class OpcuaFrontEnd:
             fields = {
                 n.variables[r.name]: (d, r.field) for d, n in self.drives.items() for r in READINGS
             }
-            server.iserver.history_manager.set_storage(DriveHistory(self.history, fields))
+            sources: dict[ua.NodeId, str | None] = {n.object: d for d, n in self.drives.items()}
+            server_node = ua.NodeId(ua.ObjectIds.Server)
+            sources[server_node] = None  # every drive's events
+            notifier = ua.EventNotifier.SubscribeToEvents.mask | ua.EventNotifier.HistoryRead.mask
+            await server.get_node(server_node).write_attribute(
+                ua.AttributeIds.EventNotifier,
+                ua.DataValue(ua.Variant(notifier, ua.VariantType.Byte)),
+            )
+            server.iserver.history_manager.set_storage(
+                DriveHistory(self.history, fields, sources=sources)
+            )
 
     def _link_methods(self, server: Server, nodes: DriveNodes) -> None:
         for name, node in nodes.methods.items():

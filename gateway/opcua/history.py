@@ -1,11 +1,14 @@
-"""HistoryRead of the drives' readings, from the gateway's history store.
+"""HistoryRead of the drives' readings and events, from the gateway's history store.
 
 The store is whatever gives :class:`ReadingHistory` (the SQLite history of the box): rows
-of a drive's readings by field name between two wall-clock times. This module answers
-OPC UA's ReadRawModified requests on the reading variables from it (asyncua's
-HistoryStorageInterface): it never stores anything itself (the store is written by the
-history writer, off the fieldbus path), and it reads at most ``max_values`` rows per
-request, giving a continuation point for the rest.
+of a drive's readings by field name between two wall-clock times, and its events. This
+module answers OPC UA's ReadRawModified requests on the reading variables and ReadEvent
+requests on the drive objects (one drive's events) and the Server object (every drive's)
+from it (asyncua's HistoryStorageInterface): it never stores anything itself (the store is
+written by the history writer, off the fieldbus path), and it reads at most
+``max_values`` rows or events per request, giving a continuation point for the rest.
+An event is a BaseEventType with the standard fields (:mod:`gateway.opcua.eventhistory`);
+the request's where clause is not applied (the client filters what it reads).
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from typing import Any, Protocol
 
 from asyncua import ua
 from asyncua.server.history import HistoryStorageInterface
+
+from gateway.opcua.eventhistory import HistoryEventLike, history_event
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +49,15 @@ class ReadingHistory(Protocol):
         self, drive_id: str, start: float, end: float, step: float | None = None
     ) -> Sequence[HistoryRowLike]: ...
 
+    def events(
+        self,
+        drive_id: str | None,
+        start: float,
+        end: float,
+        limit: int | None = None,
+        newest: bool = False,
+    ) -> Sequence[HistoryEventLike]: ...
+
 
 def _seconds(when: datetime | None) -> float | None:
     if when is None:
@@ -68,11 +82,15 @@ class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
         fields: Mapping[ua.NodeId, tuple[str, str]],
         clock: Any = None,
         max_values: int = MAX_VALUES,
+        sources: Mapping[ua.NodeId, str | None] | None = None,
     ) -> None:
         super().__init__(max_values)
         self.store = store
         self.fields = dict(fields)
         """Reading variable -> (drive id, drive model field)."""
+        self.sources = dict(sources or {})
+        """Event notifier -> its drive id (None: every drive's events, the Server)."""
+        self._nodes = {d: node for node, d in self.sources.items() if d is not None}
         self._now = clock or (lambda: datetime.now(UTC).timestamp())
         self.reads = 0
         self.failures = 0
@@ -104,7 +122,30 @@ class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
         nb_values: int,
         evfilter: Any,
     ) -> tuple[list[Any], datetime | None]:
-        return [], None
+        if source_id not in self.sources:
+            raise ua.UaStatusCodeError(ua.StatusCodes.BadHistoryOperationUnsupported)
+        drive_id = self.sources[source_id]
+        begin, finish = _seconds(start), _seconds(end)
+        backwards = begin is not None and finish is not None and finish < begin
+        if backwards:
+            begin, finish = finish, begin
+        limit = min(
+            nb_values or self.max_history_data_response_size, self.max_history_data_response_size
+        )
+        first = 0.0 if begin is None else begin
+        last = math.nextafter(self._now() if finish is None else finish, math.inf)
+        try:
+            found = list(self.store.events(drive_id, first, last, limit, newest=backwards))
+        except Exception:
+            self.failures += 1
+            log.exception("OPC UA event HistoryRead of %s: the history store failed", source_id)
+            raise ua.UaStatusCodeError(ua.StatusCodes.BadHistoryOperationUnsupported) from None
+        self.reads += 1
+        more: datetime | None = None
+        if len(found) > limit:  # the next read starts at the first event left out
+            more = _time(found[limit].t)
+            found = found[:limit]
+        return [history_event(e, self._nodes.get(e.drive_id, source_id)) for e in found], more
 
     async def stop(self) -> None:
         return None

@@ -114,10 +114,13 @@ class Builder:
         *,
         folder: bool = False,
         notifier: bool = False,
+        history: bool = False,
     ) -> ua.NodeId:
         attrs = ua.ObjectAttributes()
         if notifier:
             attrs.EventNotifier = ua.EventNotifier.SubscribeToEvents.mask
+        if notifier and history:  # its events are read back with HistoryRead
+            attrs.EventNotifier |= ua.EventNotifier.HistoryRead.mask
         type_def = ua.ObjectIds.FolderType if folder else ua.ObjectIds.BaseObjectType
         ref = (
             ua.ObjectIds.Organizes
@@ -263,7 +266,7 @@ async def add_drive(
 ) -> DriveNodes:
     """One drive's object and everything in it (one AddNodes request)."""
     d = state.id
-    nodes = DriveNodes(d, b.object(folder, b.node_id(d), d, notifier=True))
+    nodes = DriveNodes(d, b.object(folder, b.node_id(d), d, notifier=True, history=history))
     identity: dict[str, ua.Variant] = {
         "Device": ua.Variant(state.device.value, ua.VariantType.String),
         "Bus": ua.Variant(state.bus, ua.VariantType.String),

@@ -107,6 +107,20 @@ def test_events_of_one_drive_or_all(tmp_path: Path) -> None:
     assert events[0].to_json()["code"] == 21
 
 
+def test_events_by_pages_oldest_or_newest_first(tmp_path: Path) -> None:
+    """A page of ``limit`` events and the one after it (where the next page starts); the
+    newest first for a read backwards; never more than max_rows, never an error."""
+    db = HistoryDb.open_checked(tmp_path / "h.sqlite")
+    events = [HistoryEvent(T0 + i, "a", "command", f"e{i}") for i in range(12)]
+    db.write([], events)
+    store = HistoryStore(tmp_path / "h.sqlite", max_rows=10)
+    assert store.events("a", T0, T0 + 20, limit=4) == events[:5]
+    assert store.events("a", T0, T0 + 20, limit=4, newest=True) == events[::-1][:5]
+    assert store.events("a", T0, T0 + 20, limit=50) == events[:11]  # max_rows + 1
+    with pytest.raises(HistoryError, match="more than 10 events"):
+        store.events("a", T0, T0 + 20)
+
+
 def test_retention_by_age_and_by_size(tmp_path: Path) -> None:
     db = HistoryDb.open_checked(tmp_path / "h.sqlite")
     day = [speed("a", T0 + i, float(i)) for i in range(0, 86400, 2)]

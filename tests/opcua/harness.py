@@ -22,6 +22,7 @@ TIMEOUT = scaled(30.0)
 DRIVES = ("m1", "m2", "soft")
 HISTORY_START = 1_700_000_000.0
 HISTORY_ROWS = 50
+HISTORY_EVENTS = 30
 
 
 @dataclass(frozen=True)
@@ -30,11 +31,22 @@ class Row:
     values: Mapping[str, float | None]
 
 
+@dataclass(frozen=True)
+class StoredEvent:
+    t: float
+    drive_id: str
+    kind: str
+    text: str
+
+
 @dataclass
 class FakeHistory:
     """A history store of made-up rows: speed_rpm = 10 * i at HISTORY_START + i."""
 
     calls: list[tuple[str, float, float, float | None]] = field(default_factory=list)
+    event_calls: list[tuple[str | None, float, float, int | None, bool]] = field(
+        default_factory=list
+    )
 
     def readings(
         self, drive_id: str, start: float, end: float, step: float | None = None
@@ -45,6 +57,27 @@ class FakeHistory:
             for i in range(HISTORY_ROWS)
         ]
         return [r for r in rows if start <= r.t <= end]
+
+    def events(
+        self,
+        drive_id: str | None,
+        start: float,
+        end: float,
+        limit: int | None = None,
+        newest: bool = False,
+    ) -> list[StoredEvent]:
+        """m1: a fault at HISTORY_START + 10 * i, commands between; m2: 5 commands."""
+        self.event_calls.append((drive_id, start, end, limit, newest))
+        made = [
+            StoredEvent(HISTORY_START + i, "m1", "fault" if i % 10 == 0 else "command", f"m1 {i}")
+            for i in range(HISTORY_EVENTS)
+        ] + [StoredEvent(HISTORY_START + i + 0.5, "m2", "command", f"m2 {i}") for i in range(5)]
+        found = sorted(
+            (e for e in made if start <= e.t < end and drive_id in (None, e.drive_id)),
+            key=lambda e: e.t,
+            reverse=newest,
+        )
+        return found if limit is None else found[: limit + 1]
 
 
 def config_text(

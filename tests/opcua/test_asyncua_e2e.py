@@ -13,11 +13,19 @@ from typing import Any
 
 import pytest
 from asyncua import Client, Node, ua
+from asyncua.common.events import Event, get_filter_from_event_type
 
 from gateway.model import DriveCommand, DriveStatus, Source
 from gateway.opcua.frontend import OpcuaFrontEnd
 from gateway.opcua.variables import PERCENT, RPM
-from tests.opcua.harness import HISTORY_ROWS, HISTORY_START, TIMEOUT, Gateway, running_gateway
+from tests.opcua.harness import (
+    HISTORY_EVENTS,
+    HISTORY_ROWS,
+    HISTORY_START,
+    TIMEOUT,
+    Gateway,
+    running_gateway,
+)
 from tests.reliability.demo import until
 
 NS = 2
@@ -239,6 +247,81 @@ async def test_history_read_serves_the_history_store(gateway: Gateway, client: C
     assert len(everything) == HISTORY_ROWS
 
 
+def _at(offset: float) -> datetime:
+    return datetime.fromtimestamp(HISTORY_START + offset, UTC)
+
+
+async def test_history_read_of_events_serves_the_history_stores_events(
+    gateway: Gateway, client: Client
+) -> None:
+    """A drive's events are read back from its object, every drive's from the Server."""
+    m1 = client.get_node(ua.NodeId("m1", 2))
+    notifier = await m1.read_attribute(ua.AttributeIds.EventNotifier)
+    assert notifier.Value.Value & ua.EventNotifier.HistoryRead.mask  # it says it has history
+    events = await m1.read_event_history(_at(10), _at(19))
+    assert [e.Message.Text for e in events] == [f"m1: m1 {i}" for i in range(10, 20)]
+    first = events[0]
+    assert (first.SourceName, first.SourceNode, first.Time) == ("m1", m1.nodeid, _at(10))
+    assert first.EventType == ua.NodeId(ua.ObjectIds.BaseEventType)
+    assert [e.Severity for e in events[:2]] == [800, 200]  # a fault as its alarm, a command
+    again = await m1.read_event_history(_at(10), _at(19))
+    assert [e.EventId for e in again] == [e.EventId for e in events]  # the same on every read
+    assert len({e.EventId for e in events}) == len(events)
+    # the newest first when the range is given backwards
+    backwards = await m1.read_event_history(_at(19), _at(10))
+    assert [e.Message.Text for e in backwards] == [f"m1: m1 {i}" for i in range(19, 9, -1)]
+    # every drive's events from the Server object, each with its drive's object as source
+    every = await client.get_node(ua.ObjectIds.Server).read_event_history(_at(0), _at(4.9))
+    assert [(e.SourceName, e.SourceNode.Identifier) for e in every] == [
+        (d, d) for i in range(5) for d in ("m1", "m2")
+    ]
+
+
+async def test_history_read_of_events_continues_where_a_page_ended(
+    gateway: Gateway, client: Client
+) -> None:
+    """At most NumValuesPerNode events a response; the continuation point reads on."""
+    m1 = client.get_node(ua.NodeId("m1", 2))
+    details = ua.ReadEventDetails()
+    details.StartTime, details.EndTime = _at(0), _at(100)
+    details.NumValuesPerNode = 7
+    details.Filter = await get_filter_from_event_type([client.get_node(ua.ObjectIds.BaseEventType)])
+    seen: list[str] = []
+    value = ua.HistoryReadValueId()
+    value.NodeId = m1.nodeid
+    for _ in range(HISTORY_EVENTS):
+        params = ua.HistoryReadParameters()
+        params.HistoryReadDetails = details
+        params.TimestampsToReturn = ua.TimestampsToReturn.Both
+        params.NodesToRead = [value]
+        (result,) = await client.uaclient.history_read(params)
+        result.StatusCode.check()
+        fields = [
+            Event.from_event_fields(details.Filter.SelectClauses, f.EventFields)
+            for f in result.HistoryData.Events
+        ]
+        assert len(fields) <= 7
+        seen += [e.Message.Text for e in fields]
+        if not result.ContinuationPoint:
+            break
+        value = ua.HistoryReadValueId()
+        value.NodeId = m1.nodeid
+        value.ContinuationPoint = result.ContinuationPoint
+    assert seen == [f"m1: m1 {i}" for i in range(HISTORY_EVENTS)]
+    assert gateway.history.event_calls[-1][3] == 7  # the store was asked for one page
+
+
+async def test_history_read_of_events_of_a_node_without_events_is_refused(
+    gateway: Gateway, client: Client
+) -> None:
+    details = ua.ReadEventDetails()
+    details.StartTime, details.EndTime = _at(0), _at(100)
+    details.Filter = await get_filter_from_event_type([client.get_node(ua.ObjectIds.BaseEventType)])
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        await node(client, "m1", "SpeedRpm").history_read_events(details)
+    assert refused.value.code == ua.StatusCodes.BadHistoryOperationUnsupported
+
+
 async def test_a_session_in_control_feeds_the_watchdog_while_its_client_is_there(
     tmp_path: Path,
 ) -> None:
@@ -287,12 +370,21 @@ batch_interval = 0.1
             ]
 
         await until(lambda: len(recorded()) >= 5)  # the writer commits every batch_interval
+        await until(lambda: bool(store.events("m1", start, time.time())))
         rows = recorded()
+        stored = store.events("m1", start, time.time())
         async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
             # a datetime holds microseconds (rounded): ask from just before the first row
             first = datetime.fromtimestamp(rows[0].t - 0.01, UTC)
             last = datetime.fromtimestamp(rows[-1].t + 0.01, UTC)  # the last one within
             values = await node(client, "m1", "SpeedRpm").read_raw_history(first, last)
+            events = await client.get_node(ua.NodeId("m1", 2)).read_event_history(
+                datetime.fromtimestamp(start, UTC),
+                datetime.fromtimestamp(stored[-1].t + 0.01, UTC),
+            )
+        assert [(e.Message.Text, e.SourceName) for e in events] == [
+            (f"m1: {e.text}", "m1") for e in stored
+        ]
         served = [(v.SourceTimestamp.timestamp(), v.Value.Value) for v in values]
         assert len(served) >= len(rows)
         for row in rows:

@@ -108,6 +108,12 @@ async def test_node_opcua_client_browses_reads_subscribes_commands_and_acknowled
             assert commands["stop"] == {"status": "Good", "text": "accepted"}
             history = await client.until("history")
             assert history["values"] == [10.0 * i for i in range(10, 20)]
+            event_history = await client.until("event_history")
+            assert event_history["status"] == "Good"
+            assert event_history["events"] == [
+                {"source": "m1", "message": f"m1: m1 {i}", "severity": 800 if i == 10 else 200}
+                for i in range(10, 16)  # the end time is within the range
+            ]
             await client.until("waiting_alarm")
             line = gw.daemon.runtime.adapters["line1"]
             adapter: Any = line.adapter

@@ -164,10 +164,18 @@ async def test_a_value_missing_in_a_row_is_bad_no_data_and_a_failing_store_is_ba
         def readings(self, *args: Any) -> list[Any]:
             raise OSError("disk I/O error")
 
-    broken = DriveHistory(Broken(), {NODE: ("d1", "speed_rpm")})
+        def events(self, *args: Any, **kw: Any) -> list[Any]:
+            raise OSError("disk I/O error")
+
+    source = ua.NodeId("d1", 2)
+    broken = DriveHistory(Broken(), {NODE: ("d1", "speed_rpm")}, sources={source: "d1"})
     with pytest.raises(ua.UaStatusCodeError):
         await broken.read_node_history(NODE, when(0), when(1), 0)
     assert broken.failures == 1
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        await broken.read_event_history(source, when(0), when(1), 0, None)
+    assert refused.value.code == ua.StatusCodes.BadHistoryOperationUnsupported
+    assert broken.failures == 2
 
 
 # ---------------------------------------------------------------- commands

@@ -7,6 +7,7 @@ const readline = require("readline");
 const {
   OPCUAClient, MessageSecurityMode, SecurityPolicy, AttributeIds, DataType,
   ClientSubscription, ClientMonitoredItem, TimestampsToReturn, constructEventFilter,
+  ReadEventDetails, HistoryReadRequest,
 } = require("node-opcua-client");
 
 const endpoint = process.argv[2];
@@ -95,6 +96,27 @@ async function main() {
   say("history", {
     status: history.statusCode.name,
     values: history.historyData.dataValues.map((dv) => dv.value.value),
+  });
+
+  const historyFields = ["EventId", "SourceName", "Time", "Message", "Severity"];
+  const eventHistory = await session.historyRead(new HistoryReadRequest({
+    historyReadDetails: new ReadEventDetails({
+      startTime: new Date(1700000010 * 1000),
+      endTime: new Date(1700000015 * 1000),
+      numValuesPerNode: 0,
+      filter: constructEventFilter(historyFields),
+    }),
+    nodesToRead: [{ nodeId: "ns=2;s=m1" }],
+    timestampsToReturn: TimestampsToReturn.Both,
+  }));
+  const read = eventHistory.results[0];
+  say("event_history", {
+    status: read.statusCode.name,
+    events: read.historyData.events.map((e) => ({
+      source: e.eventFields[1].value,
+      message: e.eventFields[3].value.text,
+      severity: e.eventFields[4].value,
+    })),
   });
 
   say("waiting_alarm", {});
