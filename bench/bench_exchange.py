@@ -14,6 +14,10 @@ reply is in. Rounds alternate, gateway then bare; each side's figure is the medi
 
 Figures: CPU per exchange of the line's thread, and of the whole process (line, hub,
 hand-over), against the bare requester's CPU per exchange (target: ratio <= 2, issue 34).
+
+For comparisons: ``BENCH_NO_BURST=1`` measures the line without its bursts of steady
+exchanges (docs/decisions/0101); ``BENCH_EXCHANGE_PROFILE=FILE`` writes cProfile stats of
+the line's thread over the measured stretch.
 """
 
 from __future__ import annotations
@@ -144,11 +148,22 @@ async def gateway_round(config_path: Path, capture: Capture, seconds: float) -> 
         def exchanged() -> int:
             return sum(master.slave_figures(a).exchanges for a in master.addresses)
 
+        if os.environ.get("BENCH_NO_BURST"):
+            adapter._driver._bursts = False  # type: ignore[attr-defined]
         capture.frames.clear()
         capture.on = True
+        profile = os.environ.get("BENCH_EXCHANGE_PROFILE")
+        if profile:
+            import cProfile
+
+            prof = cProfile.Profile()
+            await line.call(prof.enable)
         first, t0, p0 = exchanged(), _thread_cpu(line.thread), time.process_time()
         await asyncio.sleep(seconds)
         done, t1, p1 = exchanged(), _thread_cpu(line.thread), time.process_time()
+        if profile:
+            await line.call(prof.disable)
+            prof.dump_stats(profile)
         capture.on = False
         return Side(done - first, t1 - t0, p1 - p0)
     finally:

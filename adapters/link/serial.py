@@ -288,6 +288,12 @@ class SerialLinks(Protocol):
         """End what :meth:`start` started (a simulated line's devices); idempotent."""
         return
 
+    def far_end_apart(self) -> bool:
+        """Whether the far end answers whatever this process's loop does (a device, a
+        process of its own): a driver may then wait for a reply without its loop
+        (docs/decisions/0101). A line simulated on the loop says False."""
+        return True
+
 
 @dataclass(frozen=True)
 class SerialPort(SerialLinks):
@@ -404,6 +410,23 @@ class SerialLink:
             ready = True  # the read says what is wrong with the port
         if ready:  # a tty (VMIN = 0) reads nothing, not EAGAIN: look first
             self._readable()
+
+    @property
+    def has_descriptor(self) -> bool:
+        """A port read through its file descriptor (not a URL port, which is polled)."""
+        return self._fd is not None
+
+    def take(self) -> bytes:
+        """What has arrived, read now and returned (not handed to ``on_data``): b"" when
+        nothing has, and on an error or a hang-up, which the loop's reader then reports."""
+        if self._closed or self._fd is None:
+            return b""
+        try:
+            data = os.read(self._fd, READ_CHUNK)
+        except OSError:
+            return b""
+        self.bytes_in += len(data)
+        return data
 
     def _polled_once(self) -> None:
         if self._closed:

@@ -29,6 +29,10 @@ first); a reply deadline's timer reads the port once more before the engine judg
 A reply deadline whose timer fires late (the process was not scheduled) is judged once more
 that much later (:meth:`StreamDriver._postpone`): what could not run meanwhile includes a
 simulated line's devices, which share the loop.
+
+Where the far end answers apart from the loop (``bursts``), the replies an engine's steady
+lane takes are taken back to back, each next request sent at once, without the loop's turn
+between (:meth:`StreamDriver._burst`, at most :data:`BURST`; docs/decisions/0101).
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ from typing import Any, Final, Generic, Protocol, TypeVar
 
 from adapters.link.engine import Engine
 from adapters.link.serial import SerialLink
-from adapters.link.timer import loop_clock, loop_timer, precise_sleeps
+from adapters.link.timer import loop_clock, loop_ready, loop_timer, precise_sleeps
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +54,8 @@ NEAR: Final = 0.002  # s: a deadline this close has a timer of its own (see _arm
 LATE_TIMER: Final = 0.005  # s: a reply deadline's timer this late means the loop stood still
 MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed at once
 MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
+BURST: Final = 0.002  # s: the longest a burst of steady exchanges keeps the loop (_burst)
+BURST_TURNS: Final = 64  # replies and idle times at most in one burst
 
 EventT = TypeVar("EventT")
 EventT_co = TypeVar("EventT_co", covariant=True)
@@ -117,6 +123,7 @@ class StreamDriver(Generic[EventT]):
         on_action: Callable[[Any], None] = lambda action: None,
         on_flushed: Callable[[EventT], None] = lambda event: None,
         on_stepped: Callable[[], None] = lambda: None,
+        bursts: bool = False,
     ) -> None:
         self.engine = engine
         self.link = link
@@ -146,6 +153,12 @@ class StreamDriver(Generic[EventT]):
         lane = getattr(engine, "lane", None)
         self._lane: Callable[[bytes, float, float], Sequence[Any] | None] | None = lane
         self.lane_taken = 0  # replies the steady lane took
+        # the steady lane's replies taken back to back (_burst): asked for where the far
+        # end answers apart from this loop, on a port with a descriptor
+        self._bursts = bursts and lane is not None and link.has_descriptor
+        self.burst_taken = 0  # replies taken in a burst (in lane_taken too)
+        self.bursts_yielded = 0  # bursts ended by a callback waiting in the loop
+        self._loop_ready = loop_ready(self.loop)
         link.on_data = self._on_data
         precise_sleeps()  # the short idle times slept in _step end on time (1 us slack)
 
@@ -314,8 +327,18 @@ class StreamDriver(Generic[EventT]):
 
     def _lane_run(self, actions: Sequence[Any]) -> None:
         """The steady lane's actions: its request written once its idle time is over (a
-        short one slept here, as :meth:`_step` sleeps it), then what :meth:`_step` does
-        after a step (anything queued meanwhile is stepped, the timer armed)."""
+        short one slept here, as :meth:`_step` sleeps it), the replies that follow taken
+        in a burst (:meth:`_burst`), then what :meth:`_step` does after a step (anything
+        queued meanwhile is stepped, the timer armed)."""
+        self._lane_turn(actions)
+        if self._bursts and not self._queued:
+            self._burst()
+        if self._queued:
+            self._step(self._queued.popleft())
+            return
+        self._arm(self.engine.next_deadline())
+
+    def _lane_turn(self, actions: Sequence[Any]) -> None:
         self.lane_taken += 1
         self._stepping = True
         try:
@@ -327,11 +350,56 @@ class StreamDriver(Generic[EventT]):
             self._run(actions)
         finally:
             self._stepping = False
-        if self._queued:
-            self._step(self._queued.popleft())
-            return
-        self._arm(self.engine.next_deadline())
         self.on_stepped()
+
+    def _burst(self) -> None:
+        """Steady exchanges back to back without a loop turn between (docs/decisions/0101).
+
+        After a steady lane's request, the reply is waited for here, on the port, and a
+        reply the lane takes sends the next request at once, and so on: the loop's poll,
+        its callback and the driver's timers are left out of each exchange. The burst ends
+        at anything else, each left to the loop as it would be without a burst (an idle
+        time before the next request within :data:`BURST` is slept here, as the step's
+        short idle times are, and the request sent by the step at its end): a reply
+        the lane does not take (stepped here as any reply), no reply by its deadline or
+        by the end of :data:`BURST` (the timer or the next read sees to it), an error or
+        hang-up on the port (the loop's reader reports it), and a callback waiting in the
+        loop (a command relayed from the hub: the reply read meanwhile is handed to the
+        loop after it, so the next request carries what the command changed)."""
+        engine, link, lane, protocol = self.engine, self.link, self._lane, self.protocol
+        waiting = self._loop_ready
+        end = self._time() + BURST
+        for _ in range(BURST_TURNS):
+            if lane is None or self._stopped or self._writes or waiting:
+                return
+            deadline = engine.next_deadline()
+            if deadline is None or self._queued:
+                return
+            if not engine.awaiting_reply():  # an idle time before the next request
+                if deadline > end:
+                    return
+                wait = deadline - self._time()
+                if wait > 0 and link.wait_readable(wait):
+                    return  # bytes in an idle time: the loop's reader takes them
+                self._step(None)  # the request, as the timer's step would send it
+                continue
+            wait = min(deadline, end) - self._time()
+            if wait <= 0 or not link.wait_readable(wait):
+                return
+            data = link.take()
+            if not data:
+                return
+            now = self._time()
+            if waiting:
+                self.bursts_yielded += 1
+                self.loop.call_soon(self._on_data, data, now)
+                return
+            actions = lane(data, now, SLEEP_LIMIT) if protocol.receiving() is None else None
+            if actions is None:
+                self._on_data(data, now)
+                return
+            self.burst_taken += 1
+            self._lane_turn(actions)
 
     # ------------------------------------------------------------------ sending
 

@@ -23,13 +23,14 @@ late.
 from __future__ import annotations
 
 import asyncio
+import collections
 import ctypes
 import ctypes.util
 import logging
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sized
 from typing import Final, Protocol
 
 log = logging.getLogger(__name__)
@@ -241,3 +242,23 @@ def loop_clock(loop: asyncio.AbstractEventLoop) -> Callable[[], float]:
     if getattr(type(loop), "time", None) is asyncio.BaseEventLoop.time:
         return time.monotonic
     return loop.time
+
+
+class _NeverReady:
+    """No callback is ever seen waiting (a loop without asyncio's ready queue)."""
+
+    def __bool__(self) -> bool:
+        return False
+
+
+def loop_ready(loop: asyncio.AbstractEventLoop) -> Sized | _NeverReady:
+    """Something true while callbacks wait to run in ``loop`` (those given to
+    ``call_soon`` and ``call_soon_threadsafe``, a timer's once it is due): asyncio's own
+    queue of them, read without a call, so a driver that keeps the loop for a while can
+    see at once that something else wants it. A loop without that queue (not asyncio's
+    own) gives something never true: the driver keeps the loop only as long as its own
+    bound. ``tests/link/test_stream_burst.py`` checks the queue is where this looks."""
+    ready = getattr(loop, "_ready", None)  # asyncio.BaseEventLoop's deque of handles
+    if isinstance(ready, collections.deque):
+        return ready
+    return _NeverReady()

@@ -338,7 +338,10 @@ class ProfibusAdapter:
         self._port_state = PortState.OPEN
         self._port_error = None
         self._link = link
-        self._driver = LineDriver(self.master, link, self._on_action, self._on_flushed_noise)
+        bursts = self.links is not None and self.links.far_end_apart()
+        self._driver = LineDriver(
+            self.master, link, self._on_action, self._on_flushed_noise, bursts=bursts
+        )
         if self._loop is not None:
             self._dispatch(self.master.reset(self._loop.time()))
         self._driver.start()

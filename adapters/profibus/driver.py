@@ -83,6 +83,8 @@ class LineDriver(StreamDriver[Event]):
         on_action: Callable[[Any], None] = lambda action: None,
         on_noise: Callable[[LineNoise], None] = lambda noise: None,
         on_stepped: Callable[[], None] = lambda: None,
+        *,
+        bursts: bool = False,
     ) -> None:
         self.stream = FdlStream()
         super().__init__(
@@ -92,6 +94,7 @@ class LineDriver(StreamDriver[Event]):
             on_action=on_action,
             on_flushed=_noise(on_noise),
             on_stepped=on_stepped,
+            bursts=bursts,
         )
 
     @property

@@ -16,7 +16,9 @@
   line's error counters (retries, timeouts, bad telegrams: whole run, come-up included),
   and every 0.5 s the CPU time of each part of the gateway (:mod:`bench.plant.cpusplit`:
   each line's thread, the daemon's loop split by what it runs, Zenoh's threads);
-- ``--profile``: the whole run under cProfile, its stats written to FILE at the end.
+- ``--profile``: the whole run under cProfile, its stats written to FILE at the end;
+- ``BENCH_PROFIBUS_BURSTS=0`` in the environment: the Profibus line without its bursts of
+  steady exchanges (docs/decisions/0101), to compare.
 
 The daemon is the real one (``gateway.runtime.daemon.Daemon``), set up as ``drive-gateway run``
 sets it up; only the two figure hooks above are added.
@@ -154,6 +156,15 @@ async def _daemon(config_path: str, record: str | None) -> int:
             _write(record, online(), total, final=True)
 
 
+def _bursts_from_env() -> None:
+    """``BENCH_PROFIBUS_BURSTS=0``: the Profibus line without its bursts of steady
+    exchanges (docs/decisions/0101), for a comparison with them."""
+    if os.environ.get("BENCH_PROFIBUS_BURSTS") == "0":
+        from adapters.link.serial import SerialPort
+
+        SerialPort.far_end_apart = lambda self: False  # type: ignore[method-assign]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(prog="python -m bench.plant.launch")
     parser.add_argument("--record", help="JSON: drives online, then each line's cycles")
@@ -162,6 +173,7 @@ def main() -> None:
     parser.add_argument("argv", nargs=argparse.REMAINDER, help="-- drive-gateway arguments")
     args = parser.parse_args()
     pin_from_env()
+    _bursts_from_env()
     argv = [a for a in args.argv if a != "--"] if args.argv[:1] == ["--"] else args.argv
     canbus.register()
     profiler = cProfile.Profile() if args.profile else None

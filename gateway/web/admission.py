@@ -43,7 +43,7 @@ from aiohttp.http_exceptions import HttpProcessingError
 
 from gateway.errors import StartupError
 from gateway.ratelimit import LogRateLimit
-from gateway.web.metrics import WebCounters
+from gateway.web.counters import WebCounters
 from gateway.web.rate import RequestRate
 from gateway.webconfig import IpNetwork, WebSection
 

@@ -38,8 +38,8 @@ from gateway.access.sessions import COOKIE, CSRF_HEADER, Session, Sessions, csrf
 from gateway.access.users import User
 from gateway.errors import GatewayError
 from gateway.web.admission import RefusalLog, peer_of
+from gateway.web.counters import WebCounters
 from gateway.web.hosts import origin_admitted
-from gateway.web.metrics import WebCounters
 from gateway.web.tokens import TokenFailures
 from gateway.webconfig import WebSection
 

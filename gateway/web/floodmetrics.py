@@ -27,7 +27,7 @@ from gateway.frontend import RuntimeView
 from gateway.web.views import bus_diagnostics
 
 if TYPE_CHECKING:
-    from gateway.web.metrics import WebCounters
+    from gateway.web.counters import WebCounters
 
 _NS = "drive_gateway"
 

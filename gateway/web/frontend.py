@@ -63,10 +63,11 @@ from gateway.web.admission import (
     peer_of,
 )
 from gateway.web.auth import Refused, WebAuth
+from gateway.web.counters import WebCounters
 from gateway.web.feed import PUSH_PERIOD, SEND_TIMEOUT, ClientQueue, Feed
 from gateway.web.history import ring_json
 from gateway.web.hosts import host_admitted, origin_admitted, shown
-from gateway.web.metrics import MetricsSnapshot, WebCounters, make_registry
+from gateway.web.metrics import MetricsSnapshot, make_registry
 from gateway.web.page import check_template
 from gateway.web.page import render as render_page
 from gateway.web.views import bus_diagnostics, buses_json, drive_row, drives_json, health_json

@@ -31,6 +31,7 @@ from prometheus_client.registry import Collector
 
 from gateway.frontend import RuntimeView
 from gateway.model import CommState, DriveStatus
+from gateway.web.counters import WebCounters
 from gateway.web.floodmetrics import FLOOD_METRICS, FloodCollector
 from gateway.web.views import (
     BUS_FIGURES,
@@ -119,44 +120,6 @@ def _gauge(name: str, labels: list[str] | None = None) -> GaugeMetricFamily:
 
 def _counter(name: str, labels: list[str] | None = None) -> CounterMetricFamily:
     return CounterMetricFamily(name, _help(name), labels=labels or [])
-
-
-class WebCounters:
-    """What the web front end counts itself (besides the feed's counters)."""
-
-    def __init__(self) -> None:
-        self.refused: dict[str, int] = dict.fromkeys(
-            (
-                "host",
-                "origin",
-                "token",
-                "token_limit",
-                "commands_off",
-                "pages",
-                "pages_per_peer",
-                "login",
-                "login_limit",
-                "login_busy",
-                "role",
-                "csrf",
-                "login_required",
-            ),
-            0,
-        )
-        """Requests refused, by reason."""
-        self.logins: dict[str, int] = {"success": 0, "failure": 0, "limited": 0}
-        """Web logins by result (limited: refused unchecked, too many failures)."""
-        self.commands: dict[str, int] = {"accepted": 0, "refused": 0}
-        self.connections: dict[str, int] = dict.fromkeys(
-            ("accepted", "refused", "over_limit", "over_peer_limit"), 0
-        )
-        """Connections by what became of them at accept (refused: not in web.allow)."""
-        self.connections_open = 0
-        self.timeouts: dict[str, int] = {"header": 0, "body": 0, "answer": 0}
-        self.clients_open = 0  # pages
-        self.clients_over_budget = 0
-        self.metrics_renders = 0
-        self.throttled = 0  # requests held back: their address was over web.request_rate
 
 
 class MetricsSnapshot:

@@ -19,8 +19,9 @@ from adapters.canopen.codec import frames as co
 from adapters.devicenet.codec.dupmac import DupMacCheck, DupMacKind
 from gateway.adapter import EventKind
 from gateway.runtime.lineport import OUTBOX_EVENTS
+from gateway.web.counters import WebCounters
 from gateway.web.floodmetrics import FLOOD_METRICS, FloodCollector
-from gateway.web.metrics import METRICS, WebCounters
+from gateway.web.metrics import METRICS
 from gateway.webconfig import WebLimits
 from tests.support.timing import scaled
 from tests.web.harness import TOKEN_SHA256, Demo, demo_daemon, web_section

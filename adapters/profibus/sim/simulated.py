@@ -43,6 +43,9 @@ class SimulatedLine(SerialLinks):
         """The simulated slaves once started (tests inject faults through it)."""
         self.path: str | None = None
 
+    def far_end_apart(self) -> bool:
+        return False  # the simulated slaves answer from this loop
+
     def start(self) -> str:
         line = SimLine(
             DpSlave(
