@@ -17,6 +17,7 @@ from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from gateway.history.store import HistoryDb, HistoryStore
 from tests.support.net import zenoh_endpoint
+from tests.support.tcpcut import TcpCut
 from tests.support.timing import scaled
 from tests.zenoh.client import Client, Inbox, client_config
 from tests.zenoh.conftest import HEARTBEAT, READY_LINE, GatewayProcess, gateway_config
@@ -229,3 +230,49 @@ def test_an_advanced_subscriber_gets_the_events_it_missed_while_away(
         session.close()
     missed = [t for t in got if marker in t and "_live" not in t]
     assert [t.split(": ")[-1] for t in missed] == [f"{marker}_{i}" for i in range(n)], missed
+
+
+CUT = 30.0  # s the network is cut for (issue 37): longer than Zenoh's lease (10 s)
+
+
+def test_an_advanced_subscriber_cut_off_for_30_s_gets_what_it_missed(
+    history_gateway: Running,
+) -> None:
+    """The subscriber's session stays open while the network between it and the gateway
+    is cut for 30 s (longer than Zenoh's 10 s lease: both ends drop the link); N events
+    happen meanwhile (seen committed in the history, so published while it was cut off).
+    When the network is back, the session connects again by itself and the same advanced
+    subscriber gets all N, in order, and then the live ones."""
+    key = f"{PREFIX}/drives/d2/events"
+    endpoint = history_gateway.process.endpoint
+    marker = f"c{time.monotonic_ns()}"
+    store = HistoryStore(history_gateway.path)
+
+    def recorded() -> int:
+        return sum(marker in e.text for e in store.events("d2", 0, time.time() + 60))
+
+    n = 20
+    inbox: Inbox[str] = Inbox()
+    with TcpCut(int(endpoint.rsplit(":", 1)[1])) as network:
+        session = zenoh.open(client_config(f"tcp/127.0.0.1:{network.port}"))
+        try:
+            advanced(session, key, inbox)
+            refuse(endpoint, [f"{marker}_live"])  # the commander is not behind the cut
+            inbox.until(lambda text: f"{marker}_live" in text, TIMEOUT)
+            network.cut()
+            cut_at = time.monotonic()
+            refuse(endpoint, [f"{marker}_{i}" for i in range(n)])
+            until(lambda: recorded() == n + 1, f"{n} refusals recorded")
+            time.sleep(max(0.0, CUT - (time.monotonic() - cut_at)))  # the cut's length
+            assert network.accepted == 1  # nothing got through meanwhile
+            network.restore()
+            got: list[str] = []
+            while sum(f"{marker}_" in t and "_live" not in t for t in got) < n:
+                got.append(inbox.get(timeout=TIMEOUT))
+            refuse(endpoint, [f"{marker}_after"])
+            inbox.until(lambda text: f"{marker}_after" in text, TIMEOUT)
+        finally:
+            session.close()
+    assert network.accepted >= 2  # the session connected again through the network
+    missed = [t.split(": ")[-1] for t in got if marker in t and "_live" not in t]
+    assert missed == [f"{marker}_{i}" for i in range(n)], missed
