@@ -12,7 +12,9 @@ asked at 1 ms wakes the loop a thousand times a second). The server's sessions
 - monitored items beyond ``max_monitored_items`` over all the subscriptions of the session
   that owns the subscription are refused one by one (BadTooManyMonitoredItems): the items
   of the request within the limit are created, the rest refused;
-- a subscription transferred from another session counts like one created.
+- a subscription transferred from another session counts like one created;
+- a session's subscriptions end with it, even when its CloseSession asks to keep them
+  (kept, they would be held by no session, out of every limit).
 
 What a session holds is counted from asyncua's own subscriptions each time (never a tally
 kept beside them), so a deleted item, a deleted or expired subscription and a closed

@@ -150,6 +150,12 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
             out.append(result)
         return out
 
+    async def close_session(self, delete_subs: bool = True) -> None:
+        """A client's session takes its subscriptions with it, whatever its CloseSession
+        asks: one kept for a later TransferSubscriptions would be held by no session, out
+        of every session's limits (a client could pile them up, closing and reopening)."""
+        await super().close_session(delete_subs or self.guard is not None)
+
     def touch(self) -> None:
         super().touch()
         self.last_request = time.monotonic()

@@ -157,6 +157,17 @@ async def test_a_closed_session_frees_what_it_held(gateway: Gateway) -> None:
         assert all(isinstance(h, int) for h in handles)
 
 
+async def test_a_session_closed_keeping_its_subscriptions_takes_them_with_it(
+    gateway: Gateway,
+) -> None:
+    """CloseSession with DeleteSubscriptions false: they would be held by no session."""
+    async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
+        sub = await client.create_subscription(100, Changes())
+        await sub.subscribe_data_change(readings(client, "m1", READINGS[:3]))
+        await client.uaclient.close_session(False)
+        assert service(gateway).subscriptions == {}
+
+
 async def test_a_publishing_interval_below_the_floor_is_revised_up(gateway: Gateway) -> None:
     async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
         revised = {}
