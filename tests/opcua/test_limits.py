@@ -16,6 +16,8 @@ from asyncua import Client, Node, ua
 from asyncua.server.address_space import AddressSpace
 from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.subscription_service import SubscriptionService
+from hypothesis import given
+from hypothesis import strategies as st
 
 from gateway.opcua.frontend import OpcuaFrontEnd
 from gateway.opcua.limits import (
@@ -27,6 +29,7 @@ from gateway.opcua.limits import (
     SessionLimits,
     held_by,
     monitored_items_in,
+    server_wide_subscriptions,
 )
 from gateway.opcua.sessions import GatewaySession
 from tests.opcua.harness import TIMEOUT, Gateway, running_gateway
@@ -140,6 +143,38 @@ async def test_monitored_items_beyond_the_limit_are_refused_one_by_one(gateway: 
     assert front_end(gateway).counted().refused == {"subscriptions": 0, "monitored_items": 3}
 
 
+async def test_items_added_to_another_sessions_subscription_count_for_its_owner(
+    gateway: Gateway,
+) -> None:
+    async with (
+        Client(gateway.endpoint, timeout=TIMEOUT) as owner,
+        Client(gateway.endpoint, timeout=TIMEOUT) as other,
+    ):
+        sub = await owner.create_subscription(100, Changes())
+        await sub.subscribe_data_change(readings(owner, "m1", READINGS[:4]))
+        requests = [
+            ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(
+                    NodeId=ua.NodeId(f"m2.{name}", 2), AttributeId=ua.AttributeIds.Value
+                ),
+                MonitoringMode=ua.MonitoringMode.Reporting,
+                RequestedParameters=ua.MonitoringParameters(ClientHandle=900 + i, QueueSize=1),
+            )
+            for i, name in enumerate(READINGS[:3])
+        ]
+        params = ua.CreateMonitoredItemsParameters(
+            SubscriptionId=sub.subscription_id, ItemsToCreate=requests
+        )
+        results = await other.uaclient.create_monitored_items(params)
+        assert [r.StatusCode.value for r in results] == [
+            ua.StatusCodes.Good,
+            ua.StatusCodes.BadTooManyMonitoredItems,
+            ua.StatusCodes.BadTooManyMonitoredItems,
+        ]
+        owner_id = service(gateway).subscriptions[sub.subscription_id].session_id
+        assert held_by(service(gateway), owner_id) == Held(subscriptions=1, monitored_items=5)
+
+
 async def test_a_closed_session_frees_what_it_held(gateway: Gateway) -> None:
     async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
         for drive in ("m1", "m2"):
@@ -237,6 +272,19 @@ async def test_a_transfer_over_the_limit_is_refused(gateway: Gateway) -> None:
 )
 def test_the_publishing_interval_a_subscription_gets(asked: float, revised: float) -> None:
     assert SessionLimits(20, 10_000, 0.05).publishing_interval(asked) == revised
+
+
+@given(st.floats(allow_nan=True, allow_infinity=True), st.floats(0.01, 60.0))
+def test_a_revised_publishing_interval_is_never_below_the_floor(asked: float, floor: float) -> None:
+    revised = SessionLimits(1, 1, floor).publishing_interval(asked)
+    assert floor * 1000.0 <= revised <= 3_600_000.0
+    if floor * 1000.0 <= asked <= 3_600_000.0:
+        assert revised == asked
+
+
+def test_asyncuas_bound_on_the_whole_server_never_speaks_before_a_sessions_limit() -> None:
+    assert server_wide_subscriptions(32, SessionLimits(20, 10_000, 0.05)) == 1_000
+    assert server_wide_subscriptions(100, SessionLimits(20, 10_000, 0.05)) == 2_000
 
 
 def test_refusals_are_counted_each_and_logged_once_per_period_per_session(
