@@ -12,6 +12,9 @@ asked at 1 ms wakes the loop a thousand times a second). The server's sessions
 - monitored items beyond ``max_monitored_items`` over all the subscriptions of the session
   that owns the subscription are refused one by one (BadTooManyMonitoredItems): the items
   of the request within the limit are created, the rest refused;
+- a ModifyMonitoredItems gets its queue sizes revised as asyncua revises them at creation
+  (at most ``max_monitored_item_queue_size``; asyncua takes them as asked on a modify,
+  and 0 there is a queue without end);
 - a subscription transferred from another session counts like one created;
 - a session's subscriptions end with it, even when its CloseSession asks to keep them
   (kept, they would be held by no session, out of every limit).
@@ -85,6 +88,12 @@ class SessionLimits:
         return min(requested, MAX_PUBLISHING_INTERVAL)
 
 
+def queue_size(requested: int, cap: int) -> int:
+    """The queue an item gets, as asyncua revises it at creation: 0 (the server's choice)
+    the cap, else at most the cap."""
+    return cap if requested <= 0 else min(requested, cap)
+
+
 @dataclass(frozen=True, slots=True)
 class Held:
     """What one session holds now."""
@@ -156,6 +165,24 @@ class SessionGuard:
     def revised(self, params: ua.CreateSubscriptionParameters) -> ua.CreateSubscriptionParameters:
         interval = self.limits.publishing_interval(params.RequestedPublishingInterval)
         return replace(params, RequestedPublishingInterval=interval)
+
+    @staticmethod
+    def modified(
+        params: ua.ModifyMonitoredItemsParameters, cap: int
+    ) -> ua.ModifyMonitoredItemsParameters:
+        """The queue sizes of a ModifyMonitoredItems revised as asyncua revises them at
+        creation (it takes them as asked on a modify: 0 there is a queue without end)."""
+        items = [
+            replace(
+                item,
+                RequestedParameters=replace(
+                    item.RequestedParameters,
+                    QueueSize=queue_size(item.RequestedParameters.QueueSize, cap),
+                ),
+            )
+            for item in params.ItemsToModify
+        ]
+        return replace(params, ItemsToModify=items)
 
     def room_for_items(self, service: SubscriptionService, owner: ua.NodeId) -> int:
         """How many more monitored items the session ``owner`` may hold."""

@@ -120,8 +120,11 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
     async def modify_monitored_items(
         self, params: ua.ModifyMonitoredItemsParameters
     ) -> list[ua.MonitoredItemModifyResult]:
-        """asyncua echoes the sampling interval asked for; the items are sampled at their
+        """The queue sizes revised as at creation (gateway/opcua/limits.py). asyncua
+        echoes the sampling interval asked for; the items are sampled at their
         subscription's (revised) publishing interval, which the answer says."""
+        if self.guard is not None:
+            params = self.guard.modified(params, self.iserver.max_monitored_item_queue_size)
         results: list[ua.MonitoredItemModifyResult] = await super().modify_monitored_items(params)
         sub = self.subscription_service.subscriptions.get(params.SubscriptionId)
         if self.guard is not None and sub is not None:

@@ -229,6 +229,17 @@ async def test_a_publishing_interval_below_the_floor_is_revised_up(gateway: Gate
         assert modified.RevisedSamplingInterval == 50.0
 
 
+async def test_a_modified_queue_size_is_revised_as_at_creation(gateway: Gateway) -> None:
+    """asyncua takes a modify's queue size as asked: 0 would be a queue without end."""
+    async with Client(gateway.endpoint, timeout=TIMEOUT) as client:
+        sub = await client.create_subscription(100, Changes())
+        handle = await sub.subscribe_data_change(node(client, "m1", "Comm"))
+        cap = 10_000  # asyncua's max_monitored_item_queue_size
+        for asked, revised in ((0, cap), (2**32 - 1, cap), (5, 5)):
+            (modified,) = await sub.modify_monitored_item(handle, 100.0, new_queuesize=asked)
+            assert modified.RevisedQueueSize == revised
+
+
 async def _ignore(*_args: object) -> None:
     return None
 
