@@ -10,7 +10,9 @@ Layout (see config/site.example.toml for every key)::
                          (gateway/webconfig.py)
     [history]            enabled, path, period, batch_interval, max_age, max_size_mb
     [opcua]              enabled, bind, security, certificate, private_key, trusted_clients,
-                         publish_interval, max_sessions (gateway/opcuaconfig.py)
+                         publish_interval, max_sessions, max_subscriptions,
+                         max_monitored_items, min_publishing_interval
+                         (gateway/opcuaconfig.py)
     [[users]]            name, role, password, token_sha256 (gateway/access/users.py)
     [audit]              file, max_kib, backups, journal (gateway/access/audit.py)
     [buses.<name>]       adapter = "profibus" | "devicenet" | an installed adapter's name

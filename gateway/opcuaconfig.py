@@ -20,6 +20,12 @@ never imports the front end), read whether or not the front end is part of the b
 - ``publish_interval``: s between the batches in which drive values reach the server (and
   the fastest a subscription sees them change).
 - ``max_sessions``: OPC UA sessions open at once.
+- ``max_subscriptions``: subscriptions one session may hold at once (beyond:
+  BadTooManySubscriptions).
+- ``max_monitored_items``: monitored items one session may hold at once, over all its
+  subscriptions (beyond: BadTooManyMonitoredItems for each item over).
+- ``min_publishing_interval``: s, the shortest publishing (and sampling) interval a
+  subscription gets: a shorter one asked for is revised up to it.
 """
 
 from __future__ import annotations
@@ -57,6 +63,9 @@ class OpcuaSection:
     trusted_clients: Path | None = None
     publish_interval: float = 0.1
     max_sessions: int = 32
+    max_subscriptions: int = 20
+    max_monitored_items: int = 10_000
+    min_publishing_interval: float = 0.05
 
     @property
     def endpoint(self) -> str:
@@ -140,6 +149,15 @@ def read_opcua_section(t: Table, base: Path) -> OpcuaSection:
             "publish_interval", d.publish_interval, minimum=0.02, maximum=60.0
         ),
         max_sessions=t.integer("max_sessions", d.max_sessions, minimum=1, maximum=1000),
+        max_subscriptions=t.integer(
+            "max_subscriptions", d.max_subscriptions, minimum=1, maximum=1000
+        ),
+        max_monitored_items=t.integer(
+            "max_monitored_items", d.max_monitored_items, minimum=1, maximum=1_000_000
+        ),
+        min_publishing_interval=t.number(
+            "min_publishing_interval", d.min_publishing_interval, minimum=0.01, maximum=60.0
+        ),
     )
     for key, reason in section_problems(section):
         t.errors.append(t.error(key, reason))

@@ -43,6 +43,14 @@ from gateway.model import CommState, DriveState, Source
 from gateway.opcua.alarms import Alarms
 from gateway.opcua.commands import Commands
 from gateway.opcua.history import DriveHistory, ReadingHistory
+from gateway.opcua.limits import (
+    UAPROCESSOR_LOG,
+    OwnRefusalLines,
+    Refusals,
+    SessionGuard,
+    SessionLimits,
+    server_wide_subscriptions,
+)
 from gateway.opcua.security import ensure_certificate, policies, thumbprint, trust_clients
 from gateway.opcua.sessions import CALLER, Role, RoleMap, Sessions, default_roles
 from gateway.opcua.space import (
@@ -124,6 +132,8 @@ class OpcuaFrontEnd:
         self.stretched = 0  # batches after which the period stretched (LOOP_SHARE)
         self._stretch = 1.0
         self.calls = 0
+        self.refusals = Refusals()
+        """Subscriptions and monitored items refused over a session's limits."""
 
     # ------------------------------------------------------------ life cycle
 
@@ -150,18 +160,27 @@ class OpcuaFrontEnd:
                 trusted,
                 self.section.trusted_clients,
             )
-        self.sessions = Sessions(server.iserver, self.section.max_sessions)
+        limits = SessionLimits.of(self.section)
+        server.iserver.max_subscriptions = server_wide_subscriptions(
+            self.section.max_sessions, limits
+        )
+        self.sessions = Sessions(
+            server.iserver, self.section.max_sessions, SessionGuard(limits, self.refusals)
+        )
         ns = await server.register_namespace(NAMESPACE)
         await self._build(server, ns)
         try:
             await server.start()
         except OSError as exc:
             raise self._bind_error(exc) from None
+        own_lines = OwnRefusalLines()
+        logging.getLogger(UAPROCESSOR_LOG).addFilter(own_lines)
         try:
             self._log_serving(pair)
             self.ready.set()
             await self._serve()
         finally:
+            logging.getLogger(UAPROCESSOR_LOG).removeFilter(own_lines)
             self.ready.clear()
             with contextlib.suppress(Exception):
                 async with asyncio.timeout(STOP_TIMEOUT):
@@ -481,6 +500,7 @@ class OpcuaFrontEnd:
             requests={"call": self.calls},
             commands_accepted=self.commands.accepted,
             commands_refused=self.commands.refused,
+            refused=self.refusals.by_reason(),
             connections_accepted=0 if sessions is None else sessions.opened,
             connections_over_limit=0 if sessions is None else sessions.refused,
             connections_open=0 if sessions is None else len(sessions),

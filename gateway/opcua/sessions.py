@@ -12,6 +12,10 @@ Roles: :data:`RoleMap` maps a session's user to a :class:`Role`. The default
 only (the demo), and lets none operate elsewhere: commanding drives over the network
 waits for users mapped to roles (:func:`set_role_map` is the hook a user directory plugs
 into; reading and subscribing stay open to every session).
+
+Limits: what a client's session may hold (subscriptions, monitored items, the fastest
+publishing) is checked by its :class:`~gateway.opcua.limits.SessionGuard` before asyncua
+creates it (gateway/opcua/limits.py); the server's own session has none.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from __future__ import annotations
 import contextvars
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any
 
@@ -27,6 +31,7 @@ from asyncua import ua
 from asyncua.server.internal_server import InternalServer
 from asyncua.server.internal_session import InternalSession
 
+from gateway.opcua.limits import SessionGuard
 from gateway.opcuaconfig import OpcuaSection, is_loopback
 
 
@@ -64,6 +69,8 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
     the time of its last request (the command watchdog of the drives it controls)."""
 
     last_request: float = 0.0
+    guard: SessionGuard | None = None
+    """The limits of a client's session (None: the server's own session)."""
 
     async def call(self, params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
         token = CALLER.set(self)
@@ -72,6 +79,85 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
             return results
         finally:
             CALLER.reset(token)
+
+    async def create_subscription(
+        self,
+        params: ua.CreateSubscriptionParameters,
+        callback: Callable[..., Any],
+        request_callback: Callable[..., Any] | None = None,
+    ) -> ua.CreateSubscriptionResult:
+        if self.guard is not None:
+            self.guard.admit_subscription(self.subscription_service, self.session_id, self.client)
+            params = self.guard.revised(params)
+        result: ua.CreateSubscriptionResult = await super().create_subscription(
+            params, callback, request_callback
+        )
+        return result
+
+    async def create_monitored_items(
+        self, params: ua.CreateMonitoredItemsParameters
+    ) -> list[ua.MonitoredItemCreateResult]:
+        """The items within the limit of the subscription's session are created, the rest
+        refused one by one (an unknown subscription: asyncua's answer)."""
+        sub = self.subscription_service.subscriptions.get(params.SubscriptionId)
+        if self.guard is None or sub is None:
+            return await self._create_items(params)
+        room = self.guard.room_for_items(self.subscription_service, sub.session_id)
+        items = list(params.ItemsToCreate)
+        if len(items) <= room:
+            return await self._create_items(params)
+        created = await self._create_items(replace(params, ItemsToCreate=items[:room]))
+        return created + self.guard.refuse_items(self.client, len(items) - room)
+
+    async def _create_items(
+        self, params: ua.CreateMonitoredItemsParameters
+    ) -> list[ua.MonitoredItemCreateResult]:
+        if not params.ItemsToCreate:
+            return []
+        results: list[ua.MonitoredItemCreateResult] = await super().create_monitored_items(params)
+        return results
+
+    async def modify_monitored_items(
+        self, params: ua.ModifyMonitoredItemsParameters
+    ) -> list[ua.MonitoredItemModifyResult]:
+        """The queue sizes revised as at creation (gateway/opcua/limits.py). asyncua
+        echoes the sampling interval asked for; the items are sampled at their
+        subscription's (revised) publishing interval, which the answer says."""
+        if self.guard is not None:
+            params = self.guard.modified(params, self.iserver.max_monitored_item_queue_size)
+        results: list[ua.MonitoredItemModifyResult] = await super().modify_monitored_items(params)
+        sub = self.subscription_service.subscriptions.get(params.SubscriptionId)
+        if self.guard is not None and sub is not None:
+            for result in results:
+                result.RevisedSamplingInterval = sub.data.RevisedPublishingInterval
+        return results
+
+    async def transfer_subscriptions(
+        self, params: ua.TransferSubscriptionsParameters, callback: Callable[..., Any]
+    ) -> list[ua.TransferResult]:
+        """A subscription taken over from another session counts like one created: over
+        this session's limits it stays where it was."""
+        if self.guard is None:
+            results: list[ua.TransferResult] = await super().transfer_subscriptions(
+                params, callback
+            )
+            return results
+        out: list[ua.TransferResult] = []
+        for sub_id in params.SubscriptionIds:
+            result = self.guard.transfer_refusal(
+                self.subscription_service, self.session_id, self.client, int(sub_id)
+            )
+            if result is None:
+                one = replace(params, SubscriptionIds=[sub_id])
+                (result,) = await super().transfer_subscriptions(one, callback)
+            out.append(result)
+        return out
+
+    async def close_session(self, delete_subs: bool = True) -> None:
+        """A client's session takes its subscriptions with it, whatever its CloseSession
+        asks: one kept for a later TransferSubscriptions would be held by no session, out
+        of every session's limits (a client could pile them up, closing and reopening)."""
+        await super().close_session(delete_subs or self.guard is not None)
 
     def touch(self) -> None:
         super().touch()
@@ -94,9 +180,12 @@ CALLER: contextvars.ContextVar[GatewaySession | None] = contextvars.ContextVar(
 class Sessions:
     """The open sessions of one server, at most ``limit`` at once."""
 
-    def __init__(self, iserver: InternalServer, limit: int) -> None:
+    def __init__(
+        self, iserver: InternalServer, limit: int, guard: SessionGuard | None = None
+    ) -> None:
         self._iserver = iserver
         self.limit = limit
+        self.guard = guard
         self._open: dict[str, GatewaySession] = {}
         self.refused = 0
         self.opened = 0
@@ -114,6 +203,7 @@ class Sessions:
         )
         session.touch()
         if external:
+            session.guard = self.guard
             self._open[session.client] = session
             self.opened += 1
         return session

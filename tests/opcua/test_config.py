@@ -53,6 +53,22 @@ def test_a_signed_server_on_the_network(tmp_path: Path) -> None:
     assert (section.publish_interval, section.max_sessions) == (0.25, 8)
 
 
+def test_the_per_session_limits(tmp_path: Path) -> None:
+    default = load(write(tmp_path, "[opcua]\nbind = '127.0.0.1:4840'\n")).opcua
+    # a SCADA subscribes to every drive's readings: 220 drives x ~10 items fit by default
+    assert (default.max_subscriptions, default.max_monitored_items) == (20, 10_000)
+    assert default.min_publishing_interval == 0.05
+    section = load(
+        write(
+            tmp_path,
+            "[opcua]\nbind = '127.0.0.1:4840'\nmax_subscriptions = 4\n"
+            "max_monitored_items = 500\nmin_publishing_interval = 0.25\n",
+        )
+    ).opcua
+    assert (section.max_subscriptions, section.max_monitored_items) == (4, 500)
+    assert section.min_publishing_interval == 0.25
+
+
 def test_security_none_is_refused_off_loopback(tmp_path: Path) -> None:
     assert errors(tmp_path, "[opcua]\nbind = '0.0.0.0:4840'\n") == [
         'site.toml: opcua.security: "none" is refused on 0.0.0.0, which is not a loopback '
@@ -88,6 +104,30 @@ def test_security_none_is_refused_off_loopback(tmp_path: Path) -> None:
             "site.toml: opcua.publish_interval: 0.001 is below the minimum 0.02",
         ),
         ("bind = '127.0.0.1:4840'\nport = 4840\n", "site.toml: opcua.port: unknown key"),
+        (
+            "bind = '127.0.0.1:4840'\nmax_subscriptions = 0\n",
+            "site.toml: opcua.max_subscriptions: 0 is below the minimum 1",
+        ),
+        (
+            "bind = '127.0.0.1:4840'\nmax_subscriptions = 2.5\n",
+            "site.toml: opcua.max_subscriptions: must be an integer, not a number",
+        ),
+        (
+            "bind = '127.0.0.1:4840'\nmax_monitored_items = '10k'\n",
+            "site.toml: opcua.max_monitored_items: must be an integer, not a string",
+        ),
+        (
+            "bind = '127.0.0.1:4840'\nmax_monitored_items = 2000000\n",
+            "site.toml: opcua.max_monitored_items: 2000000 is above the maximum 1000000",
+        ),
+        (
+            "bind = '127.0.0.1:4840'\nmin_publishing_interval = 0.001\n",
+            "site.toml: opcua.min_publishing_interval: 0.001 is below the minimum 0.01",
+        ),
+        (
+            "bind = '127.0.0.1:4840'\nmin_publishing_interval = true\n",
+            "site.toml: opcua.min_publishing_interval: must be a number, not a boolean",
+        ),
         (
             "bind = '127.0.0.1:4840'\ntrusted_clients = 'trusted'\n",
             'site.toml: opcua.trusted_clients: a trust list needs a signed mode ("sign", '
