@@ -311,7 +311,8 @@ async def test_a_silent_page_closed_by_its_unanswered_ping_frees_its_connection(
                     gw.hub.update(drive, speed_rpm=float(i))
                 gw.web.feed.step()
                 await asyncio.sleep(0.005)
-            assert silent not in gw.web._pages and counters.clients_open == 1
+            # its close may still be under way (a loaded machine: megabytes to drop)
+            await until(lambda: silent not in gw.web._pages and counters.clients_open == 1)
             await until(lambda: counters.connections_open == 1)  # its connection is gone too
             assert counters.clients_over_budget == 0
         finally:
