@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import os
 import signal
 import statistics
@@ -84,6 +85,7 @@ class Side:
     exchanges: int
     thread_cpu: float  # s
     process_cpu: float  # s
+    system_cpu: float = math.nan  # s of the thread's CPU in the kernel
 
     def per_exchange(self, cpu: float) -> float:
         return cpu / self.exchanges if self.exchanges else float("nan")
@@ -118,6 +120,18 @@ def _asks_reply(frame: bytes) -> bool:
     """A Data_Exchange request (SD2 or SD3, no SAPs), not a Global_Control broadcast."""
     da = {0x68: 4, 0xA2: 1}.get(frame[0]) if frame else None
     return da is not None and len(frame) > da and not frame[da] & 0x80 and frame[da] != 127
+
+
+def _thread_system(native_id: int | None) -> float:
+    """The kernel's share of a thread's CPU (s), from /proc (stime, in clock ticks)."""
+    if native_id is None:
+        return math.nan
+    try:
+        stat = Path(f"/proc/self/task/{native_id}/stat").read_text()
+    except OSError:
+        return math.nan
+    fields = stat.rsplit(")", 1)[1].split()
+    return int(fields[12]) / os.sysconf("SC_CLK_TCK")  # field 15 of stat(5)
 
 
 def _thread_cpu(thread: threading.Thread | None) -> float:
@@ -156,16 +170,19 @@ async def gateway_round(config_path: Path, capture: Capture, seconds: float) -> 
         if profile:
             import cProfile
 
-            prof = cProfile.Profile()
+            prof = cProfile.Profile(time.thread_time)  # CPU, not the waits
             await line.call(prof.enable)
+        tid = line.thread.native_id if line.thread is not None else None
         first, t0, p0 = exchanged(), _thread_cpu(line.thread), time.process_time()
+        s0 = _thread_system(tid)
         await asyncio.sleep(seconds)
         done, t1, p1 = exchanged(), _thread_cpu(line.thread), time.process_time()
+        s1 = _thread_system(tid)
         if profile:
             await line.call(prof.disable)
             prof.dump_stats(profile)
         capture.on = False
-        return Side(done - first, t1 - t0, p1 - p0)
+        return Side(done - first, t1 - t0, p1 - p0, s1 - s0)
     finally:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
@@ -202,6 +219,7 @@ def bare_round(link: Path, frames: list[bytes], seconds: float) -> Side:
     try:
         done = 0
         t0, p0 = time.thread_time(), time.process_time()
+        s0 = _thread_system(threading.get_native_id())
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             for frame in frames:
@@ -209,7 +227,8 @@ def bare_round(link: Path, frames: list[bytes], seconds: float) -> Side:
                 if not _read_reply(fd, time.monotonic() + 1.0):
                     break
                 done += 1
-        return Side(done, time.thread_time() - t0, time.process_time() - p0)
+        system = _thread_system(threading.get_native_id()) - s0
+        return Side(done, time.thread_time() - t0, time.process_time() - p0, system)
     finally:
         os.close(fd)
 
@@ -307,6 +326,8 @@ def run(rounds: int = ROUNDS, seconds: float = MEASURE) -> list[Figure]:
     line_cpu = med(s.per_exchange(s.thread_cpu) for s in gateway) * 1e6
     whole_cpu = med(s.per_exchange(s.process_cpu) for s in gateway) * 1e6
     loop_cpu = med(s.per_exchange(s.thread_cpu) for s in loop_bare) * 1e6
+    line_sys = med(s.per_exchange(s.system_cpu) for s in gateway) * 1e6
+    bare_sys = med(s.per_exchange(s.system_cpu) for s in bare) * 1e6
     rate = med(s.exchanges for s in gateway) / seconds
     bare_rate = med(s.exchanges for s in bare) / seconds
     note = f"{SLAVES} CFW700 at {BAUD} bit/s, paced slaves in a child; {rounds} rounds of {seconds:g} s"
@@ -335,6 +356,14 @@ def run(rounds: int = ROUNDS, seconds: float = MEASURE) -> list[Figure]:
             reference=round(bare_cpu, 2),
             note="a bare requester on an event loop (add_reader), the floor of an asyncio line; "
             + note,
+        ),
+        Figure(
+            "profibus_line_system_cpu_per_exchange",
+            round(line_sys, 2),
+            "us",
+            reference=round(bare_sys, 2),
+            note="of the line's thread, the part in the kernel (stime, 10 ms ticks); reference: "
+            "the bare requester's; " + note,
         ),
         Figure("profibus_line_exchange_rate", round(rate, 1), "1/s", reference=round(bare_rate, 1)),
     ]
