@@ -32,13 +32,13 @@ import cProfile
 import io
 import pstats
 import statistics
-import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 from bench.common import Figure, add_number, arg_parser, positive_int, print_figures
+from bench.linecpu import thread_cpu
 
 NODES: Final = 32
 SYNC: Final = 0.01  # s: the SYNC period (100 cycles/s; 32 nodes need 7.4 ms at 1 Mbit/s)
@@ -105,12 +105,6 @@ class Capture:
         return [c for c in out if c and c[0][0] == COB_SYNC]
 
 
-def _thread_cpu(thread: threading.Thread | None) -> float:
-    if thread is None or thread.ident is None:
-        return 0.0
-    return time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
-
-
 class _Counting:
     """Counts the hub updates the line hands over (``Hub.update`` wrapped)."""
 
@@ -164,10 +158,10 @@ async def gateway_round(
             await line.call(prof.enable)
         capture.frames.clear()
         capture.on = True
-        (s0, r0), t0, p0, u0 = figures(), _thread_cpu(line.thread), time.process_time(), 0
+        (s0, r0), t0, p0, u0 = figures(), thread_cpu(line.thread), time.process_time(), 0
         u0 = counting.count
         await asyncio.sleep(seconds)
-        (s1, r1), t1, p1 = figures(), _thread_cpu(line.thread), time.process_time()
+        (s1, r1), t1, p1 = figures(), thread_cpu(line.thread), time.process_time()
         u1 = counting.count
         capture.on = False
         if prof is not None:

@@ -30,13 +30,13 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
 from bench.common import Figure, add_counts, add_number, arg_parser, id_range, print_figures
+from bench.linecpu import thread_cpu
 
 NODES: Final = (8, 63)
 BITRATE: Final = 500_000
@@ -94,12 +94,6 @@ class Side:
         return cpu / self.polls if self.polls else float("nan")
 
 
-def _thread_cpu(thread: threading.Thread | None) -> float:
-    if thread is None or thread.ident is None:
-        return 0.0
-    return time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
-
-
 async def gateway_round(
     config_path: Path, seconds: float, profile: str | None = None
 ) -> tuple[Side, dict[int, bytes]]:
@@ -130,9 +124,9 @@ async def gateway_round(
         profiler = cProfile.Profile(time.thread_time) if profile else None
         if profiler is not None:
             await line.call(profiler.enable)
-        first, t0, p0 = polled(), _thread_cpu(line.thread), time.process_time()
+        first, t0, p0 = polled(), thread_cpu(line.thread), time.process_time()
         await asyncio.sleep(seconds)
-        done, t1, p1 = polled(), _thread_cpu(line.thread), time.process_time()
+        done, t1, p1 = polled(), thread_cpu(line.thread), time.process_time()
         if profiler is not None and profile:
             await line.call(profiler.disable)
             profiler.dump_stats(profile)

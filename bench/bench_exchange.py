@@ -16,8 +16,8 @@ Figures: CPU per exchange of the line's thread, and of the whole process (line, 
 hand-over), against the bare requester's CPU per exchange (target: ratio <= 2, issue 34).
 
 For comparisons: ``BENCH_NO_BURST=1`` measures the line without its bursts of steady
-exchanges (docs/decisions/0101); ``BENCH_EXCHANGE_PROFILE=FILE`` writes cProfile stats of
-the line's thread over the measured stretch.
+exchanges (docs/decisions/0101); ``BENCH_LINE_PROFILE=FILE`` writes a CPU-time profile of
+the line's thread over the measured stretch (:mod:`bench.linecpu`).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from bench.common import Figure, add_number, arg_parser, print_figures
+from bench.linecpu import line_profile, thread_cpu, thread_system
 
 SLAVES: Final = 8
 BAUD: Final = 1_500_000
@@ -122,24 +123,6 @@ def _asks_reply(frame: bytes) -> bool:
     return da is not None and len(frame) > da and not frame[da] & 0x80 and frame[da] != 127
 
 
-def _thread_system(native_id: int | None) -> float:
-    """The kernel's share of a thread's CPU (s), from /proc (stime, in clock ticks)."""
-    if native_id is None:
-        return math.nan
-    try:
-        stat = Path(f"/proc/self/task/{native_id}/stat").read_text()
-    except OSError:
-        return math.nan
-    fields = stat.rsplit(")", 1)[1].split()
-    return int(fields[12]) / os.sysconf("SC_CLK_TCK")  # field 15 of stat(5)
-
-
-def _thread_cpu(thread: threading.Thread | None) -> float:
-    if thread is None or thread.ident is None:
-        return 0.0
-    return time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
-
-
 async def gateway_round(config_path: Path, capture: Capture, seconds: float) -> Side:
     from gateway.config import load, load_adapter
     from gateway.model import CommState
@@ -166,21 +149,13 @@ async def gateway_round(config_path: Path, capture: Capture, seconds: float) -> 
             adapter._driver._bursts = False  # type: ignore[attr-defined]
         capture.frames.clear()
         capture.on = True
-        profile = os.environ.get("BENCH_EXCHANGE_PROFILE")
-        if profile:
-            import cProfile
-
-            prof = cProfile.Profile(time.thread_time)  # CPU, not the waits
-            await line.call(prof.enable)
         tid = line.thread.native_id if line.thread is not None else None
-        first, t0, p0 = exchanged(), _thread_cpu(line.thread), time.process_time()
-        s0 = _thread_system(tid)
-        await asyncio.sleep(seconds)
-        done, t1, p1 = exchanged(), _thread_cpu(line.thread), time.process_time()
-        s1 = _thread_system(tid)
-        if profile:
-            await line.call(prof.disable)
-            prof.dump_stats(profile)
+        async with line_profile(line):
+            first, t0, p0 = exchanged(), thread_cpu(line.thread), time.process_time()
+            s0 = thread_system(tid)
+            await asyncio.sleep(seconds)
+            done, t1, p1 = exchanged(), thread_cpu(line.thread), time.process_time()
+            s1 = thread_system(tid)
         capture.on = False
         return Side(done - first, t1 - t0, p1 - p0, s1 - s0)
     finally:
@@ -219,7 +194,7 @@ def bare_round(link: Path, frames: list[bytes], seconds: float) -> Side:
     try:
         done = 0
         t0, p0 = time.thread_time(), time.process_time()
-        s0 = _thread_system(threading.get_native_id())
+        s0 = thread_system(threading.get_native_id())
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             for frame in frames:
@@ -227,7 +202,7 @@ def bare_round(link: Path, frames: list[bytes], seconds: float) -> Side:
                 if not _read_reply(fd, time.monotonic() + 1.0):
                     break
                 done += 1
-        system = _thread_system(threading.get_native_id()) - s0
+        system = thread_system(threading.get_native_id()) - s0
         return Side(done, time.thread_time() - t0, time.process_time() - p0, system)
     finally:
         os.close(fd)

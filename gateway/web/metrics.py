@@ -85,6 +85,11 @@ METRICS: dict[str, str] = {
     f"{NS}_history_samples": "History samples by result (written, dropped, failed).",
     f"{NS}_history_events": "History events by result (written, dropped, failed).",
     f"{NS}_history_moved_aside": "History files moved aside as corrupt (a new one started).",
+    f"{NS}_opcua_calls": "OPC UA method calls (Run, Stop, QuickStop, Reset, SetSpeed).",
+    f"{NS}_opcua_commands": "OPC UA commands the hub accepted or refused.",
+    f"{NS}_opcua_refused": "OPC UA requests refused, by reason (a session's limits, roles).",
+    f"{NS}_opcua_sessions": "OPC UA sessions opened, or refused at max_sessions.",
+    f"{NS}_opcua_sessions_open": "OPC UA sessions open now.",
     f"{NS}_web_clients": "Web pages connected now (WebSocket).",
     f"{NS}_web_messages_dropped": "Push messages slow pages lost (each replaced by a snapshot).",
     f"{NS}_web_clients_disconnected": "Pages disconnected because they stayed stuck.",
@@ -164,6 +169,7 @@ class GatewayCollector(Collector):
         yield from self._modbus()
         yield from self._zenoh()
         yield from self._history()
+        yield from self._opcua()
         yield from self._web()
 
     def describe(self) -> Iterator[Metric]:
@@ -294,6 +300,25 @@ class GatewayCollector(Collector):
             commands.add_metric(["refused"], counted.commands_refused)
             dropped.add_metric([], counted.dropped)
         yield from (requests, commands, dropped)
+
+    def _opcua(self) -> Iterator[Metric]:
+        front_end = self.runtime.front_ends.get("opcua")
+        calls = _counter(f"{NS}_opcua_calls")
+        commands = _counter(f"{NS}_opcua_commands", ["result"])
+        refused = _counter(f"{NS}_opcua_refused", ["reason"])
+        sessions = _counter(f"{NS}_opcua_sessions", ["result"])
+        open_now = _gauge(f"{NS}_opcua_sessions_open")
+        if front_end is not None:
+            counted = front_end.counted()
+            calls.add_metric([], sum(counted.requests.values()))
+            commands.add_metric(["accepted"], counted.commands_accepted)
+            commands.add_metric(["refused"], counted.commands_refused)
+            for reason, count in counted.refused.items():
+                refused.add_metric([reason], count)
+            sessions.add_metric(["accepted"], counted.connections_accepted)
+            sessions.add_metric(["over_limit"], counted.connections_over_limit)
+            open_now.add_metric([], float(counted.connections_open))
+        yield from (calls, commands, refused, sessions, open_now)
 
     def _history(self) -> Iterator[Metric]:
         store = self.runtime.history

@@ -44,6 +44,7 @@ class FakeHistory:
     """A history store of made-up rows: speed_rpm = 10 * i at HISTORY_START + i."""
 
     calls: list[tuple[str, float, float, float | None]] = field(default_factory=list)
+    counters: None = None  # no writer here (a store's counters in /metrics)
     event_calls: list[tuple[str | None, float, float, int | None, bool]] = field(
         default_factory=list
     )

@@ -18,6 +18,7 @@ from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.subscription_service import SubscriptionService
 from hypothesis import given
 from hypothesis import strategies as st
+from prometheus_client import generate_latest
 
 from gateway.opcua.frontend import OpcuaFrontEnd
 from gateway.opcua.limits import (
@@ -32,6 +33,9 @@ from gateway.opcua.limits import (
     server_wide_subscriptions,
 )
 from gateway.opcua.sessions import GatewaySession
+from gateway.web.counters import WebCounters
+from gateway.web.feed import FeedCounters
+from gateway.web.metrics import make_registry
 from tests.opcua.harness import TIMEOUT, Gateway, running_gateway
 from tests.opcua.test_asyncua_e2e import Changes, node
 
@@ -95,6 +99,13 @@ async def test_subscriptions_beyond_the_limit_are_refused_and_deleting_frees_roo
             await other.create_subscription(100, Changes())
             await other.create_subscription(100, Changes())
     assert front_end(gateway).counted().refused == {"subscriptions": 6, "monitored_items": 0}
+    # and in /metrics, as the web front end renders them
+    text = generate_latest(
+        make_registry(gateway.daemon.runtime, FeedCounters(), WebCounters())
+    ).decode()
+    assert 'drive_gateway_opcua_refused_total{reason="subscriptions"} 6.0' in text
+    assert 'drive_gateway_opcua_sessions_total{result="accepted"} 2.0' in text
+    assert "drive_gateway_opcua_sessions_open 0.0" in text
     # one line for the six refusals, and none of asyncua's per request
     ours = [r for r in caplog.records if r.name == "gateway.opcua.limits"]
     assert [r.getMessage() for r in ours] == [
