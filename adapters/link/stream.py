@@ -381,6 +381,8 @@ class StreamDriver(Generic[EventT]):
                 wait = deadline - self._time()
                 if wait > 0 and link.wait_readable(wait):
                     return  # bytes in an idle time: the loop's reader takes them
+                if waiting:  # a command came meanwhile: it goes first, the timer steps
+                    return
                 self._step(None)  # the request, as the timer's step would send it
                 continue
             wait = min(deadline, end) - self._time()
