@@ -208,10 +208,11 @@ def test_at_rest_the_adapter_sees_a_nodes_tpdo1_about_every_refresh() -> None:
     line.run(1.0)  # the drives come to rest
     line.inputs.clear()
     syncs = line.master.figures["syncs_tx"]
-    line.run(2.0)
+    span = 10 * INPUTS_REFRESH
+    line.run(span)
     cycles = line.master.figures["syncs_tx"] - syncs
-    assert cycles >= 0.9 * 2.0 / SYNC_PERIOD
-    expected = 2.0 / INPUTS_REFRESH
+    assert cycles >= 0.9 * span / SYNC_PERIOD
+    expected = span / INPUTS_REFRESH
     for node in range(1, NODES + 1):
         assert line.master.nodes[node].quiet
         # every INPUTS_REFRESH (a TPDO1 comes per SYNC: at the first one after it)

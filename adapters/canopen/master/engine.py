@@ -76,7 +76,7 @@ from adapters.canopen.master.events import (
 from adapters.canopen.master.node import Job, Node, Phase, Purpose
 
 RPDO_REFRESH = 0.1  # s: an unchanged RPDO1 is sent again at least this often
-INPUTS_REFRESH = 0.1  # s: an unchanged TPDO1 of a quiet node is reported at least this often
+INPUTS_REFRESH = 1.0  # s: an unchanged TPDO1 of a quiet node is reported at least this often (0102)
 COB_CACHE = 2048  # COB-IDs remembered (11-bit: all of them)
 RESET_PULSE_CYCLES = 2.5  # the fault reset bit stays set this many cycles (>= 2 RPDOs)
 # then the bit is back at 0 this many cycles (>= 1 RPDO and SYNC) before the next

@@ -83,7 +83,7 @@ class _Step:
 _CLAIM_PHASES = (Phase.WAITING, Phase.REFUSED, Phase.ALLOCATING, Phase.CONFIGURING)
 CLAIM_MARGIN = 0.1  # of a check period, after the node's check is expected to end
 EXPLICIT_LOST_AFTER = 2  # explicit requests in a row unanswered: allocate explicit again
-INPUTS_REFRESH = 0.1  # s: unchanged inputs of a quiet node reported at least this often
+INPUTS_REFRESH = 1.0  # s: unchanged inputs of a quiet node reported at least this often (0102)
 
 
 class NodeMachine:

@@ -56,7 +56,7 @@ from adapters.profibus.master.timing import MAX_TELEGRAM, BusParams
 from gateway.errors import FrameEncodeError
 
 MAX_PRM_ATTEMPTS: Final = 3  # Set_Prm repeated on Prm_Req before "keeps asking"
-INPUTS_REFRESH: Final = 0.1  # s: unchanged inputs of a quiet slave reported at least this often
+INPUTS_REFRESH: Final = 1.0  # s: a quiet slave's unchanged inputs reported this often (0102)
 FRAME_MEMO: Final = 4  # Data_Exchange telegrams kept encoded per slave (2 FCBs x outputs)
 
 # 1.5, pyprofibus state timeouts (s): how long a start-up state may last before restarting.
