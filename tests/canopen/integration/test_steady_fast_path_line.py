@@ -8,7 +8,9 @@ from adapters.canopen.codec.cia402 import State
 from gateway.model import CommState, DriveCommand, Source
 from tests.canopen.integration.conftest import drive, rig
 
-CYCLES = 4  # SYNC cycles within which a command has reached the drive
+CYCLES = 8  # SYNC cycles within which a command has reached the drive: the CiA 402 steps
+# take 3 to 4 (each waits for the drive's TPDO1), one more now and then on a loaded machine;
+# the refresh, which would carry a command the hub did not tell, is 50 (1 s at 20 ms)
 
 
 async def test_a_run_and_a_stop_reach_a_quiet_nodes_rpdo_within_the_next_cycles() -> None:
