@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
@@ -73,6 +74,14 @@ def _time(seconds: float) -> datetime:
     return _EPOCH + timedelta(seconds=seconds)
 
 
+@dataclass(frozen=True, slots=True)
+class _Span:
+    first: float
+    last: float
+    backwards: bool
+    limit: int
+
+
 class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
     """asyncua's history back end over a :class:`ReadingHistory` (read only)."""
 
@@ -125,17 +134,12 @@ class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
         if source_id not in self.sources:
             raise ua.UaStatusCodeError(ua.StatusCodes.BadHistoryOperationUnsupported)
         drive_id = self.sources[source_id]
-        begin, finish = _seconds(start), _seconds(end)
-        backwards = begin is not None and finish is not None and finish < begin
-        if backwards:
-            begin, finish = finish, begin
-        limit = min(
-            nb_values or self.max_history_data_response_size, self.max_history_data_response_size
-        )
-        first = 0.0 if begin is None else begin
-        last = math.nextafter(self._now() if finish is None else finish, math.inf)
+        span = self._span(start, end, nb_values)
+        limit, last = span.limit, math.nextafter(span.last, math.inf)  # the end time within
         try:
-            found = list(self.store.events(drive_id, first, last, limit, newest=backwards))
+            found = list(
+                self.store.events(drive_id, span.first, last, limit, newest=span.backwards)
+            )
         except Exception:
             self.failures += 1
             log.exception("OPC UA event HistoryRead of %s: the history store failed", source_id)
@@ -150,6 +154,21 @@ class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
     async def stop(self) -> None:
         return None
 
+    def _span(self, start: datetime | None, end: datetime | None, nb_values: int) -> _Span:
+        """A request's times in seconds, oldest first (``backwards`` when the request gave
+        them the other way), open ends made the epoch and now; its values per response."""
+        begin, finish = _seconds(start), _seconds(end)
+        backwards = begin is not None and finish is not None and finish < begin
+        if backwards:
+            begin, finish = finish, begin
+        most = self.max_history_data_response_size
+        return _Span(
+            0.0 if begin is None else begin,
+            self._now() if finish is None else finish,
+            backwards,
+            min(nb_values or most, most),
+        )
+
     async def read_node_history(
         self, node_id: ua.NodeId, start: datetime | None, end: datetime | None, nb_values: int
     ) -> tuple[list[ua.DataValue], datetime | None]:
@@ -157,19 +176,10 @@ class DriveHistory(HistoryStorageInterface):  # type: ignore[misc]
         if where is None:
             return [], None
         drive_id, name = where
-        begin, finish = _seconds(start), _seconds(end)
-        backwards = begin is not None and finish is not None and finish < begin
-        if backwards:
-            begin, finish = finish, begin
-        limit = min(
-            nb_values or self.max_history_data_response_size, self.max_history_data_response_size
-        )
+        span = self._span(start, end, nb_values)
+        backwards, limit = span.backwards, span.limit
         try:
-            rows = self.store.readings(
-                drive_id,
-                0.0 if begin is None else begin,
-                self._now() if finish is None else finish,
-            )
+            rows = self.store.readings(drive_id, span.first, span.last)
         except Exception:
             self.failures += 1
             log.exception("OPC UA HistoryRead of %s %s: the history store failed", drive_id, name)

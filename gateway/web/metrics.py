@@ -29,7 +29,7 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
-from gateway.frontend import RuntimeView
+from gateway.frontend import FrontEndCounters, RuntimeView
 from gateway.model import CommState, DriveStatus
 from gateway.web.counters import WebCounters
 from gateway.web.floodmetrics import FLOOD_METRICS, FloodCollector
@@ -278,8 +278,7 @@ class GatewayCollector(Collector):
             counted = front_end.counted()
             requests.add_metric([], sum(counted.requests.values()))
             exceptions.add_metric([], counted.exceptions)
-            commands.add_metric(["accepted"], counted.commands_accepted)
-            commands.add_metric(["refused"], counted.commands_refused)
+            _add_commands(commands, counted)
             connections.add_metric(["accepted"], counted.connections_accepted)
             connections.add_metric(["refused"], counted.connections_refused)
             connections.add_metric(["over_limit"], counted.connections_over_limit)
@@ -296,8 +295,7 @@ class GatewayCollector(Collector):
             counted = front_end.counted()
             for kind, count in counted.requests.items():
                 requests.add_metric([kind], count)
-            commands.add_metric(["accepted"], counted.commands_accepted)
-            commands.add_metric(["refused"], counted.commands_refused)
+            _add_commands(commands, counted)
             dropped.add_metric([], counted.dropped)
         yield from (requests, commands, dropped)
 
@@ -311,8 +309,7 @@ class GatewayCollector(Collector):
         if front_end is not None:
             counted = front_end.counted()
             calls.add_metric([], sum(counted.requests.values()))
-            commands.add_metric(["accepted"], counted.commands_accepted)
-            commands.add_metric(["refused"], counted.commands_refused)
+            _add_commands(commands, counted)
             for reason, count in counted.refused.items():
                 refused.add_metric([reason], count)
             sessions.add_metric(["accepted"], counted.connections_accepted)
@@ -391,3 +388,9 @@ def make_registry(runtime: RuntimeView, feed: FeedCounters, web: WebCounters) ->
     registry.register(FloodCollector(runtime, web))
     ProcessCollector(registry=registry)
     return registry
+
+
+def _add_commands(family: CounterMetricFamily, counted: FrontEndCounters) -> None:
+    """A front end's commands by result (the hub's answer)."""
+    family.add_metric(["accepted"], counted.commands_accepted)
+    family.add_metric(["refused"], counted.commands_refused)

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gateway.zenoh.keys import CLIENT_EXAMPLE, ZENOH_SERIES, render_markdown
+from gateway.zenoh.keys import ZENOH_SERIES, client_example, render_markdown
 from tests.support.timing import scaled
 from tests.zenoh.client import Client
 from tests.zenoh.conftest import PREFIX, GatewayProcess
@@ -21,16 +21,17 @@ def test_the_zenoh_release_named_is_the_one_pinned() -> None:
     pyproject = (ROOT / "pyproject.toml").read_text()
     pin = re.search(r'"eclipse-zenoh>=([0-9.]+),<([0-9.]+)"', pyproject)
     assert pin is not None and pin.group(1) == ZENOH_SERIES
-    assert f'pip install "eclipse-zenoh>={pin.group(1)},<{pin.group(2)}"' in CLIENT_EXAMPLE
+    assert f'pip install "eclipse-zenoh>={pin.group(1)},<{pin.group(2)}"' in client_example()
     doc = render_markdown()
     assert f"built with Zenoh {ZENOH_SERIES}" in doc
     assert "**Every client sends its source info**" in doc and "`anonymous` client" in doc
-    assert "```python\n" + CLIENT_EXAMPLE in doc
+    assert "```python\n" + client_example() in doc
 
 
 def test_the_client_example_runs_and_is_told_apart(gateway: GatewayProcess) -> None:
     code = (
-        CLIENT_EXAMPLE.replace('"tcp/127.0.0.1:7447"', f'"{gateway.endpoint}"')
+        client_example()
+        .replace('"tcp/127.0.0.1:7447"', f'"{gateway.endpoint}"')
         .replace('PREFIX = "demo"', f'PREFIX = "{PREFIX}"')
         .replace('DRIVE = "cfw11"', 'DRIVE = "d2"')
     )
