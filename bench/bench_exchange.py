@@ -15,7 +15,10 @@ reply is in. Rounds alternate, gateway then bare; each side's figure is the medi
 Figures: CPU per exchange of the line's thread, and of the whole process (line, hub,
 hand-over), against the bare requester's CPU per exchange (target: ratio <= 2, issue 34).
 
-For comparisons: ``BENCH_NO_BURST=1`` measures the line without its bursts of steady
+The steady exchanges go round in steady rings (docs/decisions/0103), compiled where
+``adapters/link/_ring.c`` is built; ``DRIVE_GATEWAY_RING=python`` measures the rings in
+Python, ``DRIVE_GATEWAY_RING=off`` the line without rings (each exchange through the
+engine, in bursts). For comparisons: ``BENCH_NO_BURST=1`` measures the line without its bursts of steady
 exchanges (docs/decisions/0101); ``BENCH_LINE_PROFILE=FILE`` writes a CPU-time profile of
 the line's thread over the measured stretch (:mod:`bench.linecpu`).
 """
@@ -39,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from adapters.link.ring import ring_mode
 from bench.common import Figure, add_number, arg_parser, print_figures
 from bench.linecpu import line_profile, thread_cpu, thread_system
 
@@ -305,7 +309,10 @@ def run(rounds: int = ROUNDS, seconds: float = MEASURE) -> list[Figure]:
     bare_sys = med(s.per_exchange(s.system_cpu) for s in bare) * 1e6
     rate = med(s.exchanges for s in gateway) / seconds
     bare_rate = med(s.exchanges for s in bare) / seconds
-    note = f"{SLAVES} CFW700 at {BAUD} bit/s, paced slaves in a child; {rounds} rounds of {seconds:g} s"
+    note = (
+        f"{SLAVES} CFW700 at {BAUD} bit/s, paced slaves in a child; {rounds} rounds of"
+        f" {seconds:g} s; steady rings: {ring_mode()}"
+    )
     return [
         Figure(
             "profibus_line_cpu_per_exchange",

@@ -68,11 +68,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from adapters.link.ring import ring_mode
 from adapters.profibus.codec.dp import DataExchange, build_request
 from adapters.profibus.codec.fdl import DataTelegram, RequestFunction, ResponseFc, ResponseStatus
 from adapters.profibus.master.timing import BITS_PER_CHAR, BusParams
 from bench.common import Figure, add_number, arg_parser, positive_float, print_figures
-from bench.plant import PIN_ENV, canbus, cpusplit
+from bench.plant import PIN_ENV, REALTIME_ENV, canbus, cpusplit
 from tests.support.net import free_port
 
 PROFIBUS_SLAVES: Final = 125
@@ -122,6 +123,10 @@ class Plant:
     # every line's cycle (Profibus cycle_time, DeviceNet poll_interval, CANopen sync_period),
     # s; None: each line flat out (back to back, the SYNC at the line's minimum)
     cycle: float | None = None
+    # the Profibus line's steady rings under SCHED_FIFO at this priority (ring_priority, as
+    # the site template asks; decision 0104), and the Profibus slaves' simulator too (it
+    # stands in for slaves that answer in microseconds); 0 (BENCH_PLANT_REALTIME=0): neither
+    realtime: int = field(default_factory=lambda: int(os.environ.get("BENCH_PLANT_REALTIME", "10")))
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     logs: list[Any] = field(default_factory=list)
     raw: dict[str, Any] = field(default_factory=dict)
@@ -201,6 +206,7 @@ def config_text(
             f"watchdog = {PROFIBUS_WATCHDOG:g}",
             "latency = 0.05",
             "live_list_period = 0.0",
+            f"ring_priority = {plant.realtime}",
         ]
         for address in range(1, plant.profibus + 1):
             lines += [
@@ -318,6 +324,8 @@ def _start(plant: Plant, name: str, argv: list[str], tmp: Path, **kw: Any) -> No
     if where is not None:  # bench.plant.pin_from_env, before the child starts a thread
         cpus = where[0] if name == "gateway" else where[1]
         env[PIN_ENV] = ",".join(str(c) for c in sorted(cpus))
+    if name == "profibus-sim":  # bench.plant.realtime_from_env
+        env[REALTIME_ENV] = str(plant.realtime)
     plant.procs[name] = subprocess.Popen(
         argv, cwd=HERE, stdout=kw.pop("stdout", log), stderr=log, env=env, **kw
     )
@@ -697,7 +705,8 @@ def _figures(
 ) -> list[Figure]:
     drives = plant.profibus + plant.devicenet + plant.canopen
     conditions = (
-        f"{drives} drives; {os.cpu_count()} CPUs, load average {load[0][0]:.2f} before, "
+        f"{drives} drives; ring_priority {plant.realtime}; steady rings {ring_mode()}; "
+        f"{os.cpu_count()} CPUs, load average {load[0][0]:.2f} before, "
         f"{load[1][0]:.2f} after; window {t1 - t0:.1f} s; CPU of the bench's other "
         f"processes and of the whole host, in cores: {json.dumps(others)}"
     )

@@ -416,6 +416,16 @@ class SerialLink:
         """A port read through its file descriptor (not a URL port, which is polled)."""
         return self._fd is not None
 
+    @property
+    def descriptor(self) -> int:
+        """The port's file descriptor (-1: a URL port, polled)."""
+        return -1 if self._fd is None else self._fd
+
+    def counted(self, bytes_in: int, bytes_out: int) -> None:
+        """Bytes read and written on the descriptor by someone else (a steady ring)."""
+        self.bytes_in += bytes_in
+        self.bytes_out += bytes_out
+
     def take(self) -> bytes:
         """What has arrived, read now and returned (not handed to ``on_data``): b"" when
         nothing has, and on an error or a hang-up, which the loop's reader then reports."""

@@ -38,13 +38,24 @@ between (:meth:`StreamDriver._burst`, at most :data:`BURST`; docs/decisions/0101
 from __future__ import annotations
 
 import logging
+import os
+import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, Final, Generic, Protocol, TypeVar
 
+from adapters.link import ring
 from adapters.link.engine import Engine
+from adapters.link.ringplan import RingPlan, RingResult, RingStop
 from adapters.link.serial import SerialLink
-from adapters.link.timer import loop_clock, loop_ready, loop_timer, precise_sleeps
+from adapters.link.timer import (
+    loop_clock,
+    loop_next_timer,
+    loop_ready,
+    loop_timer,
+    loop_wake,
+    precise_sleeps,
+)
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +67,8 @@ MAX_POSTPONE: Final = 0.25  # s: the longest a late reply deadline is postponed 
 MAX_POSTPONES: Final = 3  # postponements of one reply deadline (the loop late every time)
 BURST: Final = 0.002  # s: the longest a burst of steady exchanges keeps the loop (_burst)
 BURST_TURNS: Final = 64  # replies and idle times at most in one burst
+RING_LIMIT: Final = 0.05  # s: no request of a steady ring goes out later than this (_ring)
+RING_HOLD: Final = 0.1  # s: the longest a burst with rings keeps the loop
 
 EventT = TypeVar("EventT")
 EventT_co = TypeVar("EventT_co", covariant=True)
@@ -124,6 +137,7 @@ class StreamDriver(Generic[EventT]):
         on_flushed: Callable[[EventT], None] = lambda event: None,
         on_stepped: Callable[[], None] = lambda: None,
         bursts: bool = False,
+        ring_priority: int = 0,
     ) -> None:
         self.engine = engine
         self.link = link
@@ -159,6 +173,25 @@ class StreamDriver(Generic[EventT]):
         self.burst_taken = 0  # replies taken in a burst (in lane_taken too)
         self.bursts_yielded = 0  # bursts ended by a callback waiting in the loop
         self._loop_ready = loop_ready(self.loop)
+        # the steady ring (docs/decisions/0103): where bursts are, an engine that plans one
+        self._ring_plan: Callable[[float], RingPlan | None] | None = getattr(
+            engine, "ring_plan", None
+        )
+        self._ring_done: Callable[[RingResult], Sequence[Any]] | None = getattr(
+            engine, "ring_done", None
+        )
+        self._rings = (
+            self._bursts
+            and ring.enabled()
+            and self._ring_done is not None
+            and self._time is time.monotonic  # the ring's clock is the loop's
+        )
+        self._wake = loop_wake(self.loop)
+        self._ring_priority = ring_priority  # SCHED_FIFO of the rings (0: none; 0104)
+        self._refused = False  # the priority was refused (said once)
+        self.ring_taken = 0  # replies taken by steady rings (not in lane_taken)
+        self.rings = 0  # rings run
+        self.rings_woken = 0  # rings ended by a callback handed to the loop (a command)
         link.on_data = self._on_data
         precise_sleeps()  # the short idle times slept in _step end on time (1 us slack)
 
@@ -369,9 +402,17 @@ class StreamDriver(Generic[EventT]):
         engine, link, lane, protocol = self.engine, self.link, self._lane, self.protocol
         waiting = self._loop_ready
         end = self._time() + BURST
+        hold = end - BURST + RING_HOLD
         for _ in range(BURST_TURNS):
             if lane is None or self._stopped or self._writes or waiting:
                 return
+            if self._rings and engine.awaiting_reply():
+                went_on = self._ring()
+                if went_on is not None:
+                    if not went_on:
+                        return
+                    end = min(self._time() + BURST, hold)
+                    continue
             deadline = engine.next_deadline()
             if deadline is None or self._queued:
                 return
@@ -402,6 +443,51 @@ class StreamDriver(Generic[EventT]):
                 return
             self.burst_taken += 1
             self._lane_turn(actions)
+
+    def _ring(self) -> bool | None:
+        """A steady ring from the request on the line (docs/decisions/0103): the engine's
+        plan run on the port (:mod:`adapters.link.ring`), the engine brought up to date,
+        what the ring stopped at left as the burst leaves it. True: the last reply was
+        taken and the ring's plan was over (the burst goes on); False: the burst ends;
+        None: no ring (the burst takes the reply itself)."""
+        plan_of, done = self._ring_plan, self._ring_done
+        if plan_of is None or done is None or self.protocol.receiving() is not None:
+            return None
+        now = self._time()
+        plan = plan_of(min(now + RING_LIMIT, loop_next_timer(self.loop)))
+        if plan is None:
+            return None
+        link = self.link
+        result = ring.run(link.descriptor, self._wake, plan, self._ring_priority)
+        if result.realtime < 0 and not self._refused:
+            self._refused = True
+            log.warning(
+                "%s: steady rings at ordinary priority: SCHED_FIFO %d not permitted (%s);"
+                " allow it with LimitRTPRIO=%d in the unit (docs/operations.md) or set"
+                " ring_priority = 0",
+                link.name,
+                self._ring_priority,
+                os.strerror(-result.realtime),
+                self._ring_priority,
+            )
+        link.counted(result.bytes_in, result.bytes_out)
+        actions = done(result)
+        self.rings += 1
+        self.ring_taken += result.taken
+        if result.written:
+            for event in self.protocol.idle():  # the line was idle before each request
+                self.on_flushed(event)
+        if actions:  # (never a request: inputs and the like, for the adapter)
+            self._run(actions)
+        stop = result.stop
+        if stop is RingStop.WRITE:  # the rest of a request the port took only in part
+            link.write(plan.requests[result.written - 1][result.partial :])
+        elif stop is RingStop.WAKE:
+            self.rings_woken += 1
+        if result.rest:  # not taken: as any reply
+            self._on_data(result.rest, result.rest_at)
+            return False
+        return stop is RingStop.END
 
     # ------------------------------------------------------------------ sending
 

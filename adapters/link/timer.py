@@ -262,3 +262,31 @@ def loop_ready(loop: asyncio.AbstractEventLoop) -> Sized | _NeverReady:
     if isinstance(ready, collections.deque):
         return ready
     return _NeverReady()
+
+
+def loop_wake(loop: asyncio.AbstractEventLoop) -> int:
+    """The descriptor that becomes readable when a callback is handed to ``loop`` from
+    another thread (``call_soon_threadsafe`` writes to it): the read end of asyncio's
+    self-pipe; -1 for a loop without one. A steady ring waits on it beside the port, so a
+    command ends the ring before its next request (``tests/link/test_ring.py`` checks
+    it is where this looks)."""
+    ssock = getattr(loop, "_ssock", None)  # asyncio.BaseSelectorEventLoop's self-pipe
+    fileno = getattr(ssock, "fileno", None)
+    if fileno is None:
+        return -1
+    fd = fileno()
+    return fd if isinstance(fd, int) else -1
+
+
+def loop_next_timer(loop: asyncio.AbstractEventLoop) -> float:
+    """When the earliest of ``loop``'s timers (``call_at``, ``call_later``) is due, in the
+    loop's time (inf: none, or a loop that does not say): a driver that keeps the loop
+    stops before it."""
+    scheduled = getattr(loop, "_scheduled", None)  # asyncio.BaseEventLoop's heap
+    if isinstance(scheduled, list) and scheduled:
+        when = getattr(scheduled[0], "when", None)
+        if when is not None:
+            value = when()
+            if isinstance(value, float):
+                return value
+    return math.inf

@@ -340,7 +340,12 @@ class ProfibusAdapter:
         self._link = link
         bursts = self.links is not None and self.links.far_end_apart()
         self._driver = LineDriver(
-            self.master, link, self._on_action, self._on_flushed_noise, bursts=bursts
+            self.master,
+            link,
+            self._on_action,
+            self._on_flushed_noise,
+            bursts=bursts,
+            ring_priority=self.options.ring_priority,
         )
         if self._loop is not None:
             self._dispatch(self.master.reset(self._loop.time()))

@@ -85,6 +85,7 @@ class LineDriver(StreamDriver[Event]):
         on_stepped: Callable[[], None] = lambda: None,
         *,
         bursts: bool = False,
+        ring_priority: int = 0,
     ) -> None:
         self.stream = FdlStream()
         super().__init__(
@@ -95,6 +96,7 @@ class LineDriver(StreamDriver[Event]):
             on_flushed=_noise(on_noise),
             on_stepped=on_stepped,
             bursts=bursts,
+            ring_priority=ring_priority,
         )
 
     @property

@@ -21,6 +21,8 @@ Bus (``[buses.<name>]`` with ``adapter = "profibus"``)::
     absent_retry = 1.0           s between probes of an absent slave
     fault_retry = 2.0            s before a slave with a Cfg/Prm fault is started up again
     live_list_period = 1.0       s between FDL status probes of unconfigured addresses (0 = off)
+    ring_priority = 0            SCHED_FIFO priority of the line's steady rings (1-99; 0 = the
+                                 thread's own scheduling; docs/decisions/0104)
 
 Drive: the profile's keys (delegated to its ``parse_options``) plus ``watchdog`` (s, this
 slave's own DP watchdog instead of the bus's), and what the slave is sent at start-up::
@@ -84,6 +86,7 @@ class BusOptions:
     absent_retry: float = 1.0
     fault_retry: float = 2.0
     live_list_period: float = 1.0
+    ring_priority: int = 0
 
     def bus_params(self) -> BusParams:
         return BusParams(
@@ -162,6 +165,7 @@ def parse_bus_options(t: Table) -> BusOptions:
         live_list_period=t.number(
             "live_list_period", d.live_list_period, minimum=0.0, maximum=3600.0
         ),
+        ring_priority=t.integer("ring_priority", d.ring_priority, minimum=0, maximum=99),
     )
     for key, reason in bus_problems(options.bus_params()):
         raise t.error(key, reason)

@@ -25,3 +25,21 @@ def pin_from_env() -> None:
     text = os.environ.get(PIN_ENV)
     if text:
         os.sched_setaffinity(0, {int(c) for c in text.split(",")})
+
+
+REALTIME_ENV = "DRIVE_GATEWAY_BENCH_SIM_PRIORITY"
+"""The SCHED_FIFO priority the Profibus slaves' simulator takes (set by
+:mod:`bench.bench_plant`): it stands in for slaves whose ASIC answers in microseconds, so
+that its own scheduling on a busy host is not counted as the master's turnaround."""
+
+
+def realtime_from_env() -> None:
+    """This process under SCHED_FIFO at :data:`REALTIME_ENV`'s priority, if set (and
+    permitted: else it stays as it is, and says so)."""
+    text = os.environ.get(REALTIME_ENV)
+    if not text or int(text) <= 0:
+        return
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(text)))
+    except OSError as exc:
+        print(f"SCHED_FIFO {text} not permitted: {exc}", flush=True)

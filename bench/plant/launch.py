@@ -18,7 +18,8 @@
   each line's thread, the daemon's loop split by what it runs, Zenoh's threads);
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end;
 - ``BENCH_PROFIBUS_BURSTS=0`` in the environment: the Profibus line without its bursts of
-  steady exchanges (docs/decisions/0101), to compare.
+  steady exchanges (docs/decisions/0101), to compare; ``DRIVE_GATEWAY_RING=off`` (or
+  ``python``): without its steady rings (or with them in Python; docs/decisions/0103).
 
 The daemon is the real one (``gateway.runtime.daemon.Daemon``), set up as ``drive-gateway run``
 sets it up; only the two figure hooks above are added.

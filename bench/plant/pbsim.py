@@ -37,7 +37,7 @@ from typing import Any, Final
 
 from adapters.profibus.cli import build_line
 from adapters.profibus.master.timing import BITS_PER_CHAR, BusParams
-from bench.plant import pin_from_env
+from bench.plant import pin_from_env, realtime_from_env
 from bench.plant.canbus import fine_timer_slack
 from gateway.config import load
 
@@ -173,6 +173,7 @@ def main() -> None:
     parser.add_argument("--out", required=True, help="JSON written at the end")
     args = parser.parse_args()
     pin_from_env()
+    realtime_from_env()
     serve(args.config, args.baud, args.link, args.out)
 
 

@@ -166,7 +166,8 @@ def _offline_security(unit: Path) -> subprocess.CompletedProcess[str]:
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
 def test_unit_exposure_stays_low(tmp_path: Path) -> None:
     """The score recorded in docs/operations.md ("Security"); systemd >= 250 (--offline).
-    1.9: the 1.7 of the sandbox plus CAP_NET_BIND_SERVICE for Modbus on port 502 (issue 24)."""
+    2.1: the 1.7 of the sandbox, CAP_NET_BIND_SERVICE for Modbus on port 502 (issue 24) and
+    the steady rings' real-time priority (decision 0104)."""
     exe = Path(sys.executable).parent / "drive-gateway"
     unit = tmp_path / "drive-gateway.service"
     unit.write_text(UNIT.read_text().replace("/opt/drive-gateway/venv/bin/drive-gateway", str(exe)))
@@ -175,4 +176,19 @@ def test_unit_exposure_stays_low(tmp_path: Path) -> None:
         pytest.skip(f"systemd-analyze has no --offline: {proc.stderr.strip()}")
     found = re.search(r"Overall exposure level for drive-gateway\.service: ([0-9.]+)", proc.stdout)
     assert found, proc.stdout + proc.stderr
-    assert float(found.group(1)) <= 1.9, proc.stdout
+    assert float(found.group(1)) <= 2.1, proc.stdout
+
+
+def test_the_unit_lets_the_site_templates_ring_priority_through() -> None:
+    """ring_priority (decision 0104): the template's priority within LimitRTPRIO, realtime
+    not restricted, sched_setscheduler allowed again after @resources is taken away."""
+    lines = unit_lines()
+    settings = dict(lines)
+    template = (UNIT.parent / "site.example.toml").read_text()
+    found = re.search(r"^ring_priority = (\d+)", template, flags=re.M)
+    assert found is not None
+    assert 0 < int(found.group(1)) <= int(settings["LimitRTPRIO"])
+    assert settings.get("RestrictRealtime", "no") == "no"
+    filters = [value for name, value in lines if name == "SystemCallFilter"]
+    removed = next(i for i, f in enumerate(filters) if "~" in f and "@resources" in f)
+    assert any("sched_setscheduler" in f.split() for f in filters[removed + 1 :])

@@ -67,6 +67,9 @@ def test_the_wheel_carries_the_run_time_data(dist: dict[str, Path]) -> None:
         assert any(n.endswith(f".data/data/share/drive-gateway/{name}") for n in names), name
     assert "gateway/py.typed" in names and "adapters/py.typed" in names
     assert not any(n.startswith("tests/") for n in names)
+    # the steady ring compiled (decision 0103) where a C compiler is; else Python's alone
+    compiled = [n for n in names if n.startswith("adapters/link/_ring.") and n.endswith(".so")]
+    assert len(compiled) == (1 if shutil.which("cc") else 0), names
 
 
 def test_the_sdist_carries_what_a_build_and_an_install_need(dist: dict[str, Path]) -> None:
@@ -80,6 +83,8 @@ def test_the_sdist_carries_what_a_build_and_an_install_need(dist: dict[str, Path
         "docs/operations.md",
         "gateway/cli/__init__.py",
         "adapters/profibus/weg/paramtable.py",
+        "setup.py",
+        "adapters/link/_ring.c",
         *(f"config/{n}" for n in DATA),
     ):
         assert name in names, name

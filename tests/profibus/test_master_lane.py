@@ -90,6 +90,7 @@ def _apply(w: Wire, caller: Caller, addresses: list[int], command: Command) -> N
 def _trace(
     *,
     lane: bool,
+    ring: bool = False,
     quiet: bool,
     addresses: list[int],
     noise: float,
@@ -101,7 +102,7 @@ def _trace(
     line = echo_line(addresses)
     line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
     w = Wire(master, line)
-    w.whole, w.lane = True, lane
+    w.whole, w.lane, w.ring = True, lane, ring
     caller = Caller(w, addresses, quiet)
     w.on_action = caller.on_action
     w.run(0.2)
@@ -112,7 +113,8 @@ def _trace(
     w.settle()  # as a driver ends its step: the lane's last turn is the steps' too
     slaves = [master.slave_diagnostics(a) for a in addresses]
     actions = [a for a in w.actions if not isinstance(a, InputsReceived)]
-    return w.sent, actions, master.line_diagnostics(), slaves, w.lane_taken, caller.handled
+    taken = w.lane_taken + w.ring_taken
+    return w.sent, actions, master.line_diagnostics(), slaves, taken, caller.handled, w.ring_taken
 
 
 scripts = st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10)
@@ -138,6 +140,33 @@ def test_the_lane_sends_and_reports_what_the_steps_do(
 
 @settings(max_examples=30, deadline=None)
 @given(
+    addresses=st.lists(st.integers(3, 9), min_size=2, max_size=5, unique=True),
+    noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
+    seed=st.integers(0, 99),
+    script=scripts,
+)
+def test_the_steady_ring_sends_and_reports_what_the_steps_do(
+    addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
+) -> None:
+    """The steady ring (docs/decisions/0103): what the master plans and enters after a
+    ring equals the steps' telegrams (bytes and times), actions and counters."""
+    trace = partial(_trace, quiet=True, addresses=addresses, noise=noise, seed=seed, script=script)
+    with_ring, steps = trace(lane=True, ring=True), trace(lane=False)
+    assert with_ring[:4] == steps[:4]
+    assert with_ring[5] == steps[5]  # the caller handled the same replies
+    assert len(steps[0]) > 50
+
+
+def test_a_quiet_line_goes_round_in_rings() -> None:
+    trace = _trace(
+        lane=True, ring=True, quiet=True, addresses=[3, 4, 5], noise=0.0, seed=0, script=[]
+    )
+    slaves, ring_taken = trace[3], trace[6]
+    assert ring_taken > 0.5 * sum(s["exchanges"] for s in slaves)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
     addresses=st.lists(st.integers(3, 9), min_size=1, max_size=4, unique=True),
     seed=st.integers(0, 99),
     script=scripts,
@@ -154,7 +183,7 @@ def test_a_quiet_caller_puts_on_the_line_what_a_caller_of_every_reply_does(
 
 def test_a_quiet_slave_goes_the_lane_and_still_reports_its_inputs_every_refresh() -> None:
     trace = _trace(lane=True, quiet=True, addresses=[3, 4], noise=0.0, seed=0, script=[])
-    _, _, _, slaves, taken, handled = trace
+    _, _, _, slaves, taken, handled, _ = trace
     exchanges = sum(s["exchanges"] for s in slaves)
     assert taken > 0.8 * exchanges  # the steady exchange went the lane
     # 0.7 s of data exchange: the inputs reported at start and at least every refresh

@@ -14,6 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from adapters.link.ringplan import RingResult, RingStop
 from adapters.link.stream import SLEEP_LIMIT
 from adapters.profibus.codec.fdl import (
     DataTelegram,
@@ -82,6 +83,10 @@ class Wire:
         self.whole = False
         self.lane = False
         self.lane_taken = 0
+        # with ``ring`` (and ``lane``), a request of the lane's on the line starts a steady
+        # ring (Master.ring_plan), run here in fake time as adapters/link/ring.py runs it
+        self.ring = False
+        self.ring_taken = 0
 
     # ------------------------------------------------------------------ driving
 
@@ -112,6 +117,8 @@ class Wire:
         self._queue.extend(self.master.step(self.now))
         while True:
             self._drain()
+            if self.ring and self.master.awaiting_reply() and not self.decoder.buffered:
+                self._ring(end)
             if cond():
                 return True
             deadline = self.master.next_deadline()
@@ -177,14 +184,62 @@ class Wire:
             self.now = max(self.now, action.not_before) + self.write_lag
             self.sent.append((self.now, action.data))
             self._queue.extend(self.master.step(self.now, Written(self.now)))
-            end = self.now + self.bus.tx_time(len(action.data))
-            for out in self.line.receive(action.data, end):
-                if self.drop_replies:
-                    self.drop_replies -= 1
-                    continue
-                arrive = out.at + self.turnaround + self.late_by + self.bus.tx_time(len(out.data))
-                self._seq += 1
-                heapq.heappush(self._arrivals, (arrive, self._seq, out.data))
+            self._to_slaves(action.data)
+
+    def _to_slaves(self, data: bytes) -> None:
+        """A request written now reaches the slaves; their replies are on their way."""
+        end = self.now + self.bus.tx_time(len(data))
+        for out in self.line.receive(data, end):
+            if self.drop_replies:
+                self.drop_replies -= 1
+                continue
+            arrive = out.at + self.turnaround + self.late_by + self.bus.tx_time(len(out.data))
+            self._seq += 1
+            heapq.heappush(self._arrivals, (arrive, self._seq, out.data))
+
+    def _ring(self, end: float) -> None:
+        """A steady ring in fake time: each reply taken when it is the one expected and
+        came by its deadline, each next request written once the
+        line is free; stopped at anything else, which is left as it is (an arrival not
+        taken stays for the steps), and at ``end`` (the run's: a command comes after)."""
+        plan = self.master.ring_plan(end)
+        if plan is None:
+            return
+        times: list[float] = []
+        idle, deadline = plan.idle_since, plan.deadline
+        stop = RingStop.END
+        for i, expected in enumerate(plan.expected):
+            arrival = self._arrivals[0] if self._arrivals else None
+            if arrival is None or arrival[0] > min(deadline, end):
+                stop = RingStop.TIMEOUT
+                break
+            at, _, data = arrival
+            if data != expected:
+                stop = RingStop.DIFFER
+                break
+            heapq.heappop(self._arrivals)
+            self.now = at
+            self.received.append((at, data))
+            times.append(at)
+            idle = max(idle, at)
+            if i + 1 == len(plan.expected):
+                break
+            free = max(plan.busy_until, idle + plan.tsyn)
+            if free > plan.horizon:
+                stop = RingStop.HORIZON
+                break
+            self.now = max(self.now, free) + self.write_lag
+            self.line.tick(self.now)
+            request = plan.requests[i]
+            self.sent.append((self.now, request))
+            times.append(self.now)
+            self._to_slaves(request)
+            sent_end = self.now + self.bus.tx_time(len(request))
+            idle = max(idle, sent_end)
+            deadline = sent_end + self.bus.reply_wait
+        result = RingResult(stop, tuple(times), b"", 0.0, idle, -1, 0, 0)
+        self.ring_taken += result.taken
+        self._queue.extend(self.master.ring_done(result))
 
     # ------------------------------------------------------------------ looking
 

@@ -26,6 +26,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
+from adapters.link.ringplan import RingPlan, RingResult
 from adapters.profibus.codec import dpv1
 from adapters.profibus.codec.dp import GlobalControl
 from adapters.profibus.codec.fdl import (
@@ -54,6 +55,7 @@ from adapters.profibus.master.events import (
 )
 from adapters.profibus.master.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.line import Line
+from adapters.profibus.master.ring import SteadyRing
 from adapters.profibus.master.scheduler import Scheduler
 from adapters.profibus.master.station import Station, StationContext
 from adapters.profibus.master.timing import BusParams
@@ -83,6 +85,7 @@ class Master:
         self._scheduler = Scheduler(
             bus, self._slaves, self._line, self._acyclic, now, context=context
         )
+        self._ring = SteadyRing(self._line, self._slaves, self._scheduler, self._out)
         self._stopped = False
         # a steady reply was taken while the line was not free yet (TSYN): the next turn,
         # once it is, is the steady one unless an event comes first (see _steady_turn)
@@ -384,6 +387,21 @@ class Master:
             self._steady_due = True  # the step at that deadline takes the short path
             return self._take()
         self._steady_due = not self._scheduler.steady_next(free)
+        return self._take()
+
+    def ring_plan(self, horizon: float) -> RingPlan | None:
+        """The steady ring from the Data_Exchange on the line (:mod:`.ring`): the cycle's
+        next steady exchanges as bytes, none of them sent for after ``horizon``; None
+        when anything else waits or there is nothing to gain."""
+        if self._jobs or self._timed or self._stopped:
+            return None
+        return self._ring.plan(horizon)
+
+    def ring_done(self, result: RingResult) -> list[Action]:
+        """Enter what the ring of the last plan did (as a step enters each steady reply);
+        after a taken reply with the line free, the next turn is the steady one. The
+        actions: the inputs whose refresh fell due during the ring (never a request)."""
+        self._steady_due = self._ring.enter(result)
         return self._take()
 
     def _steady_turn(self, now: float) -> bool:

@@ -157,8 +157,13 @@ class Station:
     def data_frame(self, fc: RequestFc, operate: bool) -> bytes:
         """The Data_Exchange telegram (1.5 step 6; zero outputs in Clear), kept encoded:
         the same outputs go out cycle after cycle with one of two FCB values."""
-        outputs = self.outputs if operate else bytes(len(self.outputs))
         self.outputs_pending = False  # carried (in Clear: dropped, as Clear requires)
+        return self.frame_for(fc, operate)
+
+    def frame_for(self, fc: RequestFc, operate: bool) -> bytes:
+        """The Data_Exchange telegram :meth:`data_frame` sends, nothing marked as carried
+        (a steady ring's plan: it goes out only if the ring gets that far)."""
+        outputs = self.outputs if operate else bytes(len(self.outputs))
         key = (fc.fcb, fc.fcv, outputs)
         frame = self.frames.get(key)
         if frame is None:

@@ -15,6 +15,8 @@ import threading
 from collections.abc import AsyncIterator, Iterator
 from typing import Any
 
+import pytest
+
 from adapters.link.timer import loop_ready
 from adapters.profibus.adapter import ProfibusAdapter
 from adapters.profibus.link import profibus_port
@@ -34,13 +36,14 @@ LIMIT = 30.0  # s, times the machine's time scale: a bound, never a wait
 REMOTE = "tests.profibus.integration.test_steady_lane_line:RemoteCfw700"
 
 
-def _bus() -> tuple[BusConfig, Hub]:
+def _bus(**options: Any) -> tuple[BusConfig, Hub]:
     table = {
         "adapter": "profibus",
         "simulate": True,
         "latency": 0.02,
         "cycle_time": 0.0,  # flat out: the line waits for replies most of the time
         "drives": DRIVES,
+        **options,
     }
     config = parse({"buses": {"profibus": table}}, "steady-burst.toml")
     return config.buses[0], build_hub(config)
@@ -75,8 +78,10 @@ def slaves_apart(bus: BusConfig) -> Iterator[tuple[str, SimulatedLine]]:
 
 
 @contextlib.asynccontextmanager
-async def line_apart() -> AsyncIterator[tuple[Hub, ProfibusAdapter, SimulatedLine, LineThread]]:
-    bus, hub = _bus()
+async def line_apart(
+    **options: Any,
+) -> AsyncIterator[tuple[Hub, ProfibusAdapter, SimulatedLine, LineThread]]:
+    bus, hub = _bus(**options)
     with slaves_apart(bus) as (path, sim):
         adapter = ProfibusAdapter(bus, links=profibus_port(path, bus.options.baudrate))
         line = LineThread(adapter, hub)
@@ -97,7 +102,10 @@ async def _exchanges(sim: SimulatedLine, address: int, count: int) -> None:
         await heard.until(lambda: counters.exchanges >= first + count)
 
 
-async def test_steady_replies_are_taken_in_bursts_and_a_command_ends_one() -> None:
+async def test_steady_replies_are_taken_in_bursts_and_a_command_ends_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("DRIVE_GATEWAY_RING", "off")  # the bursts alone (rings: test_steady_ring)
     async with line_apart() as (hub, adapter, sim, line), asyncio.timeout(scaled(LIMIT)):
         for drive in ("a", "b"):
             await hub.wait_for(drive, lambda s: s.online)
