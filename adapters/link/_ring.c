@@ -16,7 +16,8 @@
  * the line is idle TSYN (counted from the later of the reply and the
  * request's own end, at least until busy_until) and requests[i] (the next exchange's
  * request) is written; its reply awaited reply_wait after its own line time (its length
- * times t_char). The ring stops at anything else, before acting on it, with a reason:
+ * times t_char); an exchange whose expected reply is empty is a broadcast (no reply, the
+ * line busy TSYN after its end). The ring stops at anything else, before acting on it, with a reason:
  * see STOP_* below and RingStop in ring.py.
  */
 #define PY_SSIZE_T_CLEAN
@@ -74,7 +75,7 @@ static int wait_for(int fd, int wake, double until) {
 
 typedef struct {
     int fd, wake;
-    double deadline, tsyn, reply_wait, t_char, idle_since, busy_until, horizon;
+    double deadline, tsyn, reply_wait, t_char, idle_since, busy_until, horizon, last_end;
     Py_ssize_t n;
     const char **exp;
     Py_ssize_t *exp_len;
@@ -90,9 +91,16 @@ typedef struct {
     Py_ssize_t bytes_in, bytes_out;
 } Ring;
 
-/* The reply of exchange i: 0 taken, else a STOP_* reason. */
+/* The reply of exchange i: 0 taken, else a STOP_* reason. An exchange expecting no reply
+ * is a broadcast: nobody answers, the line is free TSYN after its end. */
 static int take_reply(Ring *g, Py_ssize_t i) {
     g->rest_len = 0;
+    if (g->exp_len[i] == 0) {
+        double free_at = g->last_end + g->tsyn;
+        if (free_at > g->busy_until) g->busy_until = free_at;
+        g->times[g->ntimes++] = g->last_end;
+        return 0;
+    }
     for (;;) {
         int w = wait_for(g->fd, g->wake, g->deadline);
         if (w == 0) return STOP_TIMEOUT;
@@ -140,6 +148,7 @@ static int send_request(Ring *g, Py_ssize_t i) {
     g->bytes_out += len;
     g->times[g->ntimes++] = at;
     double end = at + (double)len * g->t_char;
+    g->last_end = end;
     if (end > g->idle_since) g->idle_since = end;
     g->deadline = end + g->reply_wait;
     return 0;

@@ -140,6 +140,8 @@ class _PyRing:
         self.fd, self.wake, self.plan = fd, wake, plan
         self.deadline = plan.deadline
         self.idle_since = plan.idle_since
+        self.busy_until = plan.busy_until
+        self.last_end = plan.idle_since
         self.times: list[float] = []
         self.rest = bytearray()
         self.rest_at = 0.0
@@ -191,6 +193,10 @@ class _PyRing:
     def _take_reply(self, i: int) -> RingStop | None:
         self.rest.clear()
         want = self.plan.expected[i]
+        if not want:  # a broadcast: nobody answers, the line free TSYN after its end
+            self.busy_until = max(self.busy_until, self.last_end + self.plan.tsyn)
+            self.times.append(self.last_end)
+            return None
         while True:
             w = self._wait(self.deadline)
             if w == 0:
@@ -221,7 +227,7 @@ class _PyRing:
 
     def _send_request(self, i: int) -> RingStop | None:
         plan = self.plan
-        free = max(plan.busy_until, self.idle_since + plan.tsyn)
+        free = max(self.busy_until, self.idle_since + plan.tsyn)
         if free > plan.horizon:
             return RingStop.HORIZON
         if free > time.monotonic():
@@ -244,7 +250,7 @@ class _PyRing:
             self.bytes_out += self.partial
             return RingStop.WRITE
         self.bytes_out += put
-        end = at + len(data) * plan.t_char
+        end = self.last_end = at + len(data) * plan.t_char
         self.idle_since = max(self.idle_since, end)
         self.deadline = end + plan.reply_wait
         return None

@@ -30,7 +30,8 @@ class RingPlan:
     ``deadline``; ``requests[i]`` goes out after ``expected[i]`` was taken."""
 
     deadline: float  # the reply deadline of the request on the line
-    expected: tuple[bytes, ...]  # each exchange's reply, taken only whole and equal
+    expected: tuple[bytes, ...]  # each exchange's reply, taken only whole and equal (b"":
+    # a broadcast, nobody answers: the line is free TSYN after its end; never the first)
     requests: tuple[bytes, ...]  # the request after each reply but the last (n - 1)
     tsyn: float  # s the line is idle before a request (from the reply or the request's end)
     reply_wait: float  # s a reply is awaited after a request's own line time

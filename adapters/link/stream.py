@@ -174,7 +174,7 @@ class StreamDriver(Generic[EventT]):
         self.bursts_yielded = 0  # bursts ended by a callback waiting in the loop
         self._loop_ready = loop_ready(self.loop)
         # the steady ring (docs/decisions/0103): where bursts are, an engine that plans one
-        self._ring_plan: Callable[[float], RingPlan | None] | None = getattr(
+        self._ring_plan: Callable[[float, float], RingPlan | None] | None = getattr(
             engine, "ring_plan", None
         )
         self._ring_done: Callable[[RingResult], Sequence[Any]] | None = getattr(
@@ -454,7 +454,7 @@ class StreamDriver(Generic[EventT]):
         if plan_of is None or done is None or self.protocol.receiving() is not None:
             return None
         now = self._time()
-        plan = plan_of(min(now + RING_LIMIT, loop_next_timer(self.loop)))
+        plan = plan_of(now, min(now + RING_LIMIT, loop_next_timer(self.loop)))
         if plan is None:
             return None
         link = self.link

@@ -283,3 +283,30 @@ def test_a_ring_refused_its_priority_runs_all_the_same(monkeypatch: pytest.Monke
         result = ring.run_python(fd, -1, _plan(3), 10)
     assert result.stop is RingStop.END and result.taken == 3
     assert result.realtime == -errno.EPERM
+
+
+def test_a_broadcast_in_a_ring_is_answered_by_nobody(runner: Runner) -> None:
+    """An exchange expecting no reply (a Global_Control): written, then the line is free
+    TSYN after its end; the ring goes on."""
+    broadcast = bytes([0x68, 5, 5, 0x68, 0x7F, 2, 0x73, 0, 0, 0x16])
+
+    def silent(sock: socket.socket, i: int) -> None:
+        return
+
+    def second(sock: socket.socket, i: int) -> None:
+        sock.sendall(REPLIES[1])
+
+    # (an idle time the far end reads the broadcast in, apart from the request after it)
+    plan = _plan(
+        3,
+        expected=(REPLIES[0], b"", REPLIES[1]),
+        requests=(broadcast, REQUESTS[1]),
+        tsyn=scaled(0.02),
+    )
+    with far_end([_reply, silent, second]) as (fd, heard):
+        result = runner(fd, -1, plan)
+    assert result.stop is RingStop.END and result.taken == 3
+    assert heard == [broadcast, REQUESTS[1]]
+    written, free, next_written = result.times[1], result.times[2], result.times[3]
+    assert free == written + len(broadcast) * plan.t_char  # the broadcast's end
+    assert next_written >= free + plan.tsyn

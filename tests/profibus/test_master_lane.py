@@ -114,7 +114,10 @@ def _trace(
     slaves = [master.slave_diagnostics(a) for a in addresses]
     actions = [a for a in w.actions if not isinstance(a, InputsReceived)]
     taken = w.lane_taken + w.ring_taken
-    return w.sent, actions, master.line_diagnostics(), slaves, taken, caller.handled, w.ring_taken
+    return (
+        *(w.sent, actions, master.line_diagnostics(), slaves, taken, caller.handled),
+        *(w.ring_taken, master._ring.crossed),
+    )
 
 
 scripts = st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10)
@@ -161,8 +164,10 @@ def test_a_quiet_line_goes_round_in_rings() -> None:
     trace = _trace(
         lane=True, ring=True, quiet=True, addresses=[3, 4, 5], noise=0.0, seed=0, script=[]
     )
-    slaves, ring_taken = trace[3], trace[6]
-    assert ring_taken > 0.5 * sum(s["exchanges"] for s in slaves)
+    slaves, ring_taken, crossed = trace[3], trace[6], trace[7]
+    assert ring_taken > 0.9 * sum(s["exchanges"] for s in slaves)
+    cycles = trace[2]["cycles"]
+    assert crossed > 0.5 * cycles  # rings go on into the next cycle (its Global_Control too)
 
 
 @settings(max_examples=30, deadline=None)
@@ -183,7 +188,7 @@ def test_a_quiet_caller_puts_on_the_line_what_a_caller_of_every_reply_does(
 
 def test_a_quiet_slave_goes_the_lane_and_still_reports_its_inputs_every_refresh() -> None:
     trace = _trace(lane=True, quiet=True, addresses=[3, 4], noise=0.0, seed=0, script=[])
-    _, _, _, slaves, taken, handled, _ = trace
+    _, _, _, slaves, taken, handled, _, _ = trace
     exchanges = sum(s["exchanges"] for s in slaves)
     assert taken > 0.8 * exchanges  # the steady exchange went the lane
     # 0.7 s of data exchange: the inputs reported at start and at least every refresh

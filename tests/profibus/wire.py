@@ -202,29 +202,34 @@ class Wire:
         came by its deadline, each next request written once the
         line is free; stopped at anything else, which is left as it is (an arrival not
         taken stays for the steps), and at ``end`` (the run's: a command comes after)."""
-        plan = self.master.ring_plan(end)
+        plan = self.master.ring_plan(self.now, end)
         if plan is None:
             return
         times: list[float] = []
-        idle, deadline = plan.idle_since, plan.deadline
+        idle, deadline, busy = plan.idle_since, plan.deadline, plan.busy_until
+        sent_end = idle
         stop = RingStop.END
         for i, expected in enumerate(plan.expected):
-            arrival = self._arrivals[0] if self._arrivals else None
-            if arrival is None or arrival[0] > min(deadline, end):
-                stop = RingStop.TIMEOUT
-                break
-            at, _, data = arrival
-            if data != expected:
-                stop = RingStop.DIFFER
-                break
-            heapq.heappop(self._arrivals)
-            self.now = at
-            self.received.append((at, data))
-            times.append(at)
-            idle = max(idle, at)
+            if not expected:  # a broadcast: nobody answers, the line free TSYN after it
+                busy = max(busy, sent_end + plan.tsyn)
+                times.append(sent_end)
+            else:
+                arrival = self._arrivals[0] if self._arrivals else None
+                if arrival is None or arrival[0] > min(deadline, end):
+                    stop = RingStop.TIMEOUT
+                    break
+                at, _, data = arrival
+                if data != expected:
+                    stop = RingStop.DIFFER
+                    break
+                heapq.heappop(self._arrivals)
+                self.now = at
+                self.received.append((at, data))
+                times.append(at)
+                idle = max(idle, at)
             if i + 1 == len(plan.expected):
                 break
-            free = max(plan.busy_until, idle + plan.tsyn)
+            free = max(busy, idle + plan.tsyn)
             if free > plan.horizon:
                 stop = RingStop.HORIZON
                 break

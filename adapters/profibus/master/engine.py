@@ -389,13 +389,13 @@ class Master:
         self._steady_due = not self._scheduler.steady_next(free)
         return self._take()
 
-    def ring_plan(self, horizon: float) -> RingPlan | None:
+    def ring_plan(self, now: float, horizon: float) -> RingPlan | None:
         """The steady ring from the Data_Exchange on the line (:mod:`.ring`): the cycle's
         next steady exchanges as bytes, none of them sent for after ``horizon``; None
         when anything else waits or there is nothing to gain."""
         if self._jobs or self._timed or self._stopped:
             return None
-        return self._ring.plan(horizon)
+        return self._ring.plan(now, horizon)
 
     def ring_done(self, result: RingResult) -> list[Action]:
         """Enter what the ring of the last plan did (as a step enters each steady reply);

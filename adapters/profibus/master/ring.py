@@ -1,21 +1,25 @@
-"""The master's steady ring: the cycle's next steady exchanges planned as bytes, and the
-master brought up to date once they ran (adapters/link/ring.py runs them; docs/decisions/
+"""The master's steady ring: the next steady exchanges planned as bytes, and the master
+brought up to date once they ran (adapters/link/ring.py runs them; docs/decisions/
 0103-steady-ring.md).
 
 A ring starts where the steady lane leaves the line (:meth:`Master.lane`): a slave's
-Data_Exchange on the line, its caller quiet. It goes on through the slaves that follow in
-the cycle while each is in data exchange, its caller quiet, no diagnosis waiting and its
-last plain reply known, and stops before the first that is not, at the end of the cycle
-(the line tasks and the next cycle are the scheduler's), and at :data:`RING_MAX`
-exchanges. Nothing else may wait: no DP-V1 job, no slave in start-up, no repetition.
+Data_Exchange on the line, its caller quiet. It goes on through the slaves that follow
+while each is in data exchange, its caller quiet, no diagnosis waiting and its last plain
+reply known, and stops before the first that is not, at :data:`RING_MAX` exchanges, and
+where no more could go before its horizon at the line's pace. At the cycle's end it goes
+on into the next cycle only where what the end sends is certain whenever the ring gets
+there (:class:`_Wraps`): the periodic Global_Control if it is due already, else nothing
+(the horizon moved before it falls due). Nothing else may wait: no DP-V1 job, no slave in
+start-up, no repetition.
 
 Afterwards each exchange the ring did is entered as the general path enters a steady
 reply, with the times it really happened: the reply's turn ends (response time, FCB,
 exchanges; its unchanged inputs reported if their refresh was due by then: a steady
-reply's inputs are the last ones reported), the next slave's
-turn begins with its Data_Exchange (the scheduler's own ``send_for``) and its write is
-confirmed (the line's ``on_written``). The counters and telegrams are those of the lane
-and of the general path: a property test runs all three on the same lines.
+reply's inputs are the last ones reported), the broadcast and the cycle's end and begin
+as the scheduler makes them, the next slave's turn begins with its Data_Exchange (the
+scheduler's own ``send_for``) and each write is confirmed (the line's ``on_written``).
+The counters and telegrams are those of the lane and of the general path: a property test
+runs all three on the same lines.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from adapters.profibus.master.station import Station
 from adapters.profibus.master.timing import BITS_PER_CHAR
 
 RING_MAX: Final = 128  # exchanges in one ring at most (a cycle of 125 slaves in one)
+RING_PACE: Final = 0.8  # of the measured line time per Data_Exchange: a ring's plan length
 
 
 def steady(sl: Station) -> bool:
@@ -55,9 +60,11 @@ class SteadyRing:
         self.stations = stations
         self.scheduler = scheduler
         self.out = out
-        self.chain: list[Station] = []  # the slaves of the last plan, in order
+        self.chain: list[Station | None] = []  # the last plan's, in order (None: broadcast)
+        self.wraps = 0  # plans that went on into the next cycle
+        self.crossed = 0  # cycles begun within a ring
 
-    def plan(self, horizon: float) -> RingPlan | None:
+    def plan(self, now: float, horizon: float) -> RingPlan | None:
         """The ring from the Data_Exchange on the line, or None (nothing to gain: fewer
         than two exchanges, or the line is not in the steady case)."""
         line = self.line
@@ -73,53 +80,131 @@ class SteadyRing:
         first = self.stations[p.address]
         if not steady(first):
             return None
-        chain = [first]
+        chain: list[Station | None] = [first]
+        expected = [first.steady_reply]
         requests: list[bytes] = []
+        fcb = {first.address: first.fcb.acknowledged()}  # each slave's next FCB in the ring
         operate = self.scheduler.mode is LineMode.OPERATE
-        for address in self.scheduler.queue:
-            sl = self.stations[address]
-            if len(chain) >= RING_MAX or not steady(sl):
+        queue = list(self.scheduler.queue)
+        wraps = _Wraps(self.scheduler, now, horizon)
+        # when each next telegram may go, no later than the line's own figures say (its line
+        # time, the reply's, TSYN; RING_PACE of a Data_Exchange's measured line time): none
+        # is planned that could not go before the horizon
+        t_char, tsyn = BITS_PER_CHAR * line.bus.t_bit, line.tsyn
+        pace = RING_PACE * self.scheduler.dx_each
+        earliest = now + len(first.steady_reply) * t_char + tsyn
+        while len(chain) < RING_MAX and earliest <= wraps.horizon:
+            if not queue:  # the cycle's end: the ring goes on into the next cycle
+                end = wraps.next()
+                if end is None:
+                    break
+                for broadcast in end:  # its Global_Control: no reply
+                    chain.append(None)
+                    expected.append(b"")
+                    requests.append(broadcast)
+                    earliest += len(broadcast) * t_char + tsyn
+                queue = list(self.stations)
+                continue
+            sl = self.stations[queue.pop(0)]
+            if not steady(sl):
                 break
+            state = fcb.get(sl.address, sl.fcb)
+            fcb[sl.address] = state.acknowledged()
+            request = sl.frame_for(state.fc(RequestFunction.SRD_HIGH), operate)
             chain.append(sl)
-            requests.append(sl.frame_for(sl.fcb.fc(RequestFunction.SRD_HIGH), operate))
+            expected.append(sl.steady_reply)
+            requests.append(request)
+            earliest += max((len(request) + len(sl.steady_reply)) * t_char + tsyn, pace)
+        while chain[-1] is None:  # never ending with the broadcast
+            chain.pop()
+            expected.pop()
+            requests.pop()
         if len(chain) < 2:
             return None
         self.chain = chain
+        self.wraps += wraps.count
         return RingPlan(
             deadline=p.deadline,
-            expected=tuple(sl.steady_reply for sl in chain),
+            expected=tuple(expected),
             requests=tuple(requests),
             tsyn=line.tsyn,
             reply_wait=line.reply_wait,
-            t_char=BITS_PER_CHAR * line.bus.t_bit,
+            t_char=t_char,
             idle_since=line.idle_since,
             busy_until=line.busy_until,
-            horizon=horizon,
+            horizon=wraps.horizon,
         )
 
     def enter(self, result: RingResult) -> bool:
         """Enter what the ring of the last plan did; True when the line is free after its
         last reply (the next turn is the steady one, as after the lane's)."""
-        line, scheduler, chain = self.line, self.scheduler, self.chain
+        line, chain = self.line, self.chain
         times = result.times
         marked = len(self.out)
         for j in range(result.taken):
-            p = line.pending
-            assert p is not None and p.address == chain[j].address
             sl = chain[j]
-            now = times[2 * j]
-            line.pending = None
-            line.idle_since = max(line.idle_since, now)
-            sl.answered(p, now)
-            inputs = sl.last_inputs
-            assert inputs is not None  # (steady: its inputs were taken)
-            sl.took_inputs(inputs, now)  # the same inputs: reported if due
-            if 2 * j + 1 < len(times):  # the next slave's request went out
-                at = times[2 * j + 1]
-                nxt = scheduler.start_turn()
-                scheduler.send_for(nxt, Purpose.DATA, at)
-                line.on_written(at)
+            if sl is not None:  # (None: the broadcast, answered by nobody)
+                now = times[2 * j]
+                p = line.pending
+                assert p is not None and p.address == sl.address
+                line.pending = None
+                line.idle_since = max(line.idle_since, now)
+                sl.answered(p, now)
+                inputs = sl.last_inputs
+                assert inputs is not None  # (steady: its inputs were taken)
+                sl.took_inputs(inputs, now)  # the same inputs: reported if due
+            if 2 * j + 1 < len(times):  # the next request (or broadcast) went out
+                self._sent(chain[j + 1], times[2 * j + 1])
         # send_for's Transmit actions: the ring wrote them (the inputs reported stay)
         self.out[marked:] = [a for a in self.out[marked:] if type(a) is not Transmit]
         self.chain = []
         return result.taken > 0 and line.pending is None
+
+    def _sent(self, sl: Station | None, at: float) -> None:
+        """The ring wrote the next telegram at ``at``: entered as the scheduler sends it."""
+        scheduler = self.scheduler
+        if sl is None:
+            scheduler.ended_with_broadcast(at)
+        else:
+            if not scheduler.queue:  # the next cycle's first
+                scheduler.next_cycle_now(at)
+                self.crossed += 1
+            scheduler.send_for(scheduler.start_turn(), Purpose.DATA, at)
+        self.line.on_written(at)
+
+
+class _Wraps:
+    """Whether a ring can go on into the next cycle, and what the cycle's end sends there:
+    only where that is certain whenever the ring gets there. The periodic Global_Control
+    goes with it when it is due already; when it is not, the ring's horizon is moved
+    before it is (and before a live-list probe's), so the end sends nothing. A Sync or
+    Freeze queued, or a cycle time not over, ends the ring at the cycle's end (with a
+    cycle time, a second end is never certain)."""
+
+    def __init__(self, scheduler: Scheduler, now: float, horizon: float) -> None:
+        self.scheduler = scheduler
+        self.now = now
+        self.horizon = horizon
+        self.count = 0
+        self.queued, self.gc_due, self.probe_due = scheduler.line_tasks_due()
+
+    def next(self) -> tuple[bytes, ...] | None:
+        """The cycle's end: (), (the Global_Control,), or None (the ring stops there)."""
+        scheduler = self.scheduler
+        started = scheduler.cycle_started
+        cycle_time = scheduler.bus.cycle_time
+        if self.queued or started is None or (self.count and cycle_time > 0):
+            return None
+        if not self.count and started + cycle_time > self.now:
+            return None
+        self.count += 1
+        self.horizon = min(self.horizon, self.probe_due - _BEFORE)
+        if self.gc_due <= self.now:
+            # due at this end; the next is a period after it at the earliest
+            self.gc_due = self.now + scheduler.bus.global_control_period
+            return (scheduler.broadcast_frame(),)
+        self.horizon = min(self.horizon, self.gc_due - _BEFORE)
+        return ()
+
+
+_BEFORE: Final = 1e-9  # s: a horizon before a due time is strictly before it

@@ -36,7 +36,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Final
 
-from adapters.profibus.codec.dp import GlobalControl
+from adapters.profibus.codec.dp import GlobalControl, global_control_request
 from adapters.profibus.codec.fdl import (
     MAX_STATION,
     DataTelegram,
@@ -293,6 +293,34 @@ class Scheduler:
             return False
         self.send_for(self.start_turn(), Purpose.DATA, now)
         return True
+
+    @property
+    def dx_each(self) -> float:
+        """The line time per Data_Exchange as the last cycle measured it (0: not yet)."""
+        return self._dx_each
+
+    def line_tasks_due(self) -> tuple[bool, float, float]:
+        """(a Sync/Freeze is queued, when the periodic Global_Control is due, when the
+        live-list probe is): what a steady ring's plan needs to know of this cycle's end."""
+        return bool(self._one_shot), self._gc_due, self._probe_due
+
+    def broadcast_frame(self) -> bytes:
+        """The periodic Global_Control as :meth:`_line_task` sends it now."""
+        control = GlobalControl(clear_data=self.mode is LineMode.CLEAR)
+        return global_control_request(control, sa=self.bus.master_address).encode()
+
+    def ended_with_broadcast(self, now: float) -> None:
+        """The cycle's periodic Global_Control went out at ``now`` (a steady ring sent it,
+        as :meth:`_line_task` would have)."""
+        sent = self._line_task(now)
+        assert sent  # (planned_end said it was due)
+
+    def next_cycle_now(self, now: float) -> None:
+        """The cycle's end with nothing more to send, and the next cycle begun, at
+        ``now`` (a steady ring went on into it, as :meth:`steady_next` would have)."""
+        self.line_done = True
+        self.end_cycle(now)
+        self.begin_cycle(now)
 
     # ------------------------------------------------------------------ a station's turn
 
