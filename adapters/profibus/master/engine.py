@@ -363,17 +363,8 @@ class Master:
         it). A property test runs the lane and the steps on the same lines and finds every
         telegram and counter equal (docs/decisions/0096)."""
         line = self._line
-        p = line.pending
-        if (
-            p is None
-            or not p.written
-            or p.purpose is not Purpose.DATA
-            or self._jobs
-            or self._timed
-            or self._stopped
-            or line.unwritten
-            or line.retry is not None
-        ):
+        p = line.data_exchange_on_line()
+        if p is None or self._jobs or self._timed or self._stopped:
             return None
         sl = self._slaves[p.address]
         if not sl.quiet or data != sl.steady_reply or now >= sl.inputs_due or sl.diag_pending:

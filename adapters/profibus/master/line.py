@@ -17,7 +17,7 @@ from collections import deque
 from adapters.profibus.codec.dp import GlobalControl, global_control_request
 from adapters.profibus.errors import DecodeFailure, FdlDecodeError
 from adapters.profibus.master.common import Job, Pending
-from adapters.profibus.master.events import Action, Transmit
+from adapters.profibus.master.events import Action, Purpose, Transmit
 from adapters.profibus.master.figures import LineFigures, SlaveFigures
 from adapters.profibus.master.timing import BITS_PER_CHAR, MAX_TELEGRAM, BusParams
 
@@ -47,6 +47,21 @@ class Line:
 
     def awaiting_reply(self) -> bool:
         return self.pending is not None and self.pending.written
+
+    def data_exchange_on_line(self) -> Pending | None:
+        """The request on the line when it is a Data_Exchange confirmed written and nothing
+        else waits on the line (no write unconfirmed, no repetition): where a steady reply
+        may be taken by its bytes (the lane, a steady ring)."""
+        p = self.pending
+        if (
+            p is None
+            or not p.written
+            or p.purpose is not Purpose.DATA
+            or self.unwritten
+            or self.retry is not None
+        ):
+            return None
+        return p
 
     def busy_with(self) -> list[int]:
         """The stations a request is on the line or waiting to be repeated for."""

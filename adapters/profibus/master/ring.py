@@ -68,14 +68,8 @@ class SteadyRing:
         """The ring from the Data_Exchange on the line, or None (nothing to gain: fewer
         than two exchanges, or the line is not in the steady case)."""
         line = self.line
-        p = line.pending
-        if (
-            p is None
-            or not p.written
-            or p.purpose is not Purpose.DATA
-            or line.unwritten
-            or line.retry is not None
-        ):
+        p = line.data_exchange_on_line()
+        if p is None:
             return None
         first = self.stations[p.address]
         if not steady(first):

@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import threading
 from collections.abc import AsyncIterator, Iterator
+from functools import partial
 from typing import Any
 
 import pytest
@@ -102,6 +103,25 @@ async def _exchanges(sim: SimulatedLine, address: int, count: int) -> None:
         await heard.until(lambda: counters.exchanges >= first + count)
 
 
+def _commanded_as(device: Any, running: bool) -> bool:
+    return bool(_run_commanded(device)) == running
+
+
+async def commands_go_out_at_once(hub: Hub, sim: SimulatedLine) -> None:
+    """A run and a stop relayed from the hub's loop are on the wire within drive a's
+    (slave 3's) next few exchanges."""
+    assert sim.line is not None
+    slave = sim.line[3]
+    device = slave.device
+    for command, running in ((DriveCommand(run=True, speed_rpm=600.0), True),
+                             (DriveCommand(run=False), False)):  # fmt: skip
+        before = slave.counters.exchanges
+        hub.submit("a", Source.ZENOH, command)
+        with Heard(slave.counters) as heard:
+            await heard.until(partial(_commanded_as, device, running))
+        assert slave.counters.exchanges - before <= 3
+
+
 async def test_steady_replies_are_taken_in_bursts_and_a_command_ends_one(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -113,21 +133,7 @@ async def test_steady_replies_are_taken_in_bursts_and_a_command_ends_one(
         driver = adapter._driver
         assert driver is not None
         assert driver.burst_taken > 0  # replies taken back to back, without the loop
-        assert sim.line is not None
-        slave = sim.line[3]
-        device = slave.device
-        # a run and a stop relayed from the hub's loop are on the wire within the slave's
-        # next few exchanges
-        before = slave.counters.exchanges
-        hub.submit("a", Source.ZENOH, DriveCommand(run=True, speed_rpm=600.0))
-        with Heard(slave.counters) as heard:
-            await heard.until(lambda: _run_commanded(device))  # type: ignore[arg-type]
-        assert slave.counters.exchanges - before <= 3
-        before = slave.counters.exchanges
-        hub.submit("a", Source.ZENOH, DriveCommand(run=False))
-        with Heard(slave.counters) as heard:
-            await heard.until(lambda: not _run_commanded(device))  # type: ignore[arg-type]
-        assert slave.counters.exchanges - before <= 3
+        await commands_go_out_at_once(hub, sim)
         # a callback put in the line's loop from another thread (as the hub's relay of a
         # command is) while the line bursts ends the burst; the reply read meanwhile is
         # handed to the loop after it, and the line goes on

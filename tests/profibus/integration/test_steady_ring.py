@@ -13,10 +13,12 @@ import os
 import pytest
 
 from adapters.link import ring
-from gateway.model import DriveCommand, Source
-from tests.profibus.integration.test_steady_burst import LIMIT, _exchanges, line_apart
-from tests.profibus.integration.test_steady_lane_line import _run_commanded
-from tests.support.heard import Heard
+from tests.profibus.integration.test_steady_burst import (
+    LIMIT,
+    _exchanges,
+    commands_go_out_at_once,
+    line_apart,
+)
 from tests.support.timing import scaled
 
 
@@ -38,19 +40,7 @@ async def test_steady_exchanges_go_round_in_rings_and_commands_end_them(
         driver = adapter._driver
         assert driver is not None
         assert driver.rings > 0 and driver.ring_taken > driver.rings  # more than one each
-        assert sim.line is not None
-        slave = sim.line[3]
-        device = slave.device
-        before = slave.counters.exchanges
-        hub.submit("a", Source.ZENOH, DriveCommand(run=True, speed_rpm=600.0))
-        with Heard(slave.counters) as heard:
-            await heard.until(lambda: _run_commanded(device))  # type: ignore[arg-type]
-        assert slave.counters.exchanges - before <= 3
-        before = slave.counters.exchanges
-        hub.submit("a", Source.ZENOH, DriveCommand(run=False))
-        with Heard(slave.counters) as heard:
-            await heard.until(lambda: not _run_commanded(device))  # type: ignore[arg-type]
-        assert slave.counters.exchanges - before <= 3
+        await commands_go_out_at_once(hub, sim)
         # a callback handed to the line's loop from another thread while a ring runs
         # ends it (the loop's self-pipe is the ring's wake descriptor), and the line
         # goes on
