@@ -66,6 +66,7 @@ class Wire:
         self.line = line
         self.bus = master.bus
         self.now = now
+        self.until = now  # where the last run(duration) ended
         self.turnaround = turnaround
         self.decoder = TelegramDecoder()
         self.actions: list[Action] = []
@@ -110,7 +111,12 @@ class Wire:
         self._drain()
 
     def run(self, duration: float) -> None:
-        self.run_until(lambda: False, duration)
+        """Run ``duration`` s on from where the last run ended when ``now`` is just past it
+        (a lane writes its request ahead of the step that would, past a run's end; the
+        steps write it when the driver settles): both end their runs at the same times."""
+        base = self.until if self.until <= self.now <= self.until + 2 * SLEEP_LIMIT else self.now
+        self.until = base + duration
+        self.run_until(lambda: False, self.until - self.now)
 
     def run_until(self, cond: Callable[[], bool], timeout: float = 5.0) -> bool:
         end = self.now + timeout
