@@ -74,9 +74,9 @@ def run(fd: int, wake: int, plan: RingPlan, priority: int = 0) -> RingResult:
     """Run ``plan`` on the port ``fd`` (non-blocking), stopping when ``wake`` (a descriptor,
     -1 for none) becomes readable, under SCHED_FIFO at ``priority`` (0: the thread's own
     scheduling); compiled where it is built."""
-    if compiled():
-        assert _native is not None
-        stop, times, rest, rest_at, idle, partial, n_in, n_out, rt = _native(
+    native = _native if compiled() else None
+    if native is not None:
+        stop, times, rest, rest_at, idle, partial, n_in, n_out, rt = native(
             fd,
             wake,
             plan.deadline,

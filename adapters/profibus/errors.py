@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import Enum, auto
 
-from gateway.errors import FrameDecodeError, FrameEncodeError
+from gateway.errors import FrameDecodeError, FrameEncodeError, GatewayError
 
 
 class DecodeFailure(Enum):
@@ -75,3 +75,8 @@ def whole_raw(data: bytes) -> Iterator[None]:
         if exc.raw == data:
             raise
         raise type(exc)(exc.reason, exc.message, data) from None
+
+
+class SteadyRingError(GatewayError):
+    """What a steady ring did does not fit its plan (a slave's reply taken for another
+    request, a broadcast not due): a fault of the master's, never of the line."""

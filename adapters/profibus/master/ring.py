@@ -28,6 +28,7 @@ from typing import Final
 
 from adapters.link.ringplan import REPLY_MAX, RingPlan, RingResult
 from adapters.profibus.codec.fdl import RequestFunction
+from adapters.profibus.errors import SteadyRingError
 from adapters.profibus.master.events import Action, LineMode, Purpose, SlaveState, Transmit
 from adapters.profibus.master.line import Line
 from adapters.profibus.master.scheduler import Scheduler
@@ -140,13 +141,12 @@ class SteadyRing:
             if sl is not None:  # (None: the broadcast, answered by nobody)
                 now = times[2 * j]
                 p = line.pending
-                assert p is not None and p.address == sl.address
+                if p is None or p.address != sl.address:
+                    raise SteadyRingError(f"a ring's reply {j} is not slave {sl.address}'s")
                 line.pending = None
                 line.idle_since = max(line.idle_since, now)
                 sl.answered(p, now)
-                inputs = sl.last_inputs
-                assert inputs is not None  # (steady: its inputs were taken)
-                sl.took_inputs(inputs, now)  # the same inputs: reported if due
+                sl.took_same_inputs(now)
             if 2 * j + 1 < len(times):  # the next request (or broadcast) went out
                 self._sent(chain[j + 1], times[2 * j + 1])
         # send_for's Transmit actions: the ring wrote them (the inputs reported stay)

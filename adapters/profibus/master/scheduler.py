@@ -44,6 +44,7 @@ from adapters.profibus.codec.fdl import (
     ResponseFc,
     StationType,
 )
+from adapters.profibus.errors import SteadyRingError
 from adapters.profibus.master.acyclic import JobQueue
 from adapters.profibus.master.common import DPV1_PURPOSES, MAX_TURN, Job, Pending, Reply, Turn
 from adapters.profibus.master.events import LineMode, Purpose, SlaveState
@@ -312,8 +313,8 @@ class Scheduler:
     def ended_with_broadcast(self, now: float) -> None:
         """The cycle's periodic Global_Control went out at ``now`` (a steady ring sent it,
         as :meth:`_line_task` would have)."""
-        sent = self._line_task(now)
-        assert sent  # (planned_end said it was due)
+        if not self._line_task(now):
+            raise SteadyRingError("a ring sent the cycle's Global_Control before it was due")
 
     def next_cycle_now(self, now: float) -> None:
         """The cycle's end with nothing more to send, and the next cycle begun, at

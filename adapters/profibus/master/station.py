@@ -256,6 +256,14 @@ class Station:
         self.inputs_due = now + INPUTS_REFRESH
         self._out.append(InputsReceived(self.address, data))
 
+    def took_same_inputs(self, now: float) -> None:
+        """A steady reply taken by its bytes (a steady ring): its inputs are the last
+        reported ones, reported again if their refresh is due (:meth:`took_inputs`)."""
+        if self.last_inputs is None:  # (never: a steady slave's inputs were taken)
+            self.figures.exchanges += 1
+            return
+        self.took_inputs(self.last_inputs, now)
+
     def _invalid(self, text: str, now: float) -> None:
         """A reply that is no answer to the request: counted; the state decides what next."""
         self.figures.invalid_replies += 1
