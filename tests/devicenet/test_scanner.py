@@ -100,8 +100,11 @@ def test_bring_up_on_the_wire() -> None:
     assert scanner[1] == scanner[0]
     # 2.5: Allocate explicit + poll on G2 msg 6 of MAC 10 (XID toggled for the first request).
     assert scanner[2] == (0x456, "40 4b 03 01 03 00")
-    # 2.12: Identity vendor ID read on G2 msg 4.
-    assert scanner[3] == (0x454, "00 0e 01 01 01")
+    # 2.9: the explicit connection's EPR first, 2500 ms, on G2 msg 4 (class 5, instance 1,
+    # attribute 9), so that a bring-up waiting its turns keeps its connection.
+    assert scanner[3] == (0x454, "00 10 05 01 09 c4 09")
+    # 2.12: Identity vendor ID read on G2 msg 4 (XID toggled again).
+    assert scanner[4] == (0x454, "40 0e 01 01 01")
     ids = [i for i, _ in scanner]
     assert 0x455 in ids  # polls
     # 2.10 step 5: the poll EPR, 50 ms, set with [hdr, 10, 05, 02, 09, lo, hi].
@@ -325,6 +328,24 @@ def test_explicit_turns_ahead_count_the_lines_window() -> None:
     lin.run(0.3)
     lin.take(ExplicitResult)
     assert lin.scanner.explicit_turns_ahead() == 0
+
+
+def test_the_explicit_window_serves_requests_in_the_order_they_were_queued() -> None:
+    """First come, first served on the line's explicit window, whatever the node's MAC:
+    in the nodes' order the lowest MACs, kept busy, took every freed place and a request
+    for a higher MAC waited past its bound (a 63-drive bring-up in the VM starved)."""
+    lin = line(2, 3, 4, config=replace(FAST, explicit_window=1))
+    lin.run(0.3)
+    assert sorted(ups(lin)) == [2, 3, 4]
+    lin.take(ExplicitResult)
+    first = lin.scanner.submit(4, GetAttributeSingle(1, 1, 1))
+    later = [
+        lin.scanner.submit(mac, GetAttributeSingle(1, 1, 1)) for _ in range(3) for mac in (2, 3)
+    ]
+    lin.run(0.2)
+    answered = [r.token for r in lin.take(ExplicitResult) if r.token in {first, *later}]
+    assert answered == [first, *later]
+    assert lin.late_deadlines == []
 
 
 def test_fragmentation_both_ways() -> None:

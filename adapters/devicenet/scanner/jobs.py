@@ -32,12 +32,11 @@ from adapters.devicenet.codec.ids import PredefinedMessage
 from adapters.devicenet.errors import DeviceNetDecodeError, FragmentationError
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import ExplicitResult
-from adapters.devicenet.scanner.node import Node, Pending, Phase, Transaction
+from adapters.devicenet.scanner.node import EXPLICIT_PHASES, Node, Pending, Transaction
 from adapters.devicenet.scanner.scheduler import Scheduler
 from gateway.errors import FrameEncodeError
 
 MAC_MASK = 0x3F
-EXPLICIT_PHASES = (Phase.CONFIGURING, Phase.ONLINE)  # an explicit connection is open
 _RESPONSES = (SuccessResponse, AllocateResponse, ErrorResponse)
 
 UnconnectedReply = Callable[[Node, float, Response], None]
@@ -85,7 +84,7 @@ class ExplicitJobs:
         if (
             node.current is None
             and node.queue
-            and self.schedule.explicit_free()
+            and self.schedule.explicit_turn(node)
             and self.ctx.tx_ok(now)
         ):
             self._start(node, now, node.queue.popleft())

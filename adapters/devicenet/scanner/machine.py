@@ -65,8 +65,15 @@ from adapters.devicenet.scanner.events import (
     NodeUp,
     ReportKind,
 )
-from adapters.devicenet.scanner.jobs import EXPLICIT_PHASES, ExplicitJobs
-from adapters.devicenet.scanner.node import Node, Pending, Phase, Purpose, Unconnected
+from adapters.devicenet.scanner.jobs import ExplicitJobs
+from adapters.devicenet.scanner.node import (
+    EXPLICIT_PHASES,
+    Node,
+    Pending,
+    Phase,
+    Purpose,
+    Unconnected,
+)
 from adapters.devicenet.scanner.scheduler import Scheduler
 
 Check = Callable[[Node, bytes], str | None]
@@ -159,7 +166,7 @@ class NodeMachine:
             out.append(gated(ctx.request_slot))
         if node.current is not None:
             out.append(node.current.deadline)
-        elif node.queue and node.phase in EXPLICIT_PHASES and self.schedule.explicit_free():
+        elif node.queue and node.phase in EXPLICIT_PHASES and self.schedule.explicit_turn(node):
             out.append(gated(0.0))
         deadline = node.reassembler.deadline
         if deadline is not None:
@@ -438,6 +445,10 @@ class NodeMachine:
     # ------------------------------------------------------------ bring-up steps
 
     def _setup_steps(self, node: Node) -> Iterable[_Step]:
+        """The bring-up's requests in turn. The explicit connection's EPR is set first: until
+        then the node deletes the connection after 4 x its default EPR of silence (2.5 s:
+        10 s, fact sheet 2.9), which a bring-up waiting its turns on a busy line can pass."""
+        yield _Step("explicit EPR", self._set_explicit_epr(), _accept)
         identity = CipClass.IDENTITY
         io = node.cfg.io_instance
         conn = CipClass.CONNECTION
@@ -455,7 +466,6 @@ class NodeMachine:
         yield _Step("produced size", GetAttributeSingle(conn, io, produced), _check_produced)
         yield _Step("consumed size", GetAttributeSingle(conn, io, consumed), _check_consumed)
         epr = ConnectionAttribute.EXPECTED_PACKET_RATE
-        yield _Step("explicit EPR", self._set_explicit_epr(), _accept)
         yield _Step("I/O EPR", SetAttributeSingle(conn, io, epr, _epr_ms(node.cfg.epr)), _set_epr)
 
     def _set_explicit_epr(self) -> SetAttributeSingle:

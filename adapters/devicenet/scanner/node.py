@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,7 +29,13 @@ class Phase(Enum):
     RELEASED = "released"
 
 
+EXPLICIT_PHASES = (Phase.CONFIGURING, Phase.ONLINE)  # an explicit connection is open
+
 Done = Callable[[float, Response | None, str | None], None]  # (now, response, error)
+
+# every request numbered as it is queued: the line's explicit window serves them in this
+# order, whichever node they are for (Scheduler.explicit_turn)
+_QUEUED = itertools.count()
 
 
 @dataclass(slots=True)
@@ -39,6 +46,7 @@ class Pending:
     token: int | None = None
     on_done: Done | None = None
     label: str = ""
+    order: int = field(default_factory=_QUEUED.__next__)  # when it was queued
 
 
 @dataclass(slots=True)

@@ -2,7 +2,10 @@
 
 - the poll cycle: every ``poll_interval`` each polled node online gets its output, at
   most ``poll_window`` polls in flight at once, each answered within ``response_timeout``;
-- the explicit window: at most ``explicit_window`` explicit requests in flight on the line;
+- the explicit window: at most ``explicit_window`` explicit requests in flight on the line,
+  first come, first served: a request goes out before those queued after it, for any node
+  (in the nodes' order, the lowest MACs took every freed place on a busy line and a
+  bring-up of the highest ones waited until its explicit connection timed out);
 - the bring-up window: at most ``bringup_window`` nodes allocating or configuring at once.
 """
 
@@ -15,7 +18,7 @@ from typing import Final
 from adapters.can.bits import frame_bits_min
 from adapters.devicenet.scanner.context import LineContext
 from adapters.devicenet.scanner.events import IoKind
-from adapters.devicenet.scanner.node import Node, Phase
+from adapters.devicenet.scanner.node import EXPLICIT_PHASES, Node, Phase
 
 _BRINGUP_PHASES = (Phase.ALLOCATING, Phase.CONFIGURING)  # counted in bringup_window
 
@@ -62,6 +65,28 @@ class Scheduler:
     def explicit_free(self) -> bool:
         """Whether another explicit request may go out (``explicit_window``)."""
         return len(self.explicit_busy) < self.ctx.config.explicit_window
+
+    def explicit_turn(self, node: Node) -> bool:
+        """Whether the next request queued for ``node`` may go out now: the window has a
+        place for it after every request queued before it for another node and waiting
+        for the window (:attr:`Pending.order`), so each waits only for those ahead of it
+        (``Scanner.explicit_turns_ahead``). The node must have a request queued."""
+        free = self.ctx.config.explicit_window - len(self.explicit_busy)
+        if free <= 0:
+            return False
+        mine = node.queue[0].order
+        for other in self.ctx.nodes.values():
+            queue = other.queue
+            if (
+                queue
+                and queue[0].order < mine
+                and other.current is None
+                and other.phase in EXPLICIT_PHASES
+            ):
+                free -= 1
+                if not free:
+                    return False
+        return True
 
     def explicit_started(self, mac: int) -> None:
         self.explicit_busy.add(mac)

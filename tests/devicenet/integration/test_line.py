@@ -92,10 +92,14 @@ async def test_63_drives_come_online(can_line: LinkConfig) -> None:
                 lost = sum(d["explicit_timeouts"] for d in diag["drives"].values())
                 node = sim_node_summary(r, m)
                 online_now = sum(1 for k in macs if r.hub.state(f"d{k}").online)
+                mine = diag["drives"][f"d{m}"]
                 pytest.fail(
-                    # the facts first: a CI log keeps the first line of a failure only
-                    f"d{m} not online: {online_now}/63 online, node {node['phase']}, "
-                    f"allocated {node['allocation']}, explicit timeouts {lost}; "
+                    # the facts first: a CI log keeps the first 200 characters of a failure
+                    f"d{m} not online: scanner {mine['state']}, configured "
+                    f"{mine.get('configured')}, node {node['phase']} allocated "
+                    f"{node['allocation']!s}, {online_now}/63 online; "
+                    f"problem {mine.get('problem') or mine.get('last_problem')!r}; "
+                    f"explicit timeouts {lost}; "
                     f"line {line}; "
                     f"simulator send failures {r.sim.send_failures}; "
                     f"simulator link {r.sim.link_figures()}; "
