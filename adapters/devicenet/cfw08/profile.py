@@ -13,7 +13,9 @@ What the drive does without the gateway and whether it obeys it are published wi
 readings (issue 32 items 5, 6): ``failsafe`` from P313 (seed 4.1.3), ``local_control``
 from Ctrl from Net (21/71, seed 3.1.1), from the situation bit of 150 with the command
 source of that situation (P229/P230, seed 4.2.4-4.2.5), or on 20/70 (no such bit) from
-Control Supervisor attribute 15 (table 16), read at connect and every status poll.
+Control Supervisor attribute 15 (table 16), read at connect and every status poll; the
+other sources (P220-P231) every fifth status poll, and at the next one after the I/O shows
+the drive's situation changing (docs/decisions/0106).
 """
 
 from __future__ import annotations
@@ -92,6 +94,9 @@ class Cfw08Profile(DnProfile):
     in_force: str | None = None  # the assembly pair the I/O connection's paths name
     io_values: dict[str, float | int] = field(default_factory=dict)
     params: dict[str, int] = field(default_factory=dict)
+    status_polls: int = 0  # since the last read of every source (SOURCES_EVERY)
+    sources_due: bool = False  # the I/O's situation changed: every source at the next poll
+    situation: tuple[object, object] | None = None  # remote and reference bits last seen
 
     @classmethod
     def parse_options(cls, table: Table, drive: DriveConfig) -> DriveOptions:
@@ -121,6 +126,10 @@ class Cfw08Profile(DnProfile):
         changes = state_changes(self._scale(), data, desired)
         self.io_values = dict(changes.pop("values"))
         changes.update(self._control(changes))
+        situation = (changes.get("remote"), self.io_values.get("ref_from_net"))
+        if situation != self.situation:
+            self.sources_due = self.situation is not None
+            self.situation = situation
         failsafe, text = failsafe_of(self.p313, self.io_timeout)
         changes["failsafe"], changes["failsafe_text"] = failsafe, text
         return changes
@@ -180,17 +189,29 @@ class Cfw08Profile(DnProfile):
         )
 
     async def poll_status(self, port: DrivePort) -> None:
+        """P070, P081 and P313 every time; of the sources, those that say whether the drive
+        obeys the network on the assembly pair in use (:data:`CONTROL_SOURCES`), and the
+        others every :data:`SOURCES_EVERY` polls or at the next poll after the I/O showed
+        the drive's situation changing (docs/decisions/0106)."""
         await self._read_status(port)
         # the keypad can change these while the drive runs (seed 4.1.3, 4.2)
         self.p313 = int(await self.read_param(port, P313, 0))
         self.params["P313"] = self.p313
-        await self._read_sources(port)
+        self.status_polls += 1
+        if self.sources_due or self.status_polls >= SOURCES_EVERY:
+            await self._read_sources(port)
+        else:
+            await self._read_sources(port, CONTROL_SOURCES[self.opts.assembly])
 
-    async def _read_sources(self, port: DrivePort) -> None:
-        """P220-P231 (seed 4.2: where commands, reference and direction come from), and on
-        20/70 Control Supervisor attribute 15 Ctrl from Net (table 16; 70 has no such
-        bit). A direction or reference that is not the network's is said in an event."""
-        for number in SOURCE_PARAMS:
+    async def _read_sources(self, port: DrivePort, numbers: tuple[int, ...] | None = None) -> None:
+        """P220-P231 (seed 4.2: where commands, reference and direction come from; all of
+        them unless ``numbers`` says which), and on 20/70 Control Supervisor attribute 15
+        Ctrl from Net (table 16; 70 has no such bit). A direction or reference that is not
+        the network's is said in an event."""
+        if numbers is None:
+            numbers = SOURCE_PARAMS
+            self.status_polls, self.sources_due = 0, False
+        for number in numbers:
             name = f"P{number:03d}"
             value = int(await self.read_param(port, number, 0))
             old = self.params.get(name)
@@ -397,6 +418,15 @@ class Cfw08Profile(DnProfile):
 COMMANDS_DEVICENET = 2  # seed 4.2.4, 4.2.5: P229/P230 = 2 DeviceNet
 CTRL_FROM_NET = 15  # Control Supervisor attribute 15, Get (seed table 16)
 SOURCE_PARAMS = (220, 221, 222, 229, 230, 231)  # seed 4.2.1-4.2.6
+# The sources that decide local control, read at every status poll: on 100/150 the command
+# source of each situation (P229/P230, seed 4.2.4-4.2.5); 21/71 carries Ctrl from Net in
+# its I/O and 20/70 reads the Control Supervisor's (every poll, _read_sources).
+CONTROL_SOURCES: dict[AssemblyPair, tuple[int, ...]] = {
+    AssemblyPair.BASIC: (),
+    AssemblyPair.EXTENDED: (),
+    AssemblyPair.WEG: (229, 230),
+}
+SOURCES_EVERY = 5  # status polls between reads of every source (10 s at the default 2 s)
 SOURCE_NOTES: dict[tuple[int, int], str] = {
     # seed 4.2.6: the direction is fixed whatever the network asks
     (231, 0): "the drive always turns clockwise (forward), whatever the direction asked",
