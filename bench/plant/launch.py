@@ -16,7 +16,8 @@
   line's error counters (retries, timeouts, bad telegrams: whole run, come-up included),
   and every 0.5 s the CPU time of each part of the gateway (:mod:`bench.plant.cpusplit`:
   each line's thread, the daemon's loop split by what it runs, Zenoh's threads);
-- ``--profile``: the whole run under cProfile, its stats written to FILE at the end;
+- ``--profile``: the whole run under cProfile, its stats written to FILE at the end, and
+  each line's thread in CPU time to FILE.line-NAME;
 - ``BENCH_PROFIBUS_BURSTS=0`` in the environment: the Profibus line without its bursts of
   steady exchanges (docs/decisions/0101), to compare; ``DRIVE_GATEWAY_RING=off`` (or
   ``python``): without its steady rings (or with them in Python; docs/decisions/0103).
@@ -166,6 +167,25 @@ def _bursts_from_env() -> None:
         SerialPort.far_end_apart = lambda self: False  # type: ignore[method-assign]
 
 
+def _profile_lines(path: str) -> None:
+    """``--profile``: each line's thread under a cProfile of its own in CPU time, written
+    at ``PATH.line-NAME`` when the line ends (the main one profiles the daemon's loop)."""
+    from gateway.runtime.linethread import LineThread
+
+    original = LineThread._thread_main
+
+    def profiled(self: LineThread, *args: Any) -> None:
+        profiler = cProfile.Profile(time.thread_time)
+        profiler.enable()
+        try:
+            original(self, *args)
+        finally:
+            profiler.disable()
+            profiler.dump_stats(f"{path}.line-{self.name}")
+
+    LineThread._thread_main = profiled  # type: ignore[method-assign,assignment]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(prog="python -m bench.plant.launch")
     parser.add_argument("--record", help="JSON: drives online, then each line's cycles")
@@ -180,6 +200,7 @@ def main() -> None:
     profiler = cProfile.Profile() if args.profile else None
     status = 0
     if profiler is not None:
+        _profile_lines(args.profile)
         profiler.enable()
     try:
         if argv[:1] == ["run"] and "--config" in argv:
