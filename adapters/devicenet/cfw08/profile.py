@@ -163,7 +163,7 @@ class Cfw08Profile(DnProfile):
         self.p313 = await self._checked_read(port, P313)
         self.params["P313"] = self.p313
         self.io_timeout = port.io_timeout
-        await self._read_sources(port)
+        await self._read_all_sources(port)
         if self.opts.max_rpm_param is not None:
             await self._read_max_rpm(port, self.opts.max_rpm_param)
         for number, value in self.opts.startup_params:
@@ -199,18 +199,21 @@ class Cfw08Profile(DnProfile):
         self.params["P313"] = self.p313
         self.status_polls += 1
         if self.sources_due or self.status_polls >= SOURCES_EVERY:
-            await self._read_sources(port)
+            await self._read_all_sources(port)
         else:
             await self._read_sources(port, CONTROL_SOURCES[self.opts.assembly])
 
-    async def _read_sources(self, port: DrivePort, numbers: tuple[int, ...] | None = None) -> None:
-        """P220-P231 (seed 4.2: where commands, reference and direction come from; all of
-        them unless ``numbers`` says which), and on 20/70 Control Supervisor attribute 15
+    async def _read_all_sources(self, port: DrivePort) -> None:
+        """Every source; the count to the next such read starts once all were read (a
+        read that failed part way is tried whole at the next poll)."""
+        await self._read_sources(port, SOURCE_PARAMS)
+        self.status_polls, self.sources_due = 0, False
+
+    async def _read_sources(self, port: DrivePort, numbers: tuple[int, ...]) -> None:
+        """The source parameters ``numbers`` of P220-P231 (seed 4.2: where commands,
+        reference and direction come from), and on 20/70 Control Supervisor attribute 15
         Ctrl from Net (table 16; 70 has no such bit). A direction or reference that is not
         the network's is said in an event."""
-        if numbers is None:
-            numbers = SOURCE_PARAMS
-            self.status_polls, self.sources_due = 0, False
         for number in numbers:
             name = f"P{number:03d}"
             value = int(await self.read_param(port, number, 0))
