@@ -834,13 +834,13 @@ def _watch_live(args: argparse.Namespace) -> int:
                 emit({"type": "live", "drive": drive, "alive": alive, "ts": time.time()})
 
     with session(args.connect) as s:
-        subs = [
-            s.declare_subscriber(f"{prefix}/drives/*/state", on_sample),
-            s.declare_subscriber(f"{prefix}/drives/*/events", on_event),
-            s.liveliness().declare_subscriber(f"{prefix}/drives/*", on_token, history=True),
-            s.liveliness().declare_subscriber(f"{prefix}/gateway", on_token, history=True),
-        ]
-        try:
+        subs: list[zenoh.Subscriber[None]] = []
+        try:  # Ctrl-C ends the watch from here on: the first states print while it declares
+            subs.append(s.declare_subscriber(f"{prefix}/drives/*/state", on_sample))
+            subs.append(s.declare_subscriber(f"{prefix}/drives/*/events", on_event))
+            live = s.liveliness()
+            subs.append(live.declare_subscriber(f"{prefix}/drives/*", on_token, history=True))
+            subs.append(live.declare_subscriber(f"{prefix}/gateway", on_token, history=True))
             if not gateway_alive(s, prefix):
                 board.on_gateway(False)
                 print(f"error: {no_gateway_text(args)}; waiting for it", file=sys.stderr)

@@ -171,6 +171,42 @@ def lines_of(proc: subprocess.Popen[str]) -> queue.Queue[str]:
 # ------------------------------------------------------------------ what the parser says
 
 
+class _Declares:
+    """A session whose second subscriber's declaration is where Ctrl-C lands."""
+
+    def __init__(self) -> None:
+        self.declared: list[_Declares] = []
+        self.undeclared = 0
+
+    def declare_subscriber(self, *_: object, **__: object) -> _Declares:
+        if self.declared:
+            raise KeyboardInterrupt
+        self.declared.append(self)
+        return self
+
+    def undeclare(self) -> None:
+        self.undeclared += 1
+
+
+def test_watch_ends_well_on_ctrl_c_while_it_declares(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The first states print from the first subscriber while the others are declared: a
+    Ctrl-C then (a loaded machine's run of the test above) ends the watch as any other,
+    with what was declared undeclared."""
+    import contextlib
+
+    from gateway.cli import tools
+
+    fake = _Declares()
+    monkeypatch.setattr(tools, "session", lambda _endpoint: contextlib.nullcontext(fake))
+    args = argparse.Namespace(prefix=PREFIX, json=True, connect="tcp/127.0.0.1:1")
+    try:
+        code = tools._watch_live(args)
+    except KeyboardInterrupt:
+        pytest.fail("Ctrl-C while declaring escaped the watch (drive-gateway exits 130)")
+    assert code == tools.EXIT_OK
+    assert fake.undeclared == 1
+
+
 def test_every_argument_has_help_and_shows_its_default() -> None:
     formatter = DefaultsFormatter("drive-gateway")
     for path, parser in walk(build_parser()):
