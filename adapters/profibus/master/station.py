@@ -252,6 +252,8 @@ class Station:
         self.figures.exchanges += 1
         if self.quiet and data == self.last_inputs and now < self.inputs_due:
             return
+        if data != self.last_inputs:  # the steady reply says the last inputs, no longer
+            self.steady_reply = b""  # these (the engine's short path sets it again)
         self.last_inputs = data
         self.inputs_due = now + INPUTS_REFRESH
         self._out.append(InputsReceived(self.address, data))
