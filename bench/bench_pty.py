@@ -48,7 +48,7 @@ MIN_TSDR: Final = 11  # bit times (fact sheet 1.1)
 TSYN: Final = 33  # bit times
 EXCHANGES: Final = 5000
 
-_ECHO = r"""
+ECHO = r"""
 import os, sys
 fd = int(sys.argv[1]); size = int(sys.argv[2])
 try:
@@ -70,7 +70,7 @@ def line_time(size: int = TELEGRAM, baud: int = BAUD) -> float:
     return (BITS_PER_CHAR * 2 * size + MIN_TSDR + TSYN) / baud
 
 
-def _read_exactly(fd: int, size: int) -> None:
+def read_exactly(fd: int, size: int) -> None:
     got = 0
     while got < size:
         chunk = os.read(fd, size - got)
@@ -85,20 +85,20 @@ def measure(exchanges: int = EXCHANGES) -> tuple[list[float], float]:
     tty.setraw(master)
     tty.setraw(slave)
     echo = subprocess.Popen(
-        [sys.executable, "-c", _ECHO, str(slave), str(TELEGRAM)], pass_fds=(slave,)
+        [sys.executable, "-c", ECHO, str(slave), str(TELEGRAM)], pass_fds=(slave,)
     )
     try:
         request = b"\xaa" * TELEGRAM
         for _ in range(200):  # warm up both sides
             os.write(master, request)
-            _read_exactly(master, TELEGRAM)
+            read_exactly(master, TELEGRAM)
         trips: list[float] = []
         clock = time.perf_counter
         before = resource.getrusage(resource.RUSAGE_SELF)
         for _ in range(exchanges):
             start = clock()
             os.write(master, request)
-            _read_exactly(master, TELEGRAM)
+            read_exactly(master, TELEGRAM)
             trips.append(clock() - start)
         after = resource.getrusage(resource.RUSAGE_SELF)
     finally:

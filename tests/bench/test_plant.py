@@ -145,6 +145,10 @@ def test_a_tiny_plant_runs_and_stops() -> None:
     assert figures["plant_gateway_cpu_loop_modbus"].value > 0  # its requests, timed
     turnaround = figures["plant_profibus_turnaround_p99"]
     assert turnaround.reference is not None and turnaround.value >= turnaround.reference > 0
+    # the pty's own round trip in the same window, at the simulator's priority
+    pty = figures["plant_pty_round_trip_p99"]
+    assert pty.reference is not None and pty.value >= pty.reference > 0
+    assert "plant_profibus_turnaround_p99_less_pty" in figures
 
 
 def test_the_line_errors_of_every_profibus_line_are_summed() -> None:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from functools import partial
 from typing import Any
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from adapters.profibus.codec.dp import GlobalControl
@@ -96,8 +96,9 @@ def _trace(
     noise: float,
     seed: int,
     script: list[tuple[float, Command]],
+    cycle_time: float = 0.0,
 ) -> tuple[Any, ...]:
-    bus = dataclasses.replace(FAST_BUS, live_list_period=0.0)
+    bus = dataclasses.replace(FAST_BUS, live_list_period=0.0, cycle_time=cycle_time)
     master = Master(bus, [echo_params(a) for a in addresses])
     line = echo_line(addresses)
     line.faults = FaultInjector(seed=seed, bit_error_rate=noise)
@@ -116,7 +117,7 @@ def _trace(
     taken = w.lane_taken + w.ring_taken
     return (
         *(w.sent, actions, master.line_diagnostics(), slaves, taken, caller.handled),
-        *(w.ring_taken, master._ring.crossed),
+        *(w.ring_taken, master._ring.crossed, w.ring_closed),
     )
 
 
@@ -129,6 +130,13 @@ scripts = st.lists(st.tuples(st.floats(0.001, 0.03), commands), max_size=10)
     noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
     seed=st.integers(0, 99),
     script=scripts,
+)
+@example(  # a reply stepped with new inputs (a DP-V1 job waiting), then the one before
+    # again: the lane took it as the steady reply and left its inputs unreported
+    addresses=[3, 4, 5, 6],
+    noise=0.01,
+    seed=38,
+    script=[(0.015625, ("clear", 0)), (0.0234375, ("read", 0)), (0.0078125, ("read", 0))],
 )
 def test_the_lane_sends_and_reports_what_the_steps_do(
     addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
@@ -147,13 +155,27 @@ def test_the_lane_sends_and_reports_what_the_steps_do(
     noise=st.sampled_from([0.0, 0.0, 1e-3, 1e-2]),
     seed=st.integers(0, 99),
     script=scripts,
+    cycle_time=st.sampled_from([0.0, 0.0, 0.004, 0.02]),
 )
 def test_the_steady_ring_sends_and_reports_what_the_steps_do(
-    addresses: list[int], noise: float, seed: int, script: list[tuple[float, Command]]
+    addresses: list[int],
+    noise: float,
+    seed: int,
+    script: list[tuple[float, Command]],
+    cycle_time: float,
 ) -> None:
     """The steady ring (docs/decisions/0103): what the master plans and enters after a
-    ring equals the steps' telegrams (bytes and times), actions and counters."""
-    trace = partial(_trace, quiet=True, addresses=addresses, noise=noise, seed=seed, script=script)
+    ring equals the steps' telegrams (bytes and times), actions and counters, back to back
+    and with a cycle time (rings then end with the cycle's Global_Control)."""
+    trace = partial(
+        _trace,
+        quiet=True,
+        addresses=addresses,
+        noise=noise,
+        seed=seed,
+        script=script,
+        cycle_time=cycle_time,
+    )
     with_ring, steps = trace(lane=True, ring=True), trace(lane=False)
     assert with_ring[:4] == steps[:4]
     assert with_ring[5] == steps[5]  # the caller handled the same replies
@@ -168,6 +190,25 @@ def test_a_quiet_line_goes_round_in_rings() -> None:
     assert ring_taken > 0.9 * sum(s["exchanges"] for s in slaves)
     cycles = trace[2]["cycles"]
     assert crossed > 0.5 * cycles  # rings go on into the next cycle (its Global_Control too)
+
+
+def test_with_a_cycle_time_a_ring_ends_with_the_cycles_global_control() -> None:
+    """A cycle time not over: the ring cannot go on into the next cycle, and ends with
+    the end's Global_Control, which the line's Python would otherwise send after taking
+    the whole ring back (its delay, at every cycle's end, was the turnaround's p99)."""
+    trace = _trace(
+        lane=True,
+        ring=True,
+        quiet=True,
+        addresses=[3, 4, 5],
+        noise=0.0,
+        seed=0,
+        script=[],
+        cycle_time=0.03,  # the Global_Control (every 20 ms on this bus) due at every end
+    )
+    cycles, crossed, closed = trace[2]["cycles"], trace[7], trace[8]
+    assert crossed == 0  # a cycle time: never into the next cycle
+    assert closed > 0.8 * cycles
 
 
 @settings(max_examples=30, deadline=None)
@@ -188,7 +229,7 @@ def test_a_quiet_caller_puts_on_the_line_what_a_caller_of_every_reply_does(
 
 def test_a_quiet_slave_goes_the_lane_and_still_reports_its_inputs_every_refresh() -> None:
     trace = _trace(lane=True, quiet=True, addresses=[3, 4], noise=0.0, seed=0, script=[])
-    _, _, _, slaves, taken, handled, _, _ = trace
+    _, _, _, slaves, taken, handled, _, _, _ = trace
     exchanges = sum(s["exchanges"] for s in slaves)
     assert taken > 0.8 * exchanges  # the steady exchange went the lane
     # 0.7 s of data exchange: the inputs reported at start and at least every refresh

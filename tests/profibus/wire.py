@@ -88,6 +88,7 @@ class Wire:
         # ring (Master.ring_plan), run here in fake time as adapters/link/ring.py runs it
         self.ring = False
         self.ring_taken = 0
+        self.ring_closed = 0  # rings that ended with the cycle's Global_Control, written
 
     # ------------------------------------------------------------------ driving
 
@@ -250,6 +251,8 @@ class Wire:
             deadline = sent_end + self.bus.reply_wait
         result = RingResult(stop, tuple(times), b"", 0.0, idle, -1, 0, 0)
         self.ring_taken += result.taken
+        closed = len(times) == 2 * len(plan.expected) - 1 and not plan.expected[-1]
+        self.ring_closed += closed
         self._queue.extend(self.master.ring_done(result))
 
     # ------------------------------------------------------------------ looking

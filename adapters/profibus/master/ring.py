@@ -9,8 +9,9 @@ reply known, and stops before the first that is not, at :data:`RING_MAX` exchang
 where no more could go before its horizon at the line's pace. At the cycle's end it goes
 on into the next cycle only where what the end sends is certain whenever the ring gets
 there (:class:`_Wraps`): the periodic Global_Control if it is due already, else nothing
-(the horizon moved before it falls due). Nothing else may wait: no DP-V1 job, no slave in
-start-up, no repetition.
+(the horizon moved before it falls due). Where it cannot go on (a cycle time not over),
+it ends with the cycle's Global_Control when that is due already. Nothing else may wait:
+no DP-V1 job, no slave in start-up, no repetition.
 
 Afterwards each exchange the ring did is entered as the general path enters a steady
 reply, with the times it really happened: the reply's turn ends (response time, FCB,
@@ -91,7 +92,12 @@ class SteadyRing:
         while len(chain) < RING_MAX and earliest <= wraps.horizon:
             if not queue:  # the cycle's end: the ring goes on into the next cycle
                 end = wraps.next()
-                if end is None:
+                if end is None:  # it stops there, with the Global_Control if it is due
+                    closing = wraps.closing()
+                    if closing is not None:
+                        chain.append(None)
+                        expected.append(b"")
+                        requests.append(closing)
                     break
                 for broadcast in end:  # its Global_Control: no reply
                     chain.append(None)
@@ -110,7 +116,7 @@ class SteadyRing:
             expected.append(sl.steady_reply)
             requests.append(request)
             earliest += max((len(request) + len(sl.steady_reply)) * t_char + tsyn, pace)
-        while chain[-1] is None:  # never ending with the broadcast
+        while chain[-1] is None and not wraps.closed:  # a broadcast ends only a cycle
             chain.pop()
             expected.pop()
             requests.pop()
@@ -173,14 +179,26 @@ class _Wraps:
     goes with it when it is due already; when it is not, the ring's horizon is moved
     before it is (and before a live-list probe's), so the end sends nothing. A Sync or
     Freeze queued, or a cycle time not over, ends the ring at the cycle's end (with a
-    cycle time, a second end is never certain)."""
+    cycle time, a second end is never certain); the ring then ends with the end's
+    Global_Control when that is certain (:meth:`closing`)."""
 
     def __init__(self, scheduler: Scheduler, now: float, horizon: float) -> None:
         self.scheduler = scheduler
         self.now = now
         self.horizon = horizon
         self.count = 0
+        self.closed = False  # the ring ends with the cycle's Global_Control (closing)
         self.queued, self.gc_due, self.probe_due = scheduler.line_tasks_due()
+
+    def closing(self) -> bytes | None:
+        """Where the ring stops at the cycle's end: the Global_Control the end sends first
+        when it is certain, i.e. due already and no Sync or Freeze queued before it (the
+        ring's last telegram: the line is the engine's again after it, for a live-list
+        probe or the next cycle's start, as :meth:`Scheduler.send_next` makes them)."""
+        if self.queued or self.scheduler.cycle_started is None or self.gc_due > self.now:
+            return None
+        self.closed = True
+        return self.scheduler.broadcast_frame()
 
     def next(self) -> tuple[bytes, ...] | None:
         """The cycle's end: (), (the Global_Control,), or None (the ring stops there)."""
