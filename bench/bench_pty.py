@@ -28,6 +28,7 @@ Figures:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
 import statistics
@@ -79,8 +80,10 @@ def read_exactly(fd: int, size: int) -> None:
         got += len(chunk)
 
 
-def measure(exchanges: int = EXCHANGES) -> tuple[list[float], float]:
-    """Round trips (s) and the requester's CPU per exchange (s)."""
+@contextlib.contextmanager
+def echo_pty() -> Iterator[int]:
+    """A pty pair with the bare echo on its far side (a child process, of the caller's
+    scheduling policy): the near side's descriptor, closed with the echo at the end."""
     master, slave = os.openpty()
     tty.setraw(master)
     tty.setraw(slave)
@@ -88,6 +91,21 @@ def measure(exchanges: int = EXCHANGES) -> tuple[list[float], float]:
         [sys.executable, "-c", ECHO, str(slave), str(TELEGRAM)], pass_fds=(slave,)
     )
     try:
+        yield master
+    finally:
+        os.close(master)
+        echo.terminate()
+        try:
+            echo.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            echo.kill()
+            echo.wait()
+        os.close(slave)
+
+
+def measure(exchanges: int = EXCHANGES) -> tuple[list[float], float]:
+    """Round trips (s) and the requester's CPU per exchange (s)."""
+    with echo_pty() as master:
         request = b"\xaa" * TELEGRAM
         for _ in range(200):  # warm up both sides
             os.write(master, request)
@@ -101,15 +119,6 @@ def measure(exchanges: int = EXCHANGES) -> tuple[list[float], float]:
             read_exactly(master, TELEGRAM)
             trips.append(clock() - start)
         after = resource.getrusage(resource.RUSAGE_SELF)
-    finally:
-        os.close(master)
-        echo.terminate()
-        try:
-            echo.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            echo.kill()
-            echo.wait()
-        os.close(slave)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return trips, cpu / exchanges
 

@@ -23,13 +23,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
-import sys
 import time
-import tty
 from typing import Final
 
-from bench.bench_pty import ECHO, TELEGRAM, read_exactly
+from bench.bench_pty import TELEGRAM, echo_pty, read_exactly
 from bench.plant import pin_from_env, realtime_from_env
 from bench.plant.pbsim import summary
 
@@ -38,14 +35,8 @@ PACE: Final = 0.001  # s between two exchanges' starts (a light load: about 2 % 
 
 def probe(settle: float, seconds: float) -> list[float]:
     """Round trips (s) over ``seconds``, after ``settle`` s of the same exchanges."""
-    master, slave = os.openpty()
-    tty.setraw(master)
-    tty.setraw(slave)
-    echo = subprocess.Popen(  # the scheduling policy is inherited: the same priority
-        [sys.executable, "-c", ECHO, str(slave), str(TELEGRAM)], pass_fds=(slave,)
-    )
     trips: list[float] = []
-    try:
+    with echo_pty() as master:  # the echo inherits this process's priority
         request = b"\xaa" * TELEGRAM
         clock = time.monotonic
         begin = clock()
@@ -63,15 +54,6 @@ def probe(settle: float, seconds: float) -> list[float]:
             if start >= measure_from:
                 trips.append(clock() - start)
             at = max(at + PACE, clock())
-    finally:
-        os.close(master)
-        echo.terminate()
-        try:
-            echo.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            echo.kill()
-            echo.wait()
-        os.close(slave)
     return trips
 
 
