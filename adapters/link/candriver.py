@@ -18,6 +18,11 @@ or a receive failure. Then everything waiting is drained and stepped in the next
 step: a frame that arrived during the hold is stepped as if it had arrived at the hold's
 end. Without a hold (None, the default) each frame ends the wait as before.
 
+Burst (:class:`Burst`, docs/decisions/0108): a wait that is not held, while the loop has
+nothing else to do, is first made on the bus's descriptor itself (``CanLink.burst``), so
+a steady line's responses are taken without a turn of the loop each; a callback handed to
+the loop ends it at once, and the loop gets a turn at least every :data:`BURST_HOLD`.
+
 A send that fails (a full transmit queue, the interface down) goes back to the engine as
 the events :meth:`CanProtocol.send_failed` makes of it, so it backs off; the frames not
 sent are dropped, never retried here. The clock is injected (``time.monotonic`` unless a
@@ -26,14 +31,19 @@ test gives another).
 
 from __future__ import annotations
 
+import asyncio
+import os
 import time
 from collections.abc import Callable, Sequence
 from typing import Final, Generic, Protocol, TypeVar
 
 from adapters.link.can import CanEvent, CanLink, Frame, FrameT, SendResult
 from adapters.link.engine import Engine
+from adapters.link.timer import loop_next_timer, loop_ready, loop_wake
 
 IDLE_WAIT: Final = 1.0  # s: the longest wait for frames when nothing else is due
+BURST: Final = 0.002  # s: the longest a burst waits on the bus for the next frames
+BURST_HOLD: Final = 0.05  # s: the longest a run of bursts keeps the loop from a turn
 
 EventT = TypeVar("EventT")
 ActionT = TypeVar("ActionT")
@@ -109,7 +119,8 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
             protocol.wake_at,
             protocol.hold_until,
         )
-        events: Sequence[CanEvent[FrameT]] = ()
+        events: Sequence[CanEvent[FrameT]] | None = ()
+        burst = Burst.of(asyncio.get_running_loop(), clock)
         while True:
             now = clock()
             protocol.before_step(now)
@@ -134,8 +145,10 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
                 wait = deadline - clock()
                 events = await link.receive(wait if wait > 0.0 else 0.0, True)
             else:
-                wait = IDLE_WAIT if deadline is None else deadline - clock()
-                events = await link.receive(wait if wait > 0.0 else 0.0)
+                events = burst.wait(link, deadline) if burst is not None else None
+                if events is None:  # no burst: the loop's turn
+                    wait = IDLE_WAIT if deadline is None else deadline - clock()
+                    events = await link.receive(wait if wait > 0.0 else 0.0)
 
     def take(self, now: float, events: Sequence[CanEvent[FrameT]]) -> None:
         """Step each received event (then show it to the adapter)."""
@@ -176,3 +189,49 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
             return
         for event in self.protocol.send_failed(result):
             self.act(now, self.engine.step(now, event))
+
+
+class Burst:
+    """The driver's burst (docs/decisions/0108): the next frames waited for on the bus's
+    descriptor itself, without a turn of the line's loop, while the loop has nothing else
+    to do: no callback waiting, its next timer not before the wait's end, its wake
+    descriptor (a callback handed from another thread: a command) watched beside the
+    bus. Each wait lasts at most :data:`BURST`, and a run of them at most
+    :data:`BURST_HOLD` before the loop gets a turn whatever happens."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, ready: object, wake: int) -> None:
+        self.loop = loop
+        self.ready = ready  # true while callbacks wait in the loop (timer.loop_ready)
+        self.wake = wake
+        self.since: float | None = None  # the run of bursts began (None: after a turn)
+
+    @classmethod
+    def of(cls, loop: asyncio.AbstractEventLoop, clock: Callable[[], float]) -> Burst | None:
+        """The burst of a driver on ``loop``; None where it cannot be kept: a clock other
+        than the loop's (a test's), or ``DRIVE_GATEWAY_CAN_BURST=off`` (a comparison)."""
+        if clock is not time.monotonic or os.environ.get("DRIVE_GATEWAY_CAN_BURST") == "off":
+            return None
+        return cls(loop, loop_ready(loop), loop_wake(loop))
+
+    def wait(self, link: CanLink[FrameT], deadline: float | None) -> list[CanEvent[FrameT]] | None:
+        """Frames that came by the earliest of ``deadline``, :data:`BURST` and the loop's
+        next timer; ``[]`` when ``deadline`` came with none; None: the loop's turn (the
+        caller awaits the link)."""
+        now = time.monotonic()
+        if self.ready:
+            self.since = None
+            return None
+        if self.since is None:
+            self.since = now
+        elif now - self.since > BURST_HOLD:
+            self.since = None
+            return None
+        until = min(now + BURST, loop_next_timer(self.loop))
+        due = False
+        if deadline is not None and deadline <= until:
+            until, due = deadline, True
+        events = link.burst(until, self.wake)
+        if events is None or (not events and not due):
+            self.since = None
+            return None
+        return events

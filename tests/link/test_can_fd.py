@@ -12,6 +12,7 @@ import errno
 import socket
 import struct
 import threading
+import time
 import uuid
 from collections.abc import AsyncIterator, Iterator
 from dataclasses import dataclass
@@ -30,7 +31,9 @@ from adapters.link.can import (
     RxFrame,
     bus_fileno,
 )
+from adapters.link.candriver import CanDriver
 from adapters.link.canerror import LineCondition
+from adapters.link.timer import loop_wake
 from gateway.errors import AdapterError, FrameDecodeError
 from tests.support.timing import scaled
 
@@ -343,3 +346,153 @@ async def test_a_hold_on_a_bus_without_a_descriptor_keeps_frames_a_failure_ends_
             assert got == [RxFailed("Network is down", True), RxFrame(Frame(0x181, b"\x05"))]
         finally:
             peer.shutdown()
+
+
+# ---------------------------------------------------------------------- the burst (0108)
+
+
+async def test_a_burst_takes_frames_on_the_descriptor_without_the_loop(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    loop = asyncio.get_running_loop()
+    bus.write(0x3CA, b"\x10")
+    got = lnk.burst(time.monotonic() + scaled(10.0), loop_wake(loop))
+    assert got == [RxFrame(Frame(0x3CA, b"\x10"))]
+    assert lnk.figures.frames_rx == 1
+    # a frame written from another thread while the burst waits: taken when it comes
+    writer = threading.Timer(0.01, bus.write, (0x3CB, b"\x01"))
+    writer.start()
+    try:
+        got = lnk.burst(time.monotonic() + scaled(10.0), loop_wake(loop))
+    finally:
+        writer.join()
+    assert got == [RxFrame(Frame(0x3CB, b"\x01"))]
+
+
+async def test_a_burst_ends_with_nothing_at_its_time_and_none_when_not_for_now(
+    link: tuple[CanLink[Frame], PairBus],
+) -> None:
+    lnk, bus = link
+    loop = asyncio.get_running_loop()
+    wake = loop_wake(loop)
+    assert lnk.burst(time.monotonic() + 0.005, wake) == []  # the time is over, no frame
+    assert lnk.burst(time.monotonic() - 1.0, wake) == []
+    lnk.wake()  # a wake asked for: the loop's turn
+    assert lnk.burst(time.monotonic() + scaled(10.0), wake) is None
+    assert await lnk.receive(0.0) == []
+    # a callback handed to the loop from another thread: its wake descriptor ends the burst
+    handed = threading.Timer(0.01, loop.call_soon_threadsafe, (lambda: None,))
+    handed.start()
+    try:
+        start = time.monotonic()
+        assert lnk.burst(start + scaled(10.0), wake) is None
+        assert time.monotonic() - start < scaled(5.0)
+    finally:
+        handed.join()
+    bus.write(0x3CA)
+    lnk._readable()  # the loop's reader, played by the test: a frame already waiting
+    assert lnk.burst(time.monotonic() + scaled(10.0), wake) is None  # already waiting
+    assert await lnk.receive(0.0) == [RxFrame(Frame(0x3CA, b""))]
+
+
+async def test_a_burst_on_a_bus_without_a_descriptor_is_never_for_now() -> None:
+    channel = f"burst-{uuid.uuid4().hex[:8]}"
+    async with CanLink(CanConfig("virtual", channel), make) as lnk:
+        assert lnk.burst(time.monotonic() + 1.0, -1) is None
+
+
+class _Echo:
+    """A CAN protocol of the driver that counts the frames stepped and asks nothing."""
+
+    def __init__(self, frames: int) -> None:
+        self.stepped = 0
+        self.frames = frames
+        self.all_in = asyncio.Event()
+
+    def event(self, received: object) -> object:
+        self.stepped += 1
+        if self.stepped == self.frames:
+            self.all_in.set()
+        return received
+
+    def frame(self, action: object) -> None:
+        return None
+
+    def handle(self, now: float, action: object) -> None:
+        return None
+
+    def send_failed(self, result: object) -> list[object]:
+        return []
+
+    def before_step(self, now: float) -> None:
+        return None
+
+    def after_step(self, now: float) -> None:
+        return None
+
+    def wake_at(self) -> float | None:
+        return None
+
+    def received(self, now: float, event: object) -> None:
+        return None
+
+    def hold_until(self, now: float) -> float | None:
+        return None
+
+
+class _Quiet:
+    """An engine with nothing to do (a deadline far off)."""
+
+    def step(self, now: float, event: object = None) -> list[object]:
+        return []
+
+    def next_deadline(self) -> float | None:
+        return time.monotonic() + 3600.0
+
+
+@pytest.mark.parametrize("mode", ["on", "off"])
+async def test_the_driver_takes_frames_in_bursts_without_a_loop_turn_each(
+    link: tuple[CanLink[Frame], PairBus], monkeypatch: pytest.MonkeyPatch, mode: str
+) -> None:
+    """Frames 0.5 ms apart, as poll responses come: with the burst the driver takes them
+    on the bus's descriptor, the link's receive awaited only when a burst ends (the loop's
+    turn); without it (DRIVE_GATEWAY_CAN_BURST=off) one await per frame or so."""
+    monkeypatch.setenv("DRIVE_GATEWAY_CAN_BURST", mode)
+    lnk, bus = link
+    frames = 200
+    protocol = _Echo(frames)
+    awaited = 0
+    receive = lnk.receive
+
+    async def counted(wait: float, hold: bool = False) -> list[Any]:
+        nonlocal awaited
+        awaited += 1
+        return await receive(wait, hold)
+
+    monkeypatch.setattr(lnk, "receive", counted)
+    driver = CanDriver(_Quiet(), lnk, protocol)
+    task = asyncio.create_task(driver.run())
+
+    def write() -> None:
+        for i in range(frames):
+            bus.write(0x300 + i % 64, bytes([i % 256]))
+            time.sleep(0.0005)  # the far end's pace: a response every 0.5 ms
+
+    writer = threading.Thread(target=write)
+    try:
+        await asyncio.sleep(0.01)
+        start = awaited
+        writer.start()
+        await asyncio.wait_for(protocol.all_in.wait(), scaled(30.0))  # no timer meanwhile
+        turns = awaited - start
+    finally:
+        if writer.ident is not None:
+            writer.join()
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+    assert protocol.stepped == frames
+    if mode == "on":
+        assert turns < frames / 4, turns
+    else:
+        assert turns > frames / 2, turns
