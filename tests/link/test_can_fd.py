@@ -463,11 +463,13 @@ async def test_the_driver_takes_frames_in_bursts_without_a_loop_turn_each(
     frames = 200
     protocol = _Echo(frames)
     awaited = 0
+    waiting = asyncio.Event()  # the driver reached its first wait
     receive = lnk.receive
 
     async def counted(wait: float, hold: bool = False) -> list[Any]:
         nonlocal awaited
         awaited += 1
+        waiting.set()
         return await receive(wait, hold)
 
     monkeypatch.setattr(lnk, "receive", counted)
@@ -481,7 +483,7 @@ async def test_the_driver_takes_frames_in_bursts_without_a_loop_turn_each(
 
     writer = threading.Thread(target=write)
     try:
-        await asyncio.sleep(0.01)
+        await asyncio.wait_for(waiting.wait(), scaled(10.0))
         start = awaited
         writer.start()
         await asyncio.wait_for(protocol.all_in.wait(), scaled(30.0))  # no timer meanwhile
