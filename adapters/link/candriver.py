@@ -218,8 +218,8 @@ class Burst:
         next timer; ``[]`` when ``deadline`` came with none; None: the loop's turn (the
         caller awaits the link)."""
         now = time.monotonic()
-        if self.ready:
-            self.since = None
+        if self.ready or (deadline is not None and deadline <= now):
+            self.since = None  # (a deadline already past: the loop's turn, as before)
             return None
         if self.since is None:
             self.since = now

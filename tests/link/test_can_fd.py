@@ -31,7 +31,7 @@ from adapters.link.can import (
     RxFrame,
     bus_fileno,
 )
-from adapters.link.candriver import CanDriver
+from adapters.link.candriver import Burst, CanDriver
 from adapters.link.canerror import LineCondition
 from adapters.link.timer import loop_wake
 from gateway.errors import AdapterError, FrameDecodeError
@@ -498,3 +498,30 @@ async def test_the_driver_takes_frames_in_bursts_without_a_loop_turn_each(
         assert turns < frames / 4, turns
     else:
         assert turns > frames / 2, turns
+
+
+async def test_the_driver_bursts_only_while_its_loop_has_nothing_else_to_do(
+    link: tuple[CanLink[Frame], PairBus], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.delenv("DRIVE_GATEWAY_CAN_BURST", raising=False)
+    lnk, _ = link
+    loop = asyncio.get_running_loop()
+    burst = Burst.of(loop, time.monotonic)
+    assert burst is not None
+    assert Burst.of(loop, lambda: 0.0) is None  # a test's clock: never
+    now = time.monotonic()
+    assert burst.wait(lnk, now + 0.001) == []  # the engine's deadline came, no frame
+    assert burst.wait(lnk, now - 1.0) is None  # a deadline already past: the loop's turn
+    handle = loop.call_soon(lambda: None)  # a callback waiting: the loop's turn
+    assert burst.wait(lnk, time.monotonic() + 1.0) is None
+    handle.cancel()
+    await asyncio.sleep(0)  # (the loop drops the cancelled callback)
+    timer = loop.call_later(0.001, lambda: None)  # the loop's next timer ends the burst
+    try:
+        start = time.monotonic()
+        assert burst.wait(lnk, start + scaled(10.0)) is None
+        assert time.monotonic() - start < scaled(1.0)
+    finally:
+        timer.cancel()
+    monkeypatch.setenv("DRIVE_GATEWAY_CAN_BURST", "off")
+    assert Burst.of(loop, time.monotonic) is None
