@@ -361,15 +361,19 @@ class CanLink(Generic[FrameT]):
             self._waiter = None
             _release(waiter)
 
-    def _drain(self, bus: can.BusABC, limit: int = RX_DRAIN) -> None:
+    def _drain(self, bus: can.BusABC, limit: int = RX_DRAIN, ask: int | None = None) -> None:
         """Read what is waiting on the descriptor, at most ``limit`` frames (RX_DRAIN at
-        the end of a hold, RX_BATCH per readiness)."""
+        the end of a hold, RX_BATCH per readiness). With ``ask`` (the descriptor: a
+        burst's) whether more waits is asked of it after each frame, cheaper than a read
+        that finds nothing."""
         recv, rx = bus.recv, self._rx
         for _ in range(limit):
             msg = recv(0)
             if msg is None:
                 break
             rx.append(msg)
+            if ask is not None and not select.select((ask,), (), (), 0.0)[0]:
+                break
 
     def _arrived(self, msg: can.Message) -> None:
         """A message from the Notifier (a bus without a descriptor), on the loop."""
@@ -499,14 +503,7 @@ class CanLink(Generic[FrameT]):
             return []
         if fd not in ready:
             return None
-        recv, rx = bus.recv, self._rx
-        for _ in range(RX_BATCH):  # what is waiting: asked of the descriptor after each
-            msg = recv(0)  # frame, cheaper than a read that finds nothing
-            if msg is None:
-                break
-            rx.append(msg)
-            if not select.select((fd,), (), (), 0.0)[0]:
-                break
+        self._drain(bus, RX_BATCH, fd)
         return self._collect()
 
     def _collect(self) -> list[CanEvent[FrameT]]:

@@ -119,7 +119,7 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
             protocol.wake_at,
             protocol.hold_until,
         )
-        events: Sequence[CanEvent[FrameT]] | None = ()
+        events: Sequence[CanEvent[FrameT]] = ()
         burst = Burst.of(asyncio.get_running_loop(), clock)
         while True:
             now = clock()
@@ -145,8 +145,10 @@ class CanDriver(Generic[FrameT, EventT, ActionT]):
                 wait = deadline - clock()
                 events = await link.receive(wait if wait > 0.0 else 0.0, True)
             else:
-                events = burst.wait(link, deadline) if burst is not None else None
-                if events is None:  # no burst: the loop's turn
+                burst_got = burst.wait(link, deadline) if burst is not None else None
+                if burst_got is not None:
+                    events = burst_got
+                else:  # no burst: the loop's turn
                     wait = IDLE_WAIT if deadline is None else deadline - clock()
                     events = await link.receive(wait if wait > 0.0 else 0.0)
 

@@ -16,9 +16,9 @@ One blocking loop (``select`` on the pty, 1 us timer slack, ``time.sleep`` to th
 moment: this process does nothing else meanwhile, as a half-duplex line carries nothing
 else); the devices tick every 10 ms, one slave at a time between telegrams (each slave's
 application runs beside its own line interface; a pass over every device at once would
-hold a request meanwhile, counted as the master's turnaround). Recorded for the report: how late each reply went
-out against its moment, and the master's turnaround as seen from the line (reply written ->
-next request read), against TSYN.
+hold a request meanwhile, counted as the master's turnaround). Recorded for the report:
+how late each reply went out against its moment, and the master's turnaround as seen from
+the line (reply written -> next request read), against TSYN.
 
 ``python -m bench.plant.pbsim --config FILE --baud B --link PATH --out JSON``: the pty's
 path is symlinked at PATH (the config's ``port``); SIGTERM ends it and writes JSON.

@@ -24,14 +24,16 @@ import pytest
 from adapters.link.can import (
     RX_BATCH,
     CanConfig,
+    CanEvent,
     CanLink,
     RxBad,
     RxError,
     RxFailed,
     RxFrame,
+    SendResult,
     bus_fileno,
 )
-from adapters.link.candriver import Burst, CanDriver
+from adapters.link.candriver import Burst, CanDriver, CanProtocol
 from adapters.link.canerror import LineCondition
 from adapters.link.timer import loop_wake
 from gateway.errors import AdapterError, FrameDecodeError
@@ -402,43 +404,29 @@ async def test_a_burst_on_a_bus_without_a_descriptor_is_never_for_now() -> None:
         assert lnk.burst(time.monotonic() + 1.0, -1) is None
 
 
-class _Echo:
-    """A CAN protocol of the driver that counts the frames stepped and asks nothing."""
+class _Echo(CanProtocol[Frame, Any, Any]):
+    """A CAN protocol of the driver that counts the frames stepped and asks nothing (the
+    optional hooks keep their defaults)."""
 
     def __init__(self, frames: int) -> None:
         self.stepped = 0
         self.frames = frames
         self.all_in = asyncio.Event()
 
-    def event(self, received: object) -> object:
+    def event(self, received: CanEvent[Frame]) -> Any:
         self.stepped += 1
         if self.stepped == self.frames:
             self.all_in.set()
         return received
 
-    def frame(self, action: object) -> None:
+    def frame(self, action: Any) -> None:
         return None
 
-    def handle(self, now: float, action: object) -> None:
+    def handle(self, now: float, action: Any) -> None:
         return None
 
-    def send_failed(self, result: object) -> list[object]:
+    def send_failed(self, result: SendResult) -> list[Any]:
         return []
-
-    def before_step(self, now: float) -> None:
-        return None
-
-    def after_step(self, now: float) -> None:
-        return None
-
-    def wake_at(self) -> float | None:
-        return None
-
-    def received(self, now: float, event: object) -> None:
-        return None
-
-    def hold_until(self, now: float) -> float | None:
-        return None
 
 
 class _Quiet:
@@ -512,10 +500,10 @@ async def test_the_driver_bursts_only_while_its_loop_has_nothing_else_to_do(
     now = time.monotonic()
     assert burst.wait(lnk, now + 0.001) == []  # the engine's deadline came, no frame
     assert burst.wait(lnk, now - 1.0) is None  # a deadline already past: the loop's turn
-    handle = loop.call_soon(lambda: None)  # a callback waiting: the loop's turn
+    ran: asyncio.Future[None] = loop.create_future()
+    loop.call_soon(ran.set_result, None)  # a callback waiting: the loop's turn
     assert burst.wait(lnk, time.monotonic() + 1.0) is None
-    handle.cancel()
-    await asyncio.sleep(0)  # (the loop drops the cancelled callback)
+    await ran  # the loop ran it: nothing waits any more
     timer = loop.call_later(0.001, lambda: None)  # the loop's next timer ends the burst
     try:
         start = time.monotonic()
