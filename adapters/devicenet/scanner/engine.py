@@ -229,7 +229,8 @@ class Scanner:
     def explicit_turns_ahead(self) -> int:
         """How many turns of the line's explicit window the requests queued or in flight
         (all nodes) take: a request submitted now starts within that many."""
-        backlog = sum(len(n.queue) + (n.current is not None) for n in self.nodes.values())
+        # (a node's request in flight is one in the window: ExplicitJobs starts and ends both)
+        backlog = sum(map(len, self._queues)) + len(self.schedule.explicit_busy)
         return -(-backlog // self._ctx.config.explicit_window)
 
     def online_macs(self) -> list[int]:
