@@ -50,6 +50,8 @@ cycle at :data:`CYCLE_100MS` (``plant_100ms_*``: the CPU a steady plant costs).
 ``make bench`` runs it with :data:`MEASURE` seconds (``BENCH_PLANT_SECONDS`` overrides, the
 ``--short`` flag of ``python -m bench`` gives :data:`SHORT_MEASURE`). Start-up is bounded
 by :data:`STARTUP_BOUND`; the whole run stays within a couple of minutes.
+``BENCH_DEVICENET_STATUS=S``: the CFW-08s' ``status_interval`` (their explicit status
+reads; the adapter's default otherwise), to weigh those reads' share of the line.
 """
 
 from __future__ import annotations
@@ -173,6 +175,12 @@ def felser_cycle(slaves: int, bus: BusParams | None = None) -> float:
 # ---------------------------------------------------------------------- the config
 
 
+def _status_interval() -> list[str]:
+    """The DeviceNet line's ``status_interval`` line where ``BENCH_DEVICENET_STATUS`` sets it."""
+    value = os.environ.get("BENCH_DEVICENET_STATUS")
+    return [] if not value else [f"status_interval = {float(value)!r}"]
+
+
 def config_text(
     plant: Plant, tmp: Path, modbus_port: int, zenoh_port: int, opcua_port: int = 0
 ) -> str:
@@ -231,6 +239,7 @@ def config_text(
             "mac = 0",
             f"poll_interval = {plant.cycle or 0.001!r}",
             "expected_packet_rate = 0.5",
+            *_status_interval(),
         ]
         for mac in range(1, plant.devicenet + 1):
             lines += [

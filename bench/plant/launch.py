@@ -17,7 +17,9 @@
   and every 0.5 s the CPU time of each part of the gateway (:mod:`bench.plant.cpusplit`:
   each line's thread, the daemon's loop split by what it runs, Zenoh's threads);
 - ``--profile``: the whole run under cProfile, its stats written to FILE at the end, and
-  each line's thread in CPU time to FILE.line-NAME;
+  each line's thread in CPU time to FILE.line-NAME (``BENCH_PROFILE_AFTER=S``: a line's
+  stats from S seconds after its start, without the come-up; ``BENCH_PROFILE_FOR=T``: for
+  T seconds, without the shutdown);
 - ``BENCH_PROFIBUS_BURSTS=0`` in the environment: the Profibus line without its bursts of
   steady exchanges (docs/decisions/0101), to compare; ``DRIVE_GATEWAY_RING=off`` (or
   ``python``): without its steady rings (or with them in Python; docs/decisions/0103).
@@ -34,9 +36,11 @@ import cProfile
 import gc
 import json
 import logging
+import marshal
 import math
 import os
 import sys
+import threading
 import time
 from typing import Any
 
@@ -167,6 +171,30 @@ def _bursts_from_env() -> None:
         SerialPort.far_end_apart = lambda self: False  # type: ignore[method-assign]
 
 
+def _snapshot(profiler: cProfile.Profile) -> dict[Any, Any]:
+    profiler.snapshot_stats()
+    return dict(profiler.stats)
+
+
+def _less(stats: dict[Any, Any], before: dict[Any, Any]) -> dict[Any, Any]:
+    """The stats gathered since ``before`` (``BENCH_PROFILE_AFTER``: without the come-up)."""
+
+    def minus(a: tuple[Any, ...], b: tuple[Any, ...] | None) -> tuple[Any, ...]:
+        return a if b is None else tuple(x - y for x, y in zip(a, b, strict=True))
+
+    out: dict[Any, Any] = {}
+    for func, (cc, nc, tt, ct, callers) in stats.items():
+        old = before.get(func)
+        if old is None:
+            out[func] = (cc, nc, tt, ct, callers)
+            continue
+        counts = minus((cc, nc, tt, ct), old[:4])
+        if counts[1] <= 0:
+            continue
+        out[func] = (*counts, {c: minus(v, old[4].get(c)) for c, v in callers.items()})
+    return out
+
+
 def _profile_lines(path: str) -> None:
     """``--profile``: each line's thread under a cProfile of its own in CPU time, written
     at ``PATH.line-NAME`` when the line ends (the main one profiles the daemon's loop)."""
@@ -174,14 +202,25 @@ def _profile_lines(path: str) -> None:
 
     original = LineThread._thread_main
 
+    after = float(os.environ.get("BENCH_PROFILE_AFTER", "0"))
+    span = float(os.environ.get("BENCH_PROFILE_FOR", "0"))
+
     def profiled(self: LineThread, *args: Any) -> None:
         profiler = cProfile.Profile(time.thread_time)
+        before: dict[Any, Any] = {}
+        end: dict[Any, Any] = {}
+        for at, into in ((after, before), (after + span, end) if span > 0 else (0.0, end)):
+            if at > 0:
+                timer = threading.Timer(at, lambda into=into: into.update(_snapshot(profiler)))
+                timer.daemon = True
+                timer.start()
         profiler.enable()
         try:
             original(self, *args)
         finally:
             profiler.disable()
-            profiler.dump_stats(f"{path}.line-{self.name}")
+            with open(f"{path}.line-{self.name}", "wb") as out:
+                marshal.dump(_less(end or _snapshot(profiler), before), out)
 
     LineThread._thread_main = profiled  # type: ignore[method-assign,assignment]
 
