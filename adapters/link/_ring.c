@@ -5,7 +5,7 @@
  * and when a driver runs one. This file only runs it:
  *
  *   run(fd, wake, deadline, expected, requests, tsyn, reply_wait, t_char,
- *       idle_since, busy_until, horizon, priority)
+ *       idle_since, busy_until, horizon, priority, gc_due, gc_period)
  *     -> (stop, times, rest, rest_at, idle_since, partial, bytes_in, bytes_out, realtime)
  *
  * With priority > 0 the ring runs under SCHED_FIFO at that priority (the thread's own
@@ -17,13 +17,16 @@
  * request's own end, at least until busy_until) and requests[i] (the next exchange's
  * request) is written; its reply awaited reply_wait after its own line time (its length
  * times t_char); an exchange whose expected reply is empty is a broadcast (no reply, the
- * line busy TSYN after its end). The ring stops at anything else, before acting on it, with a reason:
- * see STOP_* below and RingStop in ring.py.
+ * line busy TSYN after its end), written only when it is due once the line is free for it
+ * (gc_due, then gc_period after each one written); one not due is left out, its two times
+ * NaN, and the next request follows in its place. The ring stops at anything else, before
+ * acting on it, with a reason: see STOP_* below and RingStop in ring.py.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
 #include <errno.h>
+#include <math.h>
 #include <poll.h>
 #include <sched.h>
 #include <string.h>
@@ -76,6 +79,8 @@ static int wait_for(int fd, int wake, double until) {
 typedef struct {
     int fd, wake;
     double deadline, tsyn, reply_wait, t_char, idle_since, busy_until, horizon, last_end;
+    double gc_due, gc_period;
+    int skipped; /* the last broadcast was not due: left out */
     Py_ssize_t n;
     const char **exp;
     Py_ssize_t *exp_len;
@@ -96,6 +101,11 @@ typedef struct {
 static int take_reply(Ring *g, Py_ssize_t i) {
     g->rest_len = 0;
     if (g->exp_len[i] == 0) {
+        if (g->skipped) { /* left out: nothing on the line */
+            g->skipped = 0;
+            g->times[g->ntimes++] = NAN;
+            return 0;
+        }
         double free_at = g->last_end + g->tsyn;
         if (free_at > g->busy_until) g->busy_until = free_at;
         g->times[g->ntimes++] = g->last_end;
@@ -135,10 +145,17 @@ static int send_request(Ring *g, Py_ssize_t i) {
         if (w == 2) return STOP_WAKE;
         if (w < 0) return STOP_PORT;
     }
+    int broadcast = i + 1 < g->n && g->exp_len[i + 1] == 0;
+    if (broadcast && now_s() < g->gc_due) { /* not due: left out, the next follows */
+        g->skipped = 1;
+        g->times[g->ntimes++] = NAN;
+        return 0;
+    }
     const char *data = g->req[i];
     Py_ssize_t len = g->req_len[i];
     ssize_t put = write(g->fd, data, (size_t)len);
     double at = now_s();
+    if (broadcast) g->gc_due = at + g->gc_period;
     if (put != len) {
         g->partial = put < 0 ? 0 : put;
         g->bytes_out += g->partial;
@@ -196,9 +213,10 @@ static PyObject *ring_run(PyObject *self, PyObject *args) {
     memset(&g, 0, sizeof g);
     PyObject *expected, *requests;
     int priority;
-    if (!PyArg_ParseTuple(args, "iidO!O!ddddddi", &g.fd, &g.wake, &g.deadline, &PyTuple_Type,
+    if (!PyArg_ParseTuple(args, "iidO!O!ddddddidd", &g.fd, &g.wake, &g.deadline, &PyTuple_Type,
                           &expected, &PyTuple_Type, &requests, &g.tsyn, &g.reply_wait,
-                          &g.t_char, &g.idle_since, &g.busy_until, &g.horizon, &priority))
+                          &g.t_char, &g.idle_since, &g.busy_until, &g.horizon, &priority,
+                          &g.gc_due, &g.gc_period))
         return NULL;
     g.n = PyTuple_GET_SIZE(expected);
     if (PyTuple_GET_SIZE(requests) + 1 != g.n || g.n < 1) {

@@ -5,7 +5,8 @@ An engine whose line is at rest (each reply the same as the last, each next requ
 plans a ring (:class:`RingPlan`): for each exchange the reply it would take whole and
 the request that follows it, the line's idle time and reply wait as numbers. The ring
 runs it on the port's descriptor without the engine: reads each reply until it is whole,
-takes it when it is the one expected, waits the idle time, writes the next request, and
+takes it when it is the one expected, waits the idle time, writes the next request (a
+broadcast only when it is due then: ``RingPlan.gc_due``, docs/decisions/0110), and
 stops at the first anything else, before acting on it (:class:`RingStop`). The engine is
 then brought up to date once for the whole run (:class:`RingResult`: when each reply came
 and each request went) instead of once per exchange (docs/decisions/0103-steady-ring.md).
@@ -89,6 +90,8 @@ def run(fd: int, wake: int, plan: RingPlan, priority: int = 0) -> RingResult:
             plan.busy_until,
             plan.horizon,
             priority,
+            plan.gc_due,
+            plan.gc_period,
         )
         return RingResult(RingStop(stop), times, rest, rest_at, idle, partial, n_in, n_out, rt)
     return run_python(fd, wake, plan, priority)
@@ -142,6 +145,8 @@ class _PyRing:
         self.idle_since = plan.idle_since
         self.busy_until = plan.busy_until
         self.last_end = plan.idle_since
+        self.gc_due = plan.gc_due
+        self.skipped = False  # the last broadcast was not due: left out
         self.times: list[float] = []
         self.rest = bytearray()
         self.rest_at = 0.0
@@ -193,6 +198,10 @@ class _PyRing:
     def _take_reply(self, i: int) -> RingStop | None:
         self.rest.clear()
         want = self.plan.expected[i]
+        if not want and self.skipped:  # a broadcast left out: nothing on the line
+            self.skipped = False
+            self.times.append(math.nan)
+            return None
         if not want:  # a broadcast: nobody answers, the line free TSYN after its end
             self.busy_until = max(self.busy_until, self.last_end + self.plan.tsyn)
             self.times.append(self.last_end)
@@ -238,12 +247,19 @@ class _PyRing:
                 return RingStop.WAKE
             if w < 0:
                 return RingStop.PORT
+        broadcast = not plan.expected[i + 1]
+        if broadcast and time.monotonic() < self.gc_due:  # not due: the next follows
+            self.skipped = True
+            self.times.append(math.nan)
+            return None
         data = plan.requests[i]
         try:
             put = os.write(self.fd, data)
         except OSError:
             put = -1
         at = time.monotonic()
+        if broadcast:
+            self.gc_due = at + plan.gc_period
         self.times.append(at)
         if put != len(data):
             self.partial = max(put, 0)

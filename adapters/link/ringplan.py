@@ -4,6 +4,7 @@ it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final
@@ -31,7 +32,8 @@ class RingPlan:
 
     deadline: float  # the reply deadline of the request on the line
     expected: tuple[bytes, ...]  # each exchange's reply, taken only whole and equal (b"":
-    # a broadcast, nobody answers: the line is free TSYN after its end; never the first)
+    # a broadcast, nobody answers: the line is free TSYN after its end; never the first;
+    # written only when due, see gc_due)
     requests: tuple[bytes, ...]  # the request after each reply but the last (n - 1)
     tsyn: float  # s the line is idle before a request (from the reply or the request's end)
     reply_wait: float  # s a reply is awaited after a request's own line time
@@ -39,12 +41,17 @@ class RingPlan:
     idle_since: float  # the line idle since (its last byte, as the engine counts it)
     busy_until: float  # no request before this
     horizon: float  # no request goes out for a time after this
+    # a broadcast goes out only when, the line free for it, this time has come, and then
+    # is due ``gc_period`` after it went; one not due is left out (its two times NaN)
+    gc_due: float = -math.inf
+    gc_period: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
 class RingResult:
     """What a ring did: ``times`` are each taken reply's and each written request's, in
-    turn (reply 0, request 1, reply 1, request 2, ...)."""
+    turn (reply 0, request 1, reply 1, request 2, ...); a broadcast left out (not due) has
+    NaN for both of its times."""
 
     stop: RingStop
     times: tuple[float, ...]
@@ -58,8 +65,14 @@ class RingResult:
 
     @property
     def taken(self) -> int:
-        """Replies taken."""
+        """Exchanges gone through: replies taken, a broadcast counted as one (one left out
+        too: the entries of ``times`` go by the plan's exchanges)."""
         return (len(self.times) + 1) // 2
+
+    @property
+    def left_out(self) -> int:
+        """Broadcasts of the plan not due where the ring came to them, so not sent."""
+        return sum(1 for t in self.times if math.isnan(t)) // 2
 
     @property
     def written(self) -> int:

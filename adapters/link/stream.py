@@ -473,7 +473,7 @@ class StreamDriver(Generic[EventT]):
         link.counted(result.bytes_in, result.bytes_out)
         actions = done(result)
         self.rings += 1
-        self.ring_taken += result.taken
+        self.ring_taken += result.taken - result.left_out
         if result.written:
             for event in self.protocol.idle():  # the line was idle before each request
                 self.on_flushed(event)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import math
 import os
 import select
 import shutil
@@ -310,3 +311,35 @@ def test_a_broadcast_in_a_ring_is_answered_by_nobody(runner: Runner) -> None:
     written, free, next_written = result.times[1], result.times[2], result.times[3]
     assert free == written + len(broadcast) * plan.t_char  # the broadcast's end
     assert next_written >= free + plan.tsyn
+
+
+def test_a_broadcast_not_due_is_left_out_and_one_due_is_written(runner: Runner) -> None:
+    """A Global_Control in the plan goes out only when, the line free for it, it is due
+    (``gc_due``, then ``gc_period`` after each one written, docs/decisions/0110); one not
+    due is left out (NaN for its two times) and the next request follows in its place."""
+    broadcast = bytes([0x68, 5, 5, 0x68, 0x7F, 2, 0x73, 0, 0, 0x16])
+
+    def silent(sock: socket.socket, i: int) -> None:
+        return
+
+    def reply(n: int) -> Answer:
+        def answer(sock: socket.socket, i: int) -> None:
+            sock.sendall(REPLIES[n])
+
+        return answer
+
+    # reply 0, [broadcast: due], reply 1, [broadcast: not due a period after], reply 2
+    plan = _plan(
+        5,
+        expected=(REPLIES[0], b"", REPLIES[1], b"", REPLIES[2]),
+        requests=(broadcast, REQUESTS[1], broadcast, REQUESTS[2]),
+        gc_due=time.monotonic(),
+        gc_period=60.0,
+    )
+    with far_end([_reply, silent, reply(1), reply(2)]) as (fd, heard):
+        result = runner(fd, -1, plan)
+    assert result.stop is RingStop.END and result.taken == 5 and result.left_out == 1
+    assert heard == [broadcast, REQUESTS[1], REQUESTS[2]]
+    times = result.times
+    assert not any(map(math.isnan, times[:5])) and all(map(math.isnan, times[5:7]))
+    assert times[7] >= times[4]  # the next request at once, no broadcast's line time before

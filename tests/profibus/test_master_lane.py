@@ -117,7 +117,7 @@ def _trace(
     taken = w.lane_taken + w.ring_taken
     return (
         *(w.sent, actions, master.line_diagnostics(), slaves, taken, caller.handled),
-        *(w.ring_taken, master._ring.crossed, w.ring_closed),
+        *(w.ring_taken, master._ring.crossed, w.ring_closed, w.rings, w.ring_left_out),
     )
 
 
@@ -192,6 +192,21 @@ def test_a_quiet_line_goes_round_in_rings() -> None:
     assert crossed > 0.5 * cycles  # rings go on into the next cycle (its Global_Control too)
 
 
+def test_a_ring_goes_on_past_a_global_control_not_due_and_sends_it_where_it_is() -> None:
+    """Each cycle's end in a ring has the Global_Control in its plan; the ring writes it
+    only where it is due (every 20 ms on this bus, a cycle of 3 slaves about 2 ms), as the
+    steps do (the property test above compares every telegram), so a ring is no longer cut
+    where it may fall due: rings of up to RING_MAX exchanges (docs/decisions/0110)."""
+    trace = _trace(
+        lane=True, ring=True, quiet=True, addresses=[3, 4, 5], noise=0.0, seed=0, script=[]
+    )
+    ring_taken, rings, left_out = trace[6], trace[9], trace[10]
+    assert ring_taken / rings > 50  # before: cut where it could fall due, about 15 a ring
+    assert left_out > 5 * rings  # several cycle ends a ring with no Global_Control due
+    broadcasts = [data for _, data in trace[0] if data[0] == 0x68 and data[4] & 0x7F == 127]
+    assert 0 < len(broadcasts) < trace[2]["cycles"] / 5  # one every 20 ms, not every cycle
+
+
 def test_with_a_cycle_time_a_ring_ends_with_the_cycles_global_control() -> None:
     """A cycle time not over: the ring cannot go on into the next cycle, and ends with
     the end's Global_Control, which the line's Python would otherwise send after taking
@@ -229,7 +244,7 @@ def test_a_quiet_caller_puts_on_the_line_what_a_caller_of_every_reply_does(
 
 def test_a_quiet_slave_goes_the_lane_and_still_reports_its_inputs_every_refresh() -> None:
     trace = _trace(lane=True, quiet=True, addresses=[3, 4], noise=0.0, seed=0, script=[])
-    _, _, _, slaves, taken, handled, _, _, _ = trace
+    slaves, taken, handled = trace[3:6]
     exchanges = sum(s["exchanges"] for s in slaves)
     assert taken > 0.8 * exchanges  # the steady exchange went the lane
     # 0.7 s of data exchange: the inputs reported at start and at least every refresh

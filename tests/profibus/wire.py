@@ -10,6 +10,7 @@ decoder, as the link would deliver them.
 from __future__ import annotations
 
 import heapq
+import math
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -89,6 +90,8 @@ class Wire:
         self.ring = False
         self.ring_taken = 0
         self.ring_closed = 0  # rings that ended with the cycle's Global_Control, written
+        self.rings = 0
+        self.ring_left_out = 0  # Global_Controls in rings' plans, not due there: not sent
 
     # ------------------------------------------------------------------ driving
 
@@ -212,12 +215,17 @@ class Wire:
         plan = self.master.ring_plan(self.now, end)
         if plan is None:
             return
+        self.rings += 1
         times: list[float] = []
         idle, deadline, busy = plan.idle_since, plan.deadline, plan.busy_until
         sent_end = idle
         stop = RingStop.END
+        gc_due, skipped = plan.gc_due, False
         for i, expected in enumerate(plan.expected):
-            if not expected:  # a broadcast: nobody answers, the line free TSYN after it
+            if not expected and skipped:  # a broadcast left out (not due): nothing sent
+                times.append(math.nan)
+                skipped = False
+            elif not expected:  # a broadcast: nobody answers, the line free TSYN after it
                 busy = max(busy, sent_end + plan.tsyn)
                 times.append(sent_end)
             else:
@@ -240,9 +248,17 @@ class Wire:
             if free > plan.horizon:
                 stop = RingStop.HORIZON
                 break
-            self.now = max(self.now, free) + self.write_lag
+            self.now = max(self.now, free)
+            if not plan.expected[i + 1] and self.now < gc_due:  # not due: the next follows
+                times.append(math.nan)
+                skipped = True
+                self.ring_left_out += 1
+                continue
+            self.now += self.write_lag
             self.line.tick(self.now)
             request = plan.requests[i]
+            if not plan.expected[i + 1]:
+                gc_due = self.now + plan.gc_period
             self.sent.append((self.now, request))
             times.append(self.now)
             self._to_slaves(request)
@@ -250,7 +266,7 @@ class Wire:
             idle = max(idle, sent_end)
             deadline = sent_end + self.bus.reply_wait
         result = RingResult(stop, tuple(times), b"", 0.0, idle, -1, 0, 0)
-        self.ring_taken += result.taken
+        self.ring_taken += result.taken - result.left_out
         closed = len(times) == 2 * len(plan.expected) - 1 and not plan.expected[-1]
         self.ring_closed += closed
         self._queue.extend(self.master.ring_done(result))

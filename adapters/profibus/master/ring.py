@@ -7,24 +7,27 @@ Data_Exchange on the line, its caller quiet. It goes on through the slaves that 
 while each is in data exchange, its caller quiet, no diagnosis waiting and its last plain
 reply known, and stops before the first that is not, at :data:`RING_MAX` exchanges, and
 where no more could go before its horizon at the line's pace. At the cycle's end it goes
-on into the next cycle only where what the end sends is certain whenever the ring gets
-there (:class:`_Wraps`): the periodic Global_Control if it is due already, else nothing
-(the horizon moved before it falls due). Where it cannot go on (a cycle time not over),
+on into the next cycle where nothing but the periodic Global_Control can be sent at the
+cycle's end (:class:`_Wraps`); the ring writes that one there only if it is due when the
+line is free for it, as the scheduler would (docs/decisions/0110), else the next cycle's
+first request follows at once. Where it cannot go on (a cycle time not over),
 it ends with the cycle's Global_Control when that is due already. Nothing else may wait:
 no DP-V1 job, no slave in start-up, no repetition.
 
 Afterwards each exchange the ring did is entered as the general path enters a steady
 reply, with the times it really happened: the reply's turn ends (response time, FCB,
 exchanges; its unchanged inputs reported if their refresh was due by then: a steady
-reply's inputs are the last ones reported), the broadcast and the cycle's end and begin
-as the scheduler makes them, the next slave's turn begins with its Data_Exchange (the
-scheduler's own ``send_for``) and each write is confirmed (the line's ``on_written``).
+reply's inputs are the last ones reported), the broadcast where it went (none where it
+was not due) and the cycle's end and begin as the scheduler makes them, the next slave's
+turn begins with its Data_Exchange (the scheduler's own ``send_for``) and each write is
+confirmed (the line's ``on_written``).
 The counters and telegrams are those of the lane and of the general path: a property test
 runs all three on the same lines.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Final
 
 from adapters.link.ringplan import REPLY_MAX, RingPlan, RingResult
@@ -134,6 +137,8 @@ class SteadyRing:
             idle_since=line.idle_since,
             busy_until=line.busy_until,
             horizon=wraps.horizon,
+            gc_due=wraps.gc_due,
+            gc_period=self.scheduler.bus.global_control_period,
         )
 
     def enter(self, result: RingResult) -> bool:
@@ -153,8 +158,10 @@ class SteadyRing:
                 line.idle_since = max(line.idle_since, now)
                 sl.answered(p, now)
                 sl.took_same_inputs(now)
-            if 2 * j + 1 < len(times):  # the next request (or broadcast) went out
-                self._sent(chain[j + 1], times[2 * j + 1])
+            if 2 * j + 1 < len(times) and not math.isnan(times[2 * j + 1]):
+                self._sent(chain[j + 1], times[2 * j + 1])  # the next request went out
+                # (NaN: a Global_Control not due there, left out: the next cycle's first
+                # request follows, and begins that cycle as the scheduler does)
         # send_for's Transmit actions: the ring wrote them (the inputs reported stay)
         self.out[marked:] = [a for a in self.out[marked:] if type(a) is not Transmit]
         self.chain = []
@@ -174,13 +181,13 @@ class SteadyRing:
 
 
 class _Wraps:
-    """Whether a ring can go on into the next cycle, and what the cycle's end sends there:
-    only where that is certain whenever the ring gets there. The periodic Global_Control
-    goes with it when it is due already; when it is not, the ring's horizon is moved
-    before it is (and before a live-list probe's), so the end sends nothing. A Sync or
-    Freeze queued, or a cycle time not over, ends the ring at the cycle's end (with a
-    cycle time, a second end is never certain); the ring then ends with the end's
-    Global_Control when that is certain (:meth:`closing`)."""
+    """Whether a ring can go on into the next cycle, and what the cycle's end sends there.
+    Each end has the periodic Global_Control in the plan, and the ring writes it there only
+    when it is due once the line is free for it, as the scheduler decides at that time
+    (:class:`RingPlan` ``gc_due``, docs/decisions/0110); the ring's horizon ends before a
+    live-list probe is due. A Sync or Freeze queued, or a cycle time not over, ends the
+    ring at the cycle's end (with a cycle time, a second end is never certain); the ring
+    then ends with the end's Global_Control when that is certain (:meth:`closing`)."""
 
     def __init__(self, scheduler: Scheduler, now: float, horizon: float) -> None:
         self.scheduler = scheduler
@@ -201,7 +208,9 @@ class _Wraps:
         return self.scheduler.broadcast_frame()
 
     def next(self) -> tuple[bytes, ...] | None:
-        """The cycle's end: (), (the Global_Control,), or None (the ring stops there)."""
+        """The cycle's end: (the Global_Control,), written there only if it is due then
+        (the ring decides, as the scheduler would: :class:`RingPlan` ``gc_due``), or None
+        (the ring stops there)."""
         scheduler = self.scheduler
         started = scheduler.cycle_started
         cycle_time = scheduler.bus.cycle_time
@@ -211,12 +220,7 @@ class _Wraps:
             return None
         self.count += 1
         self.horizon = min(self.horizon, self.probe_due - _BEFORE)
-        if self.gc_due <= self.now:
-            # due at this end; the next is a period after it at the earliest
-            self.gc_due = self.now + scheduler.bus.global_control_period
-            return (scheduler.broadcast_frame(),)
-        self.horizon = min(self.horizon, self.gc_due - _BEFORE)
-        return ()
+        return (scheduler.broadcast_frame(),)
 
 
 _BEFORE: Final = 1e-9  # s: a horizon before a due time is strictly before it
