@@ -97,9 +97,8 @@ class Scanner:
         self._ticks = self.machine.ticks
         self._timers = SteadyTimers(self.nodes, self.machine.steady, self.machine.idle_time)
         self.lazy_timers = True  # False: every timer step is a full pass (tests compare)
-        # for hold_until: fixed by the scan list, and every node's explicit queue
+        # for hold_until: fixed by the scan list
         self._all_polled = all(n.cfg.io is IoKind.POLLED for n in self.nodes.values())
-        self._queues = [n.queue for n in self.nodes.values()]
         # the steady lane (docs/decisions/0097): a polled node's poll response by its identifier
         self.lane = True  # False: every frame through the full step (tests compare)
         self._poll_replies = {
@@ -172,7 +171,7 @@ class Scanner:
             or now < ctx.tx_hold_until
             or schedule.in_bringup
             or schedule.explicit_busy
-            or any(self._queues)
+            or any(schedule.queues)
         ):
             return None
         return schedule.hold_until(now)
@@ -230,7 +229,7 @@ class Scanner:
         """How many turns of the line's explicit window the requests queued or in flight
         (all nodes) take: a request submitted now starts within that many."""
         # (a node's request in flight is one in the window: ExplicitJobs starts and ends both)
-        backlog = sum(map(len, self._queues)) + len(self.schedule.explicit_busy)
+        backlog = sum(map(len, self.schedule.queues)) + len(self.schedule.explicit_busy)
         return -(-backlog // self._ctx.config.explicit_window)
 
     def online_macs(self) -> list[int]:

@@ -40,7 +40,8 @@ class Scheduler:
         self.bringing = 0  # nodes in bring-up at the step's start, plus those it started
         self.cycle_started: float | None = None
         self.cycle_due = 0.0
-        self._queues = [n.queue for n in ctx.nodes.values()]  # the scan list's, fixed
+        # every node's explicit queue (the scan list is fixed): the window's counts, a hold
+        self.queues = [n.queue for n in ctx.nodes.values()]
 
     # ------------------------------------------------------------ bring-up window
 
@@ -75,7 +76,7 @@ class Scheduler:
         free = self.ctx.config.explicit_window - len(self.explicit_busy)
         if free <= 0:
             return False
-        if free >= sum(map(bool, self._queues)):  # fewer others queued than places: no count
+        if free >= sum(map(bool, self.queues)):  # fewer others queued than places: no count
             return True
         mine = node.queue[0].order
         for other in self.ctx.nodes.values():
